@@ -1,0 +1,190 @@
+"""The floating-point format object shared by the golden model, the RTL and the host.
+
+One :class:`FPFormat` describes a member of the family defined in
+``shared/spec/fp-format.md``: ``1 + exp_bits + man_bits`` bits, a hidden leading one,
+no denormals (flush to zero), one canonical NaN, and one of three roundings.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+__all__ = ["FPFormat", "ROUNDINGS", "FP16", "FP20", "FP24", "FP32", "FLAG_OVERFLOW",
+           "FLAG_UNDERFLOW", "FLAG_INVALID", "FLAG_NAMES", "PRESETS", "parse_format"]
+
+#: Roundings of the contract: ``rtz`` (correct, toward zero: the default), ``rne``
+#: (correct, to nearest even) and ``chop`` (the paper's truncating adder).
+ROUNDINGS = ("rtz", "rne", "chop")
+
+#: Event-flag bits, as packed in the ``uint8`` flag arrays of the model and the
+#: ``flags`` ports of the RTL.
+FLAG_OVERFLOW = 1
+FLAG_UNDERFLOW = 2
+FLAG_INVALID = 4
+FLAG_NAMES = {FLAG_OVERFLOW: "overflow", FLAG_UNDERFLOW: "underflow", FLAG_INVALID: "invalid"}
+
+
+@dataclass(frozen=True)
+class FPFormat:
+    """A floating-point format of the contract.
+
+    Parameters
+    ----------
+    exp_bits : int
+        Exponent bits ``E``, 2 to 11.
+    man_bits : int
+        Stored fraction bits ``M``, at least 1; ``1 + E + M`` must be at most 32.
+    rounding : str
+        ``"rtz"`` (default), ``"rne"`` or ``"chop"``.
+
+    Raises
+    ------
+    ValueError
+        Naming the parameter that is out of range.
+    """
+
+    exp_bits: int
+    man_bits: int
+    rounding: str = "rtz"
+
+    def __post_init__(self):
+        for name in ("exp_bits", "man_bits"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool):
+                raise ValueError(f"{name} must be an integer, not {value!r}")
+        if not 2 <= self.exp_bits <= 11:
+            raise ValueError(f"exp_bits must be between 2 and 11, not {self.exp_bits}")
+        if self.man_bits < 1:
+            raise ValueError(f"man_bits must be at least 1, not {self.man_bits}")
+        if self.width > 32:
+            raise ValueError(
+                f"man_bits={self.man_bits} with exp_bits={self.exp_bits} gives a width of "
+                f"{self.width} bits; the width 1+exp_bits+man_bits must be at most 32")
+        if self.rounding not in ROUNDINGS:
+            raise ValueError(f"rounding must be one of {', '.join(ROUNDINGS)}, "
+                             f"not {self.rounding!r}")
+
+    # -- derived constants -------------------------------------------------------------
+    @property
+    def width(self) -> int:
+        """Total width ``W = 1 + E + M``."""
+        return 1 + self.exp_bits + self.man_bits
+
+    @property
+    def bias(self) -> int:
+        return (1 << (self.exp_bits - 1)) - 1
+
+    @property
+    def emin(self) -> int:
+        """Smallest unbiased exponent of a normal number (``1 - bias``)."""
+        return 1 - self.bias
+
+    @property
+    def emax(self) -> int:
+        """Largest unbiased exponent of a finite number."""
+        return (1 << self.exp_bits) - 2 - self.bias
+
+    @property
+    def exp_max_field(self) -> int:
+        """The all-ones exponent field (infinities and NaNs)."""
+        return (1 << self.exp_bits) - 1
+
+    @property
+    def man_mask(self) -> int:
+        return (1 << self.man_bits) - 1
+
+    @property
+    def sign_bit(self) -> int:
+        return 1 << (self.width - 1)
+
+    @property
+    def mask(self) -> int:
+        return (1 << self.width) - 1
+
+    @property
+    def inf(self) -> int:
+        """Bit pattern of +infinity."""
+        return self.exp_max_field << self.man_bits
+
+    @property
+    def nan(self) -> int:
+        """Bit pattern of the canonical NaN (sign 0, fraction ``1 << (M-1)``)."""
+        return self.inf | (1 << (self.man_bits - 1))
+
+    @property
+    def max_finite(self) -> int:
+        """Bit pattern of the largest finite positive value."""
+        return ((self.exp_max_field - 1) << self.man_bits) | self.man_mask
+
+    @property
+    def min_normal(self) -> int:
+        """Bit pattern of the smallest positive normal value."""
+        return 1 << self.man_bits
+
+    @property
+    def one(self) -> int:
+        """Bit pattern of 1.0."""
+        return self.bias << self.man_bits
+
+    @property
+    def ulp(self) -> float:
+        """Relative unit in the last place, ``2**-M``."""
+        return 2.0 ** -self.man_bits
+
+    @property
+    def max_value(self) -> float:
+        return (2.0 - 2.0 ** -self.man_bits) * 2.0 ** self.emax
+
+    @property
+    def min_value(self) -> float:
+        """Smallest positive normal value."""
+        return 2.0 ** self.emin
+
+    @property
+    def name(self) -> str:
+        """Short name such as ``e7m16-rtz``, used for build directories and reports."""
+        return f"e{self.exp_bits}m{self.man_bits}-{self.rounding}"
+
+    def with_rounding(self, rounding: str) -> FPFormat:
+        return replace(self, rounding=rounding)
+
+    def __str__(self):
+        preset = {v: k for k, v in PRESETS.items()}.get(self.with_rounding("rtz"))
+        base = preset or f"E{self.exp_bits}M{self.man_bits}"
+        return f"{base}/{self.rounding}"
+
+
+FP16 = FPFormat(5, 10)
+FP20 = FPFormat(6, 13)
+FP24 = FPFormat(7, 16)
+FP32 = FPFormat(8, 23)
+PRESETS = {"FP16": FP16, "FP20": FP20, "FP24": FP24, "FP32": FP32}
+
+
+def parse_format(text: str, rounding: str | None = None) -> FPFormat:
+    """Parse ``FP24``, ``fp24/rne``, ``e7m16`` or ``e7m16-chop`` into a format.
+
+    Raises
+    ------
+    ValueError
+        When the text names no format or the format is out of range.
+    """
+    import re
+
+    t = text.strip()
+    rnd = rounding
+    m = re.fullmatch(r"(?i)(fp\d+|e\d+m\d+)(?:[/-](rtz|rne|chop))?", t)
+    if not m:
+        raise ValueError(f"format {text!r} is not FP16, FP20, FP24, FP32 or eXmY[-rounding]")
+    head, tail = m.group(1), m.group(2)
+    if tail is not None:
+        if rnd is not None and rnd != tail.lower():
+            raise ValueError(f"format {text!r} names rounding {tail!r} but rounding={rnd!r}")
+        rnd = tail.lower()
+    rnd = rnd or "rtz"
+    if head.upper() in PRESETS:
+        return PRESETS[head.upper()].with_rounding(rnd)
+    if head.upper().startswith("FP"):
+        raise ValueError(f"format {text!r}: known presets are {', '.join(PRESETS)}")
+    e, mb = re.fullmatch(r"(?i)e(\d+)m(\d+)", head).groups()
+    return FPFormat(int(e), int(mb), rnd)

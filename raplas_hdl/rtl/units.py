@@ -1,0 +1,80 @@
+"""Registry of the units that ``raplas-hdl verilog`` can emit.
+
+Each entry builds a component from keyword parameters; the format arrives as an
+:class:`~raplas_hdl.fp.FPFormat`. Builders import their unit lazily, so emitting one unit
+never needs the others' modules.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..fp import FP24, FPFormat
+
+__all__ = ["Unit", "UNITS", "build_unit", "emit_all"]
+
+
+@dataclass(frozen=True)
+class Unit:
+    name: str
+    module: str         # Verilog module name
+    summary: str
+    builder: str        # "python.module:callable", called as callable(fmt, **options)
+    options: dict = field(default_factory=dict)   # option -> (type, default, help)
+
+    def build(self, fmt: FPFormat, **options):
+        modname, _, attr = self.builder.partition(":")
+        factory = getattr(importlib.import_module(modname), attr)
+        return factory(fmt, **options)
+
+
+UNITS = {u.name: u for u in [
+    Unit("fp-add", "fp_add", "pipelined FP adder/subtractor",
+         "raplas_hdl.rtl.fp_add:FPAdd", {"stages": (int, 4, "pipeline stages")}),
+    Unit("fp-mul", "fp_mul", "pipelined FP multiplier (one (M+1)x(M+1) multiply)",
+         "raplas_hdl.rtl.fp_mul:FPMul", {"stages": (int, 3, "pipeline stages")}),
+    Unit("plane-sphere-tester", "plane_sphere_tester", "one plane-sphere tester",
+         "raplas_hdl.rtl.plane_sphere:PlaneSphereTester", {}),
+    Unit("plane-sphere", "plane_sphere", "plane-sphere tester array with decoder",
+         "raplas_hdl.rtl.plane_sphere:build_plane_sphere",
+         {"rows": (int, 4, "bundle rows"), "cols": (int, 4, "bundle columns"),
+          "testers": (int, None, "testers in the array (default rows+cols)")}),
+    Unit("ray-triangle", "ray_triangle", "division-free Moller-Trumbore unit",
+         "raplas_hdl.rtl.ray_triangle:RayTriangleUnit",
+         {"mode": (str, "paper", "paper | conservative")}),
+    Unit("intersection-unit", "intersection_unit", "the whole intersection unit",
+         "raplas_hdl.rtl.intersection:build_intersection_unit",
+         {"rows": (int, 4, "bundle rows"), "cols": (int, 4, "bundle columns"),
+          "testers": (int, None, "plane-sphere testers (default rows+cols)"),
+          "tris_per_sphere": (int, 8, "triangles per bounding sphere"),
+          "mode": (str, "paper", "paper | conservative")}),
+]}
+
+
+def build_unit(name: str, fmt: FPFormat = FP24, **options):
+    """Build unit ``name``; options left at ``None`` take the unit's default."""
+    try:
+        unit = UNITS[name]
+    except KeyError:
+        raise ValueError(f"unknown unit {name!r}; known units: {', '.join(UNITS)}") from None
+    unknown = set(options) - set(unit.options)
+    if unknown:
+        raise ValueError(f"unit {name} takes no option(s) {', '.join(sorted(unknown))}")
+    opts = {k: v for k, v in options.items() if v is not None}
+    return unit, unit.build(fmt, **opts), opts
+
+
+def emit_all(outdir, fmt: FPFormat = FP24, names=None) -> list[Path]:
+    """Emit every registered unit (or ``names``) at their defaults into ``outdir``."""
+    from .emit import write_unit
+
+    written = []
+    for name in names or UNITS:
+        unit, comp, opts = build_unit(name, fmt)
+        params = {"exp_bits": fmt.exp_bits, "man_bits": fmt.man_bits,
+                  "rounding": fmt.rounding, **opts}
+        path, _ = write_unit(comp, unit.module, params, Path(outdir) / f"{unit.module}.v")
+        written.append(path)
+    return written
