@@ -1,0 +1,565 @@
+"""Bit-exact golden model of the FP contract on NumPy arrays of bit patterns.
+
+Every operation takes and returns ``uint32`` bit patterns of a
+:class:`~raplas_hdl.fp.format.FPFormat` and follows ``shared/spec/fp-format.md`` bit for
+bit (the scalar rules live in :mod:`raplas_hdl.fp.kernels`; this module broadcasts in
+NumPy and runs the kernels in parallel numba loops, no per-element Python).
+
+Operands are array-likes of integers (Python ints, any integer dtype); a pattern wider
+than the format (negative, or ``>= 2**fmt.width``) raises ``ValueError``. Scalars give
+NumPy scalars, arrays give arrays of the broadcast shape.
+
+Compile time: the kernels are compiled on first use and cached on disk (numba
+``cache=True``, in ``__pycache__`` beside the sources); the first call in a fresh
+checkout takes a few seconds per operation, later processes load the cache in well
+under a second.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from .format import FLAG_INVALID, FLAG_NAMES, FLAG_OVERFLOW, FLAG_UNDERFLOW, FPFormat
+from .kernels import (CHOP, DOWN, RNE, RTZ, UP, abs_le_k, add_int_k, add_k, decode_k,
+                      encode_k, le_k, lt_k, mul_int_k, mul_k, neg_k, rmode_code)
+
+__all__ = ["encode", "decode", "add", "sub", "mul", "neg", "le", "lt", "abs_le",
+           "flags_names"]
+
+_OP_ADD, _OP_SUB, _OP_MUL = 0, 1, 2
+_CMP_LE, _CMP_LT, _CMP_ABS_LE = 0, 1, 2
+_RNE, _CHOP = RNE, CHOP
+_OVF_I, _UNF_I, _INV_I = FLAG_OVERFLOW, FLAG_UNDERFLOW, FLAG_INVALID
+
+
+# -- compiled loops -----------------------------------------------------------------------
+# One tight loop per operation (a runtime switch inside the loop costs several times the
+# arithmetic). Each returns the number of operand patterns wider than the format.
+@njit(parallel=True, cache=True)
+def _add_loop(a, b, e, m, rmode, out, fl):
+    lim = np.int64(1) << (1 + e + m)
+    bad = 0
+    for i in prange(a.size):
+        x = np.int64(a[i])
+        y = np.int64(b[i])
+        bad += np.int64(x >= lim) | np.int64(y >= lim)
+        out[i], fl[i] = add_k(x & (lim - 1), y & (lim - 1), e, m, rmode)
+    return bad
+
+
+@njit(parallel=True, cache=True)
+def _sub_loop(a, b, e, m, rmode, out, fl):
+    lim = np.int64(1) << (1 + e + m)
+    bad = 0
+    for i in prange(a.size):
+        x = np.int64(a[i])
+        y = np.int64(b[i])
+        bad += np.int64(x >= lim) | np.int64(y >= lim)
+        out[i], fl[i] = add_k(x & (lim - 1), np.int64(neg_k(y & (lim - 1), e, m)), e, m,
+                              rmode)
+    return bad
+
+
+@njit(parallel=True, cache=True)
+def _mul_loop(a, b, e, m, rmode, out, fl):
+    lim = np.int64(1) << (1 + e + m)
+    bad = 0
+    for i in prange(a.size):
+        x = np.int64(a[i])
+        y = np.int64(b[i])
+        bad += np.int64(x >= lim) | np.int64(y >= lim)
+        out[i], fl[i] = mul_k(x & (lim - 1), y & (lim - 1), e, m, rmode)
+    return bad
+
+
+@njit(parallel=True, cache=True)
+def _int_loop(a, b, e, m, rmode, op, out, fl):
+    """The integer kernels whatever the format (for the tests: both paths, same bits)."""
+    lim = np.int64(1) << (1 + e + m)
+    bad = 0
+    for i in prange(a.size):
+        x = np.int64(a[i])
+        y = np.int64(b[i])
+        bad += np.int64(x >= lim) | np.int64(y >= lim)
+        x &= lim - 1
+        y &= lim - 1
+        if op == _OP_SUB:
+            y = np.int64(neg_k(y, e, m))
+        if op == _OP_MUL:
+            out[i], fl[i] = mul_int_k(x, y, e, m, rmode)
+        else:
+            out[i], fl[i] = add_int_k(x, y, e, m, rmode)
+    return bad
+
+
+@njit(parallel=True, cache=True)
+def _negop(a, e, m, out):
+    lim = np.int64(1) << (1 + e + m)
+    bad = 0
+    for i in prange(a.size):
+        x = np.int64(a[i])
+        if x >= lim:
+            bad += 1
+            x = 0
+        out[i] = neg_k(x, e, m)
+    return bad
+
+
+@njit(parallel=True, cache=True)
+def _cmpop(a, b, e, m, op, out):
+    lim = np.int64(1) << (1 + e + m)
+    bad = 0
+    for i in prange(a.size):
+        x = np.int64(a[i])
+        y = np.int64(b[i])
+        if x >= lim or y >= lim:
+            bad += 1
+            x = 0
+            y = 0
+        if op == _CMP_LE:
+            out[i] = le_k(x, y, e, m)
+        elif op == _CMP_LT:
+            out[i] = lt_k(x, y, e, m)
+        else:
+            out[i] = abs_le_k(x, y, e, m)
+    return bad
+
+
+@njit(parallel=True, cache=True)
+def _encode(x, e, m, mode, out, fl):
+    for i in prange(x.size):
+        r, f = encode_k(x[i], e, m, mode)
+        out[i] = r
+        fl[i] = f
+
+
+@njit(parallel=True, cache=True)
+def _decode(a, e, m, out):
+    lim = np.int64(1) << (1 + e + m)
+    bad = 0
+    for i in prange(a.size):
+        x = np.int64(a[i])
+        if x >= lim:
+            bad += 1
+            x = 0
+        out[i] = decode_k(x, e, m)
+    return bad
+
+
+# -- specialised loops --------------------------------------------------------------------
+# The loops above take the format as runtime integers and go through the generic kernels.
+# For large arrays :func:`_fast_loop` compiles, once per (operation, E, M, rounding,
+# flags wanted), a loop in which the format and the rounding are compile-time constants:
+# every shift and mask is an immediate, dead roundings and (without flags) the flag logic
+# disappear, and the body is straight-line integer code (selects, no branches, no
+# division) that LLVM vectorises (AVX2: 4 x int64 lanes, the significand product one
+# ``vpmuludq``). The arithmetic is that of ``add_int_k``/``mul_int_k`` in
+# :mod:`raplas_hdl.fp.kernels`, bit for bit and flag for flag (tests/test_fp_model_fastpath.py
+# holds the two to equality, and the oracle tests check both).
+_CHUNK = 1 << 14          # elements per parallel task (contiguous; a few tasks per thread)
+_FAST_MIN = 1 << 15       # smaller arrays take the generic loops (no compile per format)
+_F64_MAGIC = np.int64(0x4330000000000000)       # float64 2^52: bit length by conversion
+_F64_TWO52 = 4503599627370496.0
+
+
+@njit(inline="always")
+def _bitlen_f(v):
+    """Bit length of ``0 < v < 2**52``, branch-free and vectorisable: ``v + 2^52`` as a
+    float64 minus ``2^52`` is ``v`` exactly; its exponent field is the bit length."""
+    f = np.int64(v | _F64_MAGIC).view(np.float64) - _F64_TWO52
+    return (np.float64(f).view(np.int64) >> 52) - 1022
+
+
+@njit(inline="always")
+def _fast_mul(a, b, E, M, R, FL):
+    """``mul_int_k`` with constant format and rounding, written with selects."""
+    EMF = (np.int64(1) << E) - 1
+    MM = (np.int64(1) << M) - 1
+    SH = E + M
+    BIAS = (np.int64(1) << (E - 1)) - 1
+    xa = (a >> M) & EMF
+    xb = (b >> M) & EMF
+    fa = a & MM
+    fb = b & MM
+    sg = (((a ^ b) >> SH) & 1) << SH
+    p = (fa | (np.int64(1) << M)) * (fb | (np.int64(1) << M))
+    t = p >> (2 * M + 1)                          # 1 when the product is >= 2
+    ex = xa + xb - BIAS + t
+    q = (p >> (M + 1)) if t != 0 else (p >> M)
+    if R == _RNE:
+        rem = (p & ((np.int64(2) << M) - 1)) if t != 0 else (p & MM)
+        half = (np.int64(1) << M) if t != 0 else (np.int64(1) << (M - 1))
+        up = (rem > half) | ((rem == half) & ((q & 1) != 0))
+        q = q + np.int64(up)
+        c = q >> (M + 1)
+        q = (q >> 1) if c != 0 else q
+        ex = ex + c
+    over = ex >= EMF
+    under = ex <= 0
+    if R == _RNE:
+        r = (sg | (EMF << M)) if over else (sg | (ex << M) | (q & MM))
+    else:
+        r = (sg | ((EMF - 1) << M) | MM) if over else (sg | (ex << M) | (q & MM))
+    r = sg if under else r
+    ia = xa == EMF
+    ib = xb == EMF
+    zero_in = (xa == 0) | (xb == 0)
+    inf_in = ia | ib
+    nan_in = (ia & (fa != 0)) | (ib & (fb != 0))
+    r = sg if zero_in else r
+    r = (sg | (EMF << M)) if inf_in else r
+    bad = inf_in & zero_in
+    r = ((EMF << M) | (np.int64(1) << (M - 1))) if (nan_in | bad) else r
+    f = np.uint8(0)
+    if FL:
+        plain = not (zero_in | inf_in)
+        f = np.uint8((np.int64(plain & over) * _OVF_I) | (np.int64(plain & under) * _UNF_I)
+                     | (np.int64(bad & (not nan_in)) * _INV_I))
+    return np.uint32(r), f
+
+
+@njit(inline="always")
+def _fast_add(a, b, E, M, R, FL):
+    """``add_int_k`` with constant format and rounding, written with selects."""
+    EMF = (np.int64(1) << E) - 1
+    MM = (np.int64(1) << M) - 1
+    SH = E + M
+    MAG = (np.int64(1) << SH) - 1
+    sa = (a >> SH) & 1
+    sb = (b >> SH) & 1
+    ma = a & MAG
+    mb = b & MAG
+    xa = ma >> M
+    xb = mb >> M
+    swap = mb > ma
+    hi = mb if swap else ma
+    lo = ma if swap else mb
+    s = sb if swap else sa
+    exh = hi >> M
+    d = min(exh - (lo >> M), M + 4)
+    ax = ((hi & MM) | (np.int64(1) << M)) << 3
+    bx = ((lo & MM) | (np.int64(1) << M)) << 3
+    bal = bx >> d
+    if R == _CHOP:
+        bal = bal & ~np.int64(7)
+    else:
+        bal = bal | np.int64((bal << d) != bx)     # sticky: anything shifted out
+    s3 = (ax - bal) if sa != sb else (ax + bal)
+    nz = s3 != 0
+    lsh = M + 4 - _bitlen_f(s3 | np.int64(not nz))    # -1 .. M+3
+    s3 = ((s3 >> 1) | (s3 & 1)) if lsh < 0 else (s3 << max(lsh, 0))
+    ex = exh - lsh
+    q = s3 >> 3
+    if R == _RNE:
+        rr = s3 & 7
+        up = (rr > 4) | ((rr == 4) & ((q & 1) != 0))
+        q = q + np.int64(up)
+        c = q >> (M + 1)
+        q = (q >> 1) if c != 0 else q
+        ex = ex + c
+    over = ex >= EMF
+    under = ex <= 0
+    sg = s << SH
+    if R == _RNE:
+        r = (sg | (EMF << M)) if over else (sg | (ex << M) | (q & MM))
+    else:
+        r = (sg | ((EMF - 1) << M) | MM) if over else (sg | (ex << M) | (q & MM))
+    r = sg if under else r
+    r = r if nz else np.int64(0)                      # exact zero sum: +0
+    za = xa == 0
+    zb = xb == 0
+    ia = xa == EMF
+    ib = xb == EMF
+    nan_in = (ia & ((a & MM) != 0)) | (ib & ((b & MM) != 0))
+    r = ma | (sa << SH) if zb else r
+    r = mb | (sb << SH) if za else r
+    r = ((sa & sb) << SH) if (za & zb) else r
+    r = ((sb << SH) | (EMF << M)) if ib else r
+    r = ((sa << SH) | (EMF << M)) if ia else r
+    inv = ia & ib & (sa != sb)
+    r = ((EMF << M) | (np.int64(1) << (M - 1))) if (nan_in | inv) else r
+    f = np.uint8(0)
+    if FL:
+        plain = nz & (not (za | zb | ia | ib))
+        f = np.uint8((np.int64(plain & over) * _OVF_I) | (np.int64(plain & under) * _UNF_I)
+                     | (np.int64(inv & (not nan_in)) * _INV_I))
+    return np.uint32(r), f
+
+
+_FAST_LOOPS = {}
+
+
+def _fast_loop(op, e, m, rmode, want_flags):
+    """The compiled loop of ``op`` for one format, rounding and flag choice (built once,
+    numba disk cache keyed by the constants)."""
+    key = (op, e, m, rmode, bool(want_flags))
+    loop = _FAST_LOOPS.get(key)
+    if loop is not None:
+        return loop
+    E, M, R, FL = int(e), int(m), int(rmode), bool(want_flags)
+    IS_MUL = op == _OP_MUL
+    NEGB = (1 << (E + M)) if op == _OP_SUB else 0    # sub: flip b's sign (a NaN stays NaN)
+    CH = _CHUNK
+
+    @njit(parallel=True, cache=True)
+    def loop(a, b, out, fl, acc):
+        n = a.size
+        for c in prange(acc.size):
+            lo = c * CH
+            hi = min(lo + CH, n)
+            o = np.uint32(0)
+            for i in range(lo, hi):
+                x = a[i]
+                y = b[i]
+                o |= x | y
+                if IS_MUL:
+                    r, f = _fast_mul(np.int64(x), np.int64(y), E, M, R, FL)
+                else:
+                    r, f = _fast_add(np.int64(x), np.int64(y) ^ NEGB, E, M, R, FL)
+                out[i] = r
+                if FL:
+                    fl[i] = f
+            acc[c] = o
+
+    _FAST_LOOPS[key] = loop
+    return loop
+
+
+def _run_fast(fa, fb, fmt, op, want_flags):
+    """Run the specialised loop; returns (bits, flags or None, number of wide patterns)."""
+    n = fa.size
+    out = np.empty(n, dtype=np.uint32)
+    fl = np.empty(n if want_flags else 1, dtype=np.uint8)
+    acc = np.empty(-(-n // _CHUNK), dtype=np.uint32)
+    _fast_loop(op, fmt.exp_bits, fmt.man_bits, rmode_code(fmt), want_flags)(fa, fb, out, fl,
+                                                                             acc)
+    bad = 0
+    if int(np.bitwise_or.reduce(acc)) > fmt.mask:
+        bad = int(np.count_nonzero((fa > fmt.mask) | (fb > fmt.mask)))
+    return out, (fl if want_flags else None), bad
+
+
+# -- argument handling --------------------------------------------------------------------
+def _check_fmt(fmt):
+    if not isinstance(fmt, FPFormat):
+        raise ValueError(f"fmt must be an FPFormat, not {fmt!r}")
+
+
+def _patterns(x, fmt, name):
+    """Coerce to a ``uint32`` array; patterns that do not fit ``uint32`` raise here, the
+    rest is range-checked against the format inside the compiled loop."""
+    arr = np.asarray(x)
+    if arr.dtype == np.uint32:
+        return arr
+    if arr.size == 0:
+        return arr.astype(np.uint32)
+    if arr.dtype == object:
+        try:
+            arr = np.array(x, dtype=np.int64)
+        except (OverflowError, TypeError, ValueError):
+            raise ValueError(f"{name} must hold integer bit patterns of the {fmt.width}-bit "
+                             f"format {fmt.name}") from None
+    if arr.dtype.kind not in "iu":
+        raise ValueError(f"{name} must hold integer bit patterns, not dtype {arr.dtype}")
+    if arr.size and (arr.min() < 0 or arr.max() > fmt.mask):
+        raise ValueError(f"{name} holds patterns outside 0..{fmt.mask:#x}, wider than the "
+                         f"{fmt.width}-bit format {fmt.name}")
+    return arr.astype(np.uint32)
+
+
+def _flat(*arrays):
+    """Broadcast, then contiguous 1-D views (copies only when needed)."""
+    shape = np.broadcast_shapes(*(a.shape for a in arrays))
+    flat = []
+    for a in arrays:
+        if a.shape != shape:
+            a = np.broadcast_to(a, shape)
+        flat.append(np.ascontiguousarray(a).reshape(-1))
+    return shape, flat
+
+
+def _shape_out(out, shape):
+    out = out.reshape(shape)
+    return out[()] if shape == () else out
+
+
+def _raise_wide(bad, fmt, names):
+    if bad:
+        raise ValueError(f"{' or '.join(names)} holds {bad} patterns wider than the "
+                         f"{fmt.width}-bit format {fmt.name}")
+
+
+def _binary(a, b, fmt, op, flags, int_path=False, path="auto"):
+    """Run a binary operation. ``path`` picks the loop: ``"auto"`` (the specialised loop
+    for arrays of at least ``_FAST_MIN`` elements, else the generic one), ``"fast"``,
+    ``"generic"`` (``add_k``/``mul_k``) or ``"int"`` (the integer kernels; also
+    ``int_path=True``). Every path gives the same bits and flags; the tests check that."""
+    _check_fmt(fmt)
+    if int_path:
+        path = "int"
+    if path not in ("auto", "fast", "generic", "int"):
+        raise ValueError(f"path must be auto, fast, generic or int, not {path!r}")
+    a = _patterns(a, fmt, "a")
+    b = _patterns(b, fmt, "b")
+    shape, (fa, fb) = _flat(a, b)
+    if path == "fast" or (path == "auto" and fa.size >= _FAST_MIN):
+        out, fl, bad = _run_fast(fa, fb, fmt, op, flags)
+        _raise_wide(bad, fmt, ("a", "b"))
+        if flags:
+            return _shape_out(out, shape), _shape_out(fl, shape)
+        return _shape_out(out, shape)
+    out = np.empty(fa.size, dtype=np.uint32)
+    fl = np.empty(fa.size, dtype=np.uint8)
+    args = (fa, fb, fmt.exp_bits, fmt.man_bits, rmode_code(fmt))
+    if path == "int":
+        bad = _int_loop(*args, op, out, fl)
+    else:
+        bad = (_add_loop, _sub_loop, _mul_loop)[op](*args, out, fl)
+    _raise_wide(bad, fmt, ("a", "b"))
+    if flags:
+        return _shape_out(out, shape), _shape_out(fl, shape)
+    return _shape_out(out, shape)
+
+
+# -- public API ---------------------------------------------------------------------------
+def add(a, b, fmt: FPFormat, flags: bool = False):
+    """``a + b``, rounded once by ``fmt.rounding``.
+
+    Parameters
+    ----------
+    a, b : array_like of int
+        Bit patterns of ``fmt`` (broadcast against each other).
+    fmt : FPFormat
+        Format and rounding.
+    flags : bool
+        Also return the event flags.
+
+    Returns
+    -------
+    numpy.ndarray of uint32, or (bits, flags)
+        ``flags`` is a ``uint8`` array of ``FLAG_OVERFLOW | FLAG_UNDERFLOW | FLAG_INVALID``.
+
+    Raises
+    ------
+    ValueError
+        If a pattern is wider than the format or not an integer.
+    """
+    return _binary(a, b, fmt, _OP_ADD, flags)
+
+
+def sub(a, b, fmt: FPFormat, flags: bool = False):
+    """``a - b = add(a, neg(b))``; see :func:`add`."""
+    return _binary(a, b, fmt, _OP_SUB, flags)
+
+
+def mul(a, b, fmt: FPFormat, flags: bool = False):
+    """``a * b``, rounded once (``chop`` multiplies like ``rtz``); see :func:`add`."""
+    return _binary(a, b, fmt, _OP_MUL, flags)
+
+
+def neg(a, fmt: FPFormat):
+    """``-a``: the sign bit flipped; a NaN gives the canonical NaN."""
+    _check_fmt(fmt)
+    a = _patterns(a, fmt, "a")
+    shape, (fa,) = _flat(a)
+    out = np.empty(fa.size, dtype=np.uint32)
+    _raise_wide(_negop(fa, fmt.exp_bits, fmt.man_bits, out), fmt, ("a",))
+    return _shape_out(out, shape)
+
+
+def _compare(a, b, fmt, op):
+    _check_fmt(fmt)
+    a = _patterns(a, fmt, "a")
+    b = _patterns(b, fmt, "b")
+    shape, (fa, fb) = _flat(a, b)
+    out = np.empty(fa.size, dtype=np.bool_)
+    _raise_wide(_cmpop(fa, fb, fmt.exp_bits, fmt.man_bits, op, out), fmt, ("a", "b"))
+    return _shape_out(out, shape)
+
+
+def le(a, b, fmt: FPFormat):
+    """``a <= b`` as an ordered comparison: NaN gives False, -0 == +0, denormals are 0."""
+    return _compare(a, b, fmt, _CMP_LE)
+
+
+def lt(a, b, fmt: FPFormat):
+    """``a < b`` as an ordered comparison: NaN gives False, -0 == +0, denormals are 0."""
+    return _compare(a, b, fmt, _CMP_LT)
+
+
+def abs_le(a, b, fmt: FPFormat):
+    """``|a| <= |b|``: NaN gives False, denormal patterns are 0."""
+    return _compare(a, b, fmt, _CMP_ABS_LE)
+
+
+def encode(x, fmt: FPFormat, direction: str | None = None, flags: bool = False):
+    """Round float64 values into ``fmt``.
+
+    Parameters
+    ----------
+    x : array_like of float
+        Values (converted to float64).
+    fmt : FPFormat
+        Target format; with ``direction=None`` its rounding is used (``chop`` as ``rtz``).
+    direction : {None, "up", "down"}
+        ``"up"`` rounds toward +inf, ``"down"`` toward -inf. An overflow in the
+        direction of rounding gives the signed infinity, otherwise the signed max finite;
+        a non-zero value below the normal range gives the signed zero, or the signed min
+        normal when rounding away from zero.
+    flags : bool
+        Also return event flags: overflow (a finite value beyond the range), underflow (a
+        non-zero value below the normal range, whatever it became). Never invalid.
+
+    Returns
+    -------
+    numpy.ndarray of uint32, or (bits, flags)
+
+    Raises
+    ------
+    ValueError
+        For an unknown direction or values that are not real numbers.
+    """
+    _check_fmt(fmt)
+    if direction is None:
+        mode = rmode_code(fmt)
+        mode = RTZ if mode == 2 else mode
+    elif direction == "up":
+        mode = UP
+    elif direction == "down":
+        mode = DOWN
+    else:
+        raise ValueError(f"direction must be None, 'up' or 'down', not {direction!r}")
+    arr = np.asarray(x)
+    if arr.dtype.kind not in "fiub":
+        raise ValueError(f"x must hold real numbers, not dtype {arr.dtype}")
+    shape = arr.shape
+    arr = np.ascontiguousarray(arr, dtype=np.float64)
+    bits = arr.reshape(-1).view(np.int64)
+    out = np.empty(bits.size, dtype=np.uint32)
+    fl = np.empty(bits.size, dtype=np.uint8)
+    _encode(bits, fmt.exp_bits, fmt.man_bits, mode, out, fl)
+    if flags:
+        return _shape_out(out, shape), _shape_out(fl, shape)
+    return _shape_out(out, shape)
+
+
+def decode(bits, fmt: FPFormat):
+    """Exact float64 values of bit patterns (denormal patterns decode as signed zeros,
+    NaNs as NaN)."""
+    _check_fmt(fmt)
+    a = _patterns(bits, fmt, "bits")
+    shape, (fa,) = _flat(a)
+    out = np.empty(fa.size, dtype=np.int64)
+    _raise_wide(_decode(fa, fmt.exp_bits, fmt.man_bits, out), fmt, ("bits",))
+    return _shape_out(out.view(np.float64), shape)
+
+
+def flags_names(flags) -> list[str]:
+    """Names of the event flags set in one flag value, e.g. ``["overflow", "invalid"]``.
+
+    For an array, the names of the flags set in any element.
+    """
+    value = int(np.bitwise_or.reduce(np.asarray(flags, dtype=np.uint8).reshape(-1))) \
+        if np.ndim(flags) else int(flags)
+    return [name for bit, name in sorted(FLAG_NAMES.items()) if value & bit]

@@ -1,0 +1,211 @@
+"""Pipelined floating-point adder/subtractor, bit for bit as ``shared/spec/fp-format.md``.
+
+Datapath (``M`` = fraction bits; significands are ``M+1`` bits with the hidden one). The
+aligned sum is kept as a *floor with sticky*: an integer ``S`` with two bits below the
+larger operand's last place plus a sticky bit that says the exact sum is a little above
+``S``. When the smaller operand loses bits in alignment, the subtraction takes one more
+unit off ``S`` (the floor of the exact difference), so truncating or rounding ``S`` with
+its sticky bit is a correct rounding of the exact result. Those lost bits only occur when
+the exponents differ by 3 or more, and then the difference needs at most one bit of left
+normalisation, so two extra bits are enough for a guard bit after normalising.
+
+The seven combinational steps, in order:
+
+``unpack``
+    Classify both operands (``sub`` flips the sign of ``b``), order them by magnitude
+    (exponent, then significand) so that ``x`` is the larger, and work out the special
+    results (NaN operand, inf - inf, infinity) and the sign of an exact zero sum.
+    Hands on: ``x``'s sign, exponent and significand, ``y``'s significand, the exponent
+    difference ``d``, whether the operation is an effective subtraction, the specials.
+``align``
+    Shift ``y``'s significand (with two zero bits appended) right by ``d`` and OR the bits
+    shifted out into a sticky bit. ``chop`` instead drops everything below ``y``'s own last
+    bit, as the paper's adder does, and has no sticky bit.
+``add``
+    ``S = X + Y'`` or ``S = X - Y' - sticky``, ``M+4`` bits.
+``lzc``
+    Leading-zero count of ``S`` (a multiplexer tree) and its zero test.
+``normalise``
+    Barrel-shift ``S`` left by the count; the significand is the top ``M+1`` bits, the next
+    bit the guard bit, the rest ORed with the alignment sticky bit; the exponent is
+    ``exp(x) + 1 - count``.
+``round``
+    Round the significand by the format's rounding (:func:`.fp_common.round_significand`).
+``pack``
+    Overflow, underflow, exact zero, specials; the bit pattern and the event flags
+    (:func:`.fp_common.pack`).
+
+Pipeline registers go behind the steps chosen by :func:`.pipeline.place_registers` from
+the step weights (3, 3, 2, 2, 3, 2, 1). The default ``stages=4`` (the paper's adder depth)
+gives:
+
+1. ``unpack``: operands classified, ordered and the exponent difference formed;
+2. ``align`` + ``add``: the aligned sum ``S`` and its sticky bit;
+3. ``lzc`` + ``normalise``: the normalised significand, guard and sticky bits, exponent;
+4. ``round`` + ``pack``: the result and its flags, on the output registers.
+
+``stages`` can be anything from 1 (all seven steps in one clock) to 7 (one step each).
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Cat, Const, Module, Mux
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
+
+from .fp_common import (check_format, leading_zeros, pack, round_significand,
+                        shift_right_sticky, unpack)
+from .pipeline import Step, build_pipeline, group_steps, place_registers, wire
+
+__all__ = ["FPAdd"]
+
+#: (name, weight) of each combinational step, in datapath order.
+ADD_STEPS = (("unpack", 3), ("align", 3), ("add", 2), ("lzc", 2), ("normalise", 3),
+             ("round", 2), ("pack", 1))
+
+_SPECIALS = ("nan", "invalid", "inf")
+
+
+class FPAdd(wiring.Component):
+    """Fully pipelined adder/subtractor: ``o = a + b`` (``sub`` = 0) or ``a - b`` (1).
+
+    One operation per clock; the result of the operands presented with ``i_valid`` at an
+    enabled clock edge appears on ``o``/``flags`` with ``o_valid`` after ``latency``
+    enabled edges. While ``en`` is 0 every register holds (a stall), inputs are not taken
+    and outputs do not change.
+
+    Parameters
+    ----------
+    fmt : FPFormat
+        Format and rounding (``rtz``, ``rne`` or ``chop``).
+    stages : int
+        Pipeline depth, 1 to 7 (default 4, as in the paper).
+
+    Attributes
+    ----------
+    a, b : In(W)
+        Operands (bit patterns).
+    sub : In(1)
+        1 selects ``a - b``.
+    i_valid : In(1)
+        The operands are an operation.
+    en : In(1)
+        Clock enable for the whole pipeline.
+    o : Out(W)
+        Result bit pattern.
+    flags : Out(3)
+        Event flags of the result: ``FLAG_OVERFLOW``, ``FLAG_UNDERFLOW``, ``FLAG_INVALID``.
+    o_valid : Out(1)
+        ``o`` and ``flags`` belong to an operation.
+
+    Raises
+    ------
+    ValueError
+        If ``fmt`` is not an :class:`FPFormat` or ``stages`` is out of range.
+    """
+
+    def __init__(self, fmt, stages: int = 4):
+        self._fmt = check_format(fmt)
+        self._steps = tuple(Step(name, getattr(self, f"_step_{name}"), weight)
+                            for name, weight in ADD_STEPS)
+        self._registered = place_registers([s.weight for s in self._steps], stages)
+        self._stages = stages
+        w = fmt.width
+        super().__init__({
+            "a": In(w), "b": In(w), "sub": In(1), "i_valid": In(1), "en": In(1),
+            "o": Out(w), "flags": Out(3), "o_valid": Out(1),
+        })
+
+    @property
+    def fmt(self):
+        return self._fmt
+
+    @property
+    def stages(self) -> int:
+        return self._stages
+
+    @property
+    def latency(self) -> int:
+        """Enabled clock edges from an input to its result (equal to ``stages``)."""
+        return self._stages
+
+    @property
+    def stage_steps(self) -> tuple[tuple[str, ...], ...]:
+        """The names of the combinational steps in each pipeline stage."""
+        return group_steps(self._steps, self._registered)
+
+    # -- combinational steps -----------------------------------------------------------
+    def _step_unpack(self, m, v):
+        fmt = self._fmt
+        ua, ub = unpack(fmt, v["a"]), unpack(fmt, v["b"])
+        sign_b = ub.sign ^ v["sub"]
+        swap = wire(m, ub.mag > ua.mag, "swap")
+        both_inf = ua.is_inf & ub.is_inf
+        eff_sub = ua.sign ^ sign_b
+        any_nan = ua.is_nan | ub.is_nan
+        exp_x = Mux(swap, ub.exp, ua.exp)
+        exp_y = Mux(swap, ua.exp, ub.exp)
+        return {
+            "sign_x": Mux(swap, sign_b, ua.sign),
+            "zero_sign": ua.sign & sign_b,
+            "eff_sub": eff_sub,
+            "exp_x": exp_x,
+            "sig_x": Mux(swap, ub.sig, ua.sig),
+            "sig_y": Mux(swap, ua.sig, ub.sig),
+            "diff": (exp_x - exp_y)[:fmt.exp_bits],
+            "nan": any_nan | (both_inf & eff_sub),
+            "invalid": ~any_nan & both_inf & eff_sub,
+            "inf": ua.is_inf | ub.is_inf,
+        }
+
+    def _step_align(self, m, v):
+        shifted, sticky = shift_right_sticky(Cat(Const(0, 2), v["sig_y"]), v["diff"])
+        if self._fmt.rounding == "chop":
+            shifted, sticky = Cat(Const(0, 2), shifted[2:]), Const(0, 1)
+        return {**_keep(v, "sign_x", "zero_sign", "eff_sub", "exp_x", "sig_x", *_SPECIALS),
+                "sig_y": shifted, "sticky": sticky}
+
+    def _step_add(self, m, v):
+        width = self._fmt.man_bits + 4
+        x = Cat(Const(0, 2), v["sig_x"])
+        total = Mux(v["eff_sub"], x - v["sig_y"] - v["sticky"], x + v["sig_y"])
+        return {**_keep(v, "sign_x", "zero_sign", "exp_x", "sticky", *_SPECIALS),
+                "sum": total[:width]}
+
+    def _step_lzc(self, m, v):
+        count, zero = leading_zeros(v["sum"])
+        return {**_keep(v, "sign_x", "zero_sign", "exp_x", "sticky", "sum", *_SPECIALS),
+                "lzc": count, "zero": zero}
+
+    def _step_normalise(self, m, v):
+        width = self._fmt.man_bits + 4
+        norm = (v["sum"] << v["lzc"])[:width]
+        return {**_keep(v, "sign_x", "zero_sign", "zero", *_SPECIALS),
+                "sig": norm[3:], "guard": norm[2],
+                "sticky": norm[:2].any() | v["sticky"],
+                "exp": v["exp_x"] + 1 - v["lzc"]}
+
+    def _step_round(self, m, v):
+        sig, exp = round_significand(self._fmt, v["sig"], v["exp"], v["guard"], v["sticky"])
+        return {**_keep(v, "sign_x", "zero_sign", "zero", *_SPECIALS),
+                "sig": sig, "exp": exp}
+
+    def _step_pack(self, m, v):
+        bits, flags = pack(self._fmt, sign=Mux(v["zero"], v["zero_sign"], v["sign_x"]),
+                           exp=v["exp"], sig=v["sig"], zero=v["zero"], inf=v["inf"],
+                           nan=v["nan"], invalid=v["invalid"])
+        return {"bits": bits, "flags": flags}
+
+    def elaborate(self, platform):
+        m = Module()
+        out, valid = build_pipeline(
+            m, self._steps, {"a": self.a, "b": self.b, "sub": self.sub},
+            self._registered, en=self.en, valid=self.i_valid)
+        m.d.comb += [self.o.eq(out["bits"]), self.flags.eq(out["flags"]),
+                     self.o_valid.eq(valid)]
+        return m
+
+
+def _keep(v, *names):
+    return {name: v[name] for name in names}
+

@@ -1,0 +1,193 @@
+"""Pipelined floating-point multiplier, bit for bit as ``shared/spec/fp-format.md``.
+
+The significand product is exact (``2M+2`` bits from one ``(M+1) x (M+1)`` unsigned
+multiply in :class:`SigMul`, a single DSP48 at FP24), so truncating it with guard and
+sticky bits is a correct rounding; ``chop`` is ``rtz`` for the multiplier.
+
+The five combinational steps, in order:
+
+``unpack``
+    Classify both operands, the sign of the product (xor), the special results (NaN
+    operand, zero times infinity, infinity, zero) and the biased exponent sum
+    ``exp(a) + exp(b) - bias``. Hands on: both significands, the sign, the exponent,
+    the specials.
+``multiply``
+    The ``2M+2``-bit significand product (:class:`SigMul`).
+``normalise``
+    The product lies in ``[1, 4)``: if its top bit is set the significand is the top
+    ``M+1`` bits and the exponent goes up by one, otherwise the next ``M+1``; the bit below
+    is the guard bit, the OR of the rest the sticky bit.
+``round``
+    Round the significand by the format's rounding (:func:`.fp_common.round_significand`).
+``pack``
+    Overflow, underflow, specials; the bit pattern and the event flags
+    (:func:`.fp_common.pack`).
+
+Pipeline registers go behind the steps chosen by :func:`.pipeline.place_registers` from
+the step weights (2, 5, 2, 2, 1). The default ``stages=3`` (the paper's multiplier
+depth) gives:
+
+1. ``unpack``: the operands classified, the exponent sum and the two significands on
+   registers (a DSP48's input registers);
+2. ``multiply``: the product on a register (the DSP48's product register);
+3. ``normalise`` + ``round`` + ``pack``: the result and its flags, on the output registers.
+
+``stages`` can be anything from 1 (all five steps in one clock) to 5 (one step each).
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Module, Mux
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
+
+from .fp_common import check_format, pack, round_significand, unpack
+from .pipeline import Step, build_pipeline, group_steps, place_registers
+
+__all__ = ["FPMul", "SigMul"]
+
+#: (name, weight) of each combinational step, in datapath order.
+MUL_STEPS = (("unpack", 2), ("multiply", 5), ("normalise", 2), ("round", 2), ("pack", 1))
+
+_CARRIED = ("sign", "exp", "nan", "invalid", "inf", "zero")
+
+
+class SigMul(wiring.Component):
+    """The significand multiplier: ``p = a * b``, unsigned, combinational.
+
+    The only multiplier of :class:`FPMul`, kept apart so that a target can replace it
+    with a vendor primitive.
+
+    Parameters
+    ----------
+    width : int
+        Operand width (``M+1``).
+
+    Attributes
+    ----------
+    a, b : In(width)
+    p : Out(2 * width)
+    """
+
+    def __init__(self, width: int):
+        if not isinstance(width, int) or isinstance(width, bool) or width < 1:
+            raise ValueError(f"width must be a positive integer, not {width!r}")
+        super().__init__({"a": In(width), "b": In(width), "p": Out(2 * width)})
+
+    def elaborate(self, platform):
+        m = Module()
+        m.d.comb += self.p.eq(self.a * self.b)
+        return m
+
+
+class FPMul(wiring.Component):
+    """Fully pipelined multiplier: ``o = a * b``.
+
+    One operation per clock; the result of the operands presented with ``i_valid`` at an
+    enabled clock edge appears on ``o``/``flags`` with ``o_valid`` after ``latency``
+    enabled edges. While ``en`` is 0 every register holds (a stall).
+
+    Parameters
+    ----------
+    fmt : FPFormat
+        Format and rounding (``rtz``, ``rne`` or ``chop``, which equals ``rtz`` here).
+    stages : int
+        Pipeline depth, 1 to 5 (default 3, as in the paper).
+
+    Attributes
+    ----------
+    a, b : In(W)
+        Operands (bit patterns).
+    i_valid : In(1)
+        The operands are an operation.
+    en : In(1)
+        Clock enable for the whole pipeline.
+    o : Out(W)
+        Result bit pattern.
+    flags : Out(3)
+        Event flags of the result: ``FLAG_OVERFLOW``, ``FLAG_UNDERFLOW``, ``FLAG_INVALID``.
+    o_valid : Out(1)
+        ``o`` and ``flags`` belong to an operation.
+
+    Raises
+    ------
+    ValueError
+        If ``fmt`` is not an :class:`FPFormat` or ``stages`` is out of range.
+    """
+
+    def __init__(self, fmt, stages: int = 3):
+        self._fmt = check_format(fmt)
+        self._steps = tuple(Step(name, getattr(self, f"_step_{name}"), weight)
+                            for name, weight in MUL_STEPS)
+        self._registered = place_registers([s.weight for s in self._steps], stages)
+        self._stages = stages
+        w = fmt.width
+        super().__init__({
+            "a": In(w), "b": In(w), "i_valid": In(1), "en": In(1),
+            "o": Out(w), "flags": Out(3), "o_valid": Out(1),
+        })
+
+    @property
+    def fmt(self):
+        return self._fmt
+
+    @property
+    def stages(self) -> int:
+        return self._stages
+
+    @property
+    def latency(self) -> int:
+        """Enabled clock edges from an input to its result (equal to ``stages``)."""
+        return self._stages
+
+    @property
+    def stage_steps(self) -> tuple[tuple[str, ...], ...]:
+        """The names of the combinational steps in each pipeline stage."""
+        return group_steps(self._steps, self._registered)
+
+    # -- combinational steps -----------------------------------------------------------
+    def _step_unpack(self, m, v):
+        fmt = self._fmt
+        ua, ub = unpack(fmt, v["a"]), unpack(fmt, v["b"])
+        any_nan = ua.is_nan | ub.is_nan
+        zero_inf = (ua.is_zero & ub.is_inf) | (ua.is_inf & ub.is_zero)
+        return {
+            "sign": ua.sign ^ ub.sign,
+            "exp": ua.exp + ub.exp - fmt.bias,
+            "sig_a": ua.sig,
+            "sig_b": ub.sig,
+            "nan": any_nan | zero_inf,
+            "invalid": ~any_nan & zero_inf,
+            "inf": ua.is_inf | ub.is_inf,
+            "zero": ua.is_zero | ub.is_zero,
+        }
+
+    def _step_multiply(self, m, v):
+        m.submodules.sigmul = sigmul = SigMul(self._fmt.man_bits + 1)
+        m.d.comb += [sigmul.a.eq(v["sig_a"]), sigmul.b.eq(v["sig_b"])]
+        return {**{k: v[k] for k in _CARRIED}, "prod": sigmul.p}
+
+    def _step_normalise(self, m, v):
+        mb = self._fmt.man_bits
+        prod = v["prod"]
+        top = prod[2 * mb + 1]
+        norm = Mux(top, prod, prod << 1)[:2 * mb + 2]
+        return {**{k: v[k] for k in _CARRIED}, "exp": v["exp"] + top,
+                "sig": norm[mb + 1:], "guard": norm[mb], "sticky": norm[:mb].any()}
+
+    def _step_round(self, m, v):
+        sig, exp = round_significand(self._fmt, v["sig"], v["exp"], v["guard"], v["sticky"])
+        return {**{k: v[k] for k in _CARRIED}, "sig": sig, "exp": exp}
+
+    def _step_pack(self, m, v):
+        bits, flags = pack(self._fmt, sign=v["sign"], exp=v["exp"], sig=v["sig"],
+                           zero=v["zero"], inf=v["inf"], nan=v["nan"], invalid=v["invalid"])
+        return {"bits": bits, "flags": flags}
+
+    def elaborate(self, platform):
+        m = Module()
+        out, valid = build_pipeline(m, self._steps, {"a": self.a, "b": self.b},
+                                    self._registered, en=self.en, valid=self.i_valid)
+        m.d.comb += [self.o.eq(out["bits"]), self.flags.eq(out["flags"]),
+                     self.o_valid.eq(valid)]
+        return m
