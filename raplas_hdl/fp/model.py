@@ -17,8 +17,11 @@ under a second.
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
-from numba import njit, prange
+from numba import get_num_threads, njit, prange
 
 from .format import FLAG_INVALID, FLAG_NAMES, FLAG_OVERFLOW, FLAG_UNDERFLOW, FPFormat
 from .kernels import (CHOP, DOWN, RNE, RTZ, UP, abs_le_k, add_int_k, add_k, decode_k,
@@ -149,16 +152,25 @@ def _decode(a, e, m, out):
 
 # -- specialised loops --------------------------------------------------------------------
 # The loops above take the format as runtime integers and go through the generic kernels.
-# For large arrays :func:`_fast_loop` compiles, once per (operation, E, M, rounding,
-# flags wanted), a loop in which the format and the rounding are compile-time constants:
-# every shift and mask is an immediate, dead roundings and (without flags) the flag logic
-# disappear, and the body is straight-line integer code (selects, no branches, no
-# division) that LLVM vectorises (AVX2: 4 x int64 lanes, the significand product one
-# ``vpmuludq``). The arithmetic is that of ``add_int_k``/``mul_int_k`` in
-# :mod:`raplas_hdl.fp.kernels`, bit for bit and flag for flag (tests/test_fp_model_fastpath.py
-# holds the two to equality, and the oracle tests check both).
-_CHUNK = 1 << 14          # elements per parallel task (contiguous; a few tasks per thread)
+# For large arrays :func:`_fast_kernel` compiles, once per (operation, E, M, rounding,
+# flags wanted), a loop in which the format and the rounding are compile-time constants
+# (closure variables: every shift and mask is an immediate, dead roundings vanish). Each
+# block of the array takes two passes:
+#   1. the common case, both operands normal and the result in range, as straight-line
+#      integer code (no branch, no division, fields kept in place so that a rounding carry
+#      or a normalisation shift simply adds into the exponent) that LLVM vectorises (AVX2:
+#      4 x int64 lanes, the significand product one ``vpmuldq``); every other element
+#      (zero, infinity or NaN operand, overflow, underflow, exact zero sum) gets the
+#      sentinel 0xFFFFFFFF, which no operation ever returns (a NaN result has sign 0);
+#   2. only in blocks that hold a sentinel: those elements again through the generic
+#      integer kernels ``add_int_k``/``mul_int_k`` (the reference for every case).
+# Flags of common-case elements are 0. The result is the integer kernels' bit for bit and
+# flag for flag (tests/test_fp_model_fastpath.py holds the fast loop to the generic one).
+# The blocks of a large array are split across threads (numba releases the GIL).
+_BLOCK = 4096             # elements per pass-1/pass-2 block (stays in L1/L2)
 _FAST_MIN = 1 << 15       # smaller arrays take the generic loops (no compile per format)
+_PAR_MIN = 1 << 16        # smaller arrays run in the calling thread
+_SENT = np.uint32(0xFFFFFFFF)
 _F64_MAGIC = np.int64(0x4330000000000000)       # float64 2^52: bit length by conversion
 _F64_TWO52 = 4503599627370496.0
 
@@ -172,170 +184,159 @@ def _bitlen_f(v):
 
 
 @njit(inline="always")
-def _fast_mul(a, b, E, M, R, FL):
-    """``mul_int_k`` with constant format and rounding, written with selects."""
-    EMF = (np.int64(1) << E) - 1
-    MM = (np.int64(1) << M) - 1
+def _common_mul(a, b, E, M, R):
+    """Pass 1 of ``a * b``: the result pattern, or -1 (all ones: the sentinel once cut to
+    32 bits) when the element is not the common case (an operand not normal, overflow or
+    underflow)."""
+    H = np.int64(1) << M
+    MM = H - 1
     SH = E + M
-    BIAS = (np.int64(1) << (E - 1)) - 1
-    xa = (a >> M) & EMF
-    xb = (b >> M) & EMF
-    fa = a & MM
-    fb = b & MM
-    sg = (((a ^ b) >> SH) & 1) << SH
-    p = (fa | (np.int64(1) << M)) * (fb | (np.int64(1) << M))
-    t = p >> (2 * M + 1)                          # 1 when the product is >= 2
-    ex = xa + xb - BIAS + t
-    q = (p >> (M + 1)) if t != 0 else (p >> M)
-    if R == _RNE:
-        rem = (p & ((np.int64(2) << M) - 1)) if t != 0 else (p & MM)
-        half = (np.int64(1) << M) if t != 0 else (np.int64(1) << (M - 1))
-        up = (rem > half) | ((rem == half) & ((q & 1) != 0))
-        q = q + np.int64(up)
-        c = q >> (M + 1)
-        q = (q >> 1) if c != 0 else q
-        ex = ex + c
-    over = ex >= EMF
-    under = ex <= 0
-    if R == _RNE:
-        r = (sg | (EMF << M)) if over else (sg | (ex << M) | (q & MM))
-    else:
-        r = (sg | ((EMF - 1) << M) | MM) if over else (sg | (ex << M) | (q & MM))
-    r = sg if under else r
-    ia = xa == EMF
-    ib = xb == EMF
-    zero_in = (xa == 0) | (xb == 0)
-    inf_in = ia | ib
-    nan_in = (ia & (fa != 0)) | (ib & (fb != 0))
-    r = sg if zero_in else r
-    r = (sg | (EMF << M)) if inf_in else r
-    bad = inf_in & zero_in
-    r = ((EMF << M) | (np.int64(1) << (M - 1))) if (nan_in | bad) else r
-    f = np.uint8(0)
-    if FL:
-        plain = not (zero_in | inf_in)
-        f = np.uint8((np.int64(plain & over) * _OVF_I) | (np.int64(plain & under) * _UNF_I)
-                     | (np.int64(bad & (not nan_in)) * _INV_I))
-    return np.uint32(r), f
+    MAG = (np.int64(1) << SH) - 1
+    EM = ((np.int64(1) << E) - 1) << M               # exponent field of inf/NaN, in place
+    BIAS1 = ((np.int64(1) << (E - 1))) << M          # (bias + 1) in place
+    ma = a & MAG
+    mb = b & MAG
+    p = ((a & MM) | H) * ((b & MM) | H)              # exact, in [2^2M, 2^(2M+2))
+    t = p >> (2 * M + 1)                             # 1 when the product is >= 2
+    sh = M + t
+    if R == _RNE:                                    # + (half - 1 + lsb), then truncate
+        p = p + (((np.int64(1) << (M - 1)) << t) - 1) + ((p >> sh) & 1)
+    q = p >> sh                                      # hidden one at bit M (or a carry)
+    # Exponent and fraction in place: a carry of the rounding adds into the exponent.
+    mag = (ma & EM) + (mb & EM) + (t << M) + q - BIAS1
+    sg = (a ^ b) & (np.int64(1) << SH)
+    ok = (mag - H) | (EM - 1 - mag) | (ma - H) | (EM - 1 - ma) | (mb - H) | (EM - 1 - mb)
+    return sg | mag | (ok >> 63)
 
 
 @njit(inline="always")
-def _fast_add(a, b, E, M, R, FL):
-    """``add_int_k`` with constant format and rounding, written with selects."""
-    EMF = (np.int64(1) << E) - 1
-    MM = (np.int64(1) << M) - 1
+def _common_add(a, b, E, M, R):
+    """Pass 1 of ``a + b``: the result pattern, or -1 (all ones: the sentinel once cut to
+    32 bits) when the element is not the common case (an operand not normal, exact zero,
+    overflow or underflow)."""
+    H = np.int64(1) << M
+    MM = H - 1
     SH = E + M
-    MAG = (np.int64(1) << SH) - 1
-    sa = (a >> SH) & 1
-    sb = (b >> SH) & 1
+    SB = np.int64(1) << SH
+    MAG = SB - 1
+    EM = ((np.int64(1) << E) - 1) << M
     ma = a & MAG
     mb = b & MAG
-    xa = ma >> M
-    xb = mb >> M
     swap = mb > ma
     hi = mb if swap else ma
     lo = ma if swap else mb
-    s = sb if swap else sa
-    exh = hi >> M
-    d = min(exh - (lo >> M), M + 4)
-    ax = ((hi & MM) | (np.int64(1) << M)) << 3
-    bx = ((lo & MM) | (np.int64(1) << M)) << 3
+    sg = (b if swap else a) & SB                     # the larger magnitude's sign
+    d = min((hi >> M) - (lo >> M), M + 4)            # (B << 3) >> (M + 4) is already 0
+    ax = ((hi & MM) | H) << 3                        # guard, round, sticky bits
+    bx = ((lo & MM) | H) << 3
     bal = bx >> d
     if R == _CHOP:
-        bal = bal & ~np.int64(7)
+        bal = bal & ~np.int64(7)                     # shifted-out bits are dropped
     else:
-        bal = bal | np.int64((bal << d) != bx)     # sticky: anything shifted out
-    s3 = (ax - bal) if sa != sb else (ax + bal)
-    nz = s3 != 0
-    lsh = M + 4 - _bitlen_f(s3 | np.int64(not nz))    # -1 .. M+3
-    s3 = ((s3 >> 1) | (s3 & 1)) if lsh < 0 else (s3 << max(lsh, 0))
-    ex = exh - lsh
+        bal = bal | np.int64((bal << d) != bx)       # sticky
+    s3 = (ax - bal) if ((a ^ b) & SB) != 0 else (ax + bal)
+    z = s3 - 1                                       # negative for an exact zero sum
+    lsh = M + 4 - _bitlen_f(s3 | np.int64(s3 == 0))  # -1 (carry) .. M+3 (cancellation)
+    r1 = np.int64(lsh < 0)
+    s3 = ((s3 << (lsh + r1)) >> r1) | (s3 & r1)      # bit M+3 leads; a carry keeps sticky
+    if R == _RNE:
+        s3 = s3 + 3 + ((s3 >> 3) & 1)                # ties to even
     q = s3 >> 3
-    if R == _RNE:
-        rr = s3 & 7
-        up = (rr > 4) | ((rr == 4) & ((q & 1) != 0))
-        q = q + np.int64(up)
-        c = q >> (M + 1)
-        q = (q >> 1) if c != 0 else q
-        ex = ex + c
-    over = ex >= EMF
-    under = ex <= 0
-    sg = s << SH
-    if R == _RNE:
-        r = (sg | (EMF << M)) if over else (sg | (ex << M) | (q & MM))
-    else:
-        r = (sg | ((EMF - 1) << M) | MM) if over else (sg | (ex << M) | (q & MM))
-    r = sg if under else r
-    r = r if nz else np.int64(0)                      # exact zero sum: +0
-    za = xa == 0
-    zb = xb == 0
-    ia = xa == EMF
-    ib = xb == EMF
-    nan_in = (ia & ((a & MM) != 0)) | (ib & ((b & MM) != 0))
-    r = ma | (sa << SH) if zb else r
-    r = mb | (sb << SH) if za else r
-    r = ((sa & sb) << SH) if (za & zb) else r
-    r = ((sb << SH) | (EMF << M)) if ib else r
-    r = ((sa << SH) | (EMF << M)) if ia else r
-    inv = ia & ib & (sa != sb)
-    r = ((EMF << M) | (np.int64(1) << (M - 1))) if (nan_in | inv) else r
-    f = np.uint8(0)
-    if FL:
-        plain = nz & (not (za | zb | ia | ib))
-        f = np.uint8((np.int64(plain & over) * _OVF_I) | (np.int64(plain & under) * _UNF_I)
-                     | (np.int64(inv & (not nan_in)) * _INV_I))
-    return np.uint32(r), f
+    mag = (hi & EM) - ((lsh + 1) << M) + q           # a rounding carry adds into exponent
+    ok = (mag - H) | (EM - 1 - mag) | (lo - H) | (EM - 1 - hi) | z
+    return sg | mag | (ok >> 63)
 
 
-_FAST_LOOPS = {}
+_FAST_KERNELS = {}
 
 
-def _fast_loop(op, e, m, rmode, want_flags):
-    """The compiled loop of ``op`` for one format, rounding and flag choice (built once,
-    numba disk cache keyed by the constants)."""
-    key = (op, e, m, rmode, bool(want_flags))
-    loop = _FAST_LOOPS.get(key)
-    if loop is not None:
-        return loop
-    E, M, R, FL = int(e), int(m), int(rmode), bool(want_flags)
-    IS_MUL = op == _OP_MUL
-    NEGB = (1 << (E + M)) if op == _OP_SUB else 0    # sub: flip b's sign (a NaN stays NaN)
-    CH = _CHUNK
+def _fast_kernel(op, e, m, rmode, want_flags):
+    """The compiled block loop of ``op`` for one format, rounding and flag choice (built
+    once per process; numba's disk cache keys it by the constants). ``chop`` multiplies
+    like ``rtz``, and ``sub`` is ``add`` with the sign of ``b`` flipped, so they share."""
+    is_mul = op == _OP_MUL
+    if is_mul and rmode == _CHOP:
+        rmode = RTZ
+    key = (is_mul, e, m, rmode, bool(want_flags))
+    kern = _FAST_KERNELS.get(key)
+    if kern is not None:
+        return kern
+    E, M, R, FL, IS_MUL, BL = int(e), int(m), int(rmode), bool(want_flags), is_mul, _BLOCK
 
-    @njit(parallel=True, cache=True)
-    def loop(a, b, out, fl, acc):
+    @njit(nogil=True, cache=True)
+    def kern(a, b, negb, out, fl):
+        """Blocks of ``out = a op b``; returns the OR of all operand patterns."""
         n = a.size
-        for c in prange(acc.size):
-            lo = c * CH
-            hi = min(lo + CH, n)
-            o = np.uint32(0)
-            for i in range(lo, hi):
-                x = a[i]
-                y = b[i]
+        o = np.uint32(0)
+        for lo in range(0, n, BL):
+            ab = a[lo:lo + BL]
+            bb = b[lo:lo + BL]
+            ob = out[lo:lo + BL]
+            fix = np.int64(0)
+            for i in range(ab.size):
+                x = ab[i]
+                y = bb[i]
                 o |= x | y
                 if IS_MUL:
-                    r, f = _fast_mul(np.int64(x), np.int64(y), E, M, R, FL)
+                    r = _common_mul(np.int64(x), np.int64(y), E, M, R)
                 else:
-                    r, f = _fast_add(np.int64(x), np.int64(y) ^ NEGB, E, M, R, FL)
-                out[i] = r
-                if FL:
-                    fl[i] = f
-            acc[c] = o
+                    r = _common_add(np.int64(x), np.int64(y) ^ negb, E, M, R)
+                fix |= r                                 # negative once a sentinel is out
+                ob[i] = np.uint32(r)
+            if FL:
+                fl[lo:lo + BL] = 0
+            if fix < 0:
+                for i in range(ab.size):
+                    if ob[i] == _SENT:
+                        x = np.int64(ab[i])
+                        y = np.int64(bb[i])
+                        if IS_MUL:
+                            r2, f2 = mul_int_k(x, y, E, M, R)
+                        else:
+                            y = np.int64(neg_k(y, E, M)) if negb else y
+                            r2, f2 = add_int_k(x, y, E, M, R)
+                        ob[i] = r2
+                        if FL:
+                            fl[lo + i] = f2
+        return o
 
-    _FAST_LOOPS[key] = loop
-    return loop
+    _FAST_KERNELS[key] = kern
+    return kern
+
+
+_POOL = [None, None]      # (executor, pid): rebuilt after a fork
+
+
+def _pool(workers):
+    ex, pid = _POOL
+    if ex is None or pid != os.getpid() or ex._max_workers < workers:
+        ex = ThreadPoolExecutor(max_workers=max(workers, os.cpu_count() or 1),
+                                thread_name_prefix="fp-model")
+        _POOL[:] = [ex, os.getpid()]
+    return ex
 
 
 def _run_fast(fa, fb, fmt, op, want_flags):
-    """Run the specialised loop; returns (bits, flags or None, number of wide patterns)."""
+    """Run the specialised loop; returns (bits, flags or None, number of wide patterns).
+    Uses numba's thread count (``numba.set_num_threads``) for large arrays."""
     n = fa.size
     out = np.empty(n, dtype=np.uint32)
-    fl = np.empty(n if want_flags else 1, dtype=np.uint8)
-    acc = np.empty(-(-n // _CHUNK), dtype=np.uint32)
-    _fast_loop(op, fmt.exp_bits, fmt.man_bits, rmode_code(fmt), want_flags)(fa, fb, out, fl,
-                                                                             acc)
+    fl = np.empty(n if want_flags else 0, dtype=np.uint8)
+    kern = _fast_kernel(op, fmt.exp_bits, fmt.man_bits, rmode_code(fmt), want_flags)
+    negb = (1 << (fmt.width - 1)) if op == _OP_SUB else 0
+    threads = min(get_num_threads(), max(1, n // (_PAR_MIN // 2)))
+    if threads <= 1:
+        orv = kern(fa, fb, negb, out, fl)
+    else:
+        step = -(-n // (threads * _BLOCK)) * _BLOCK
+        parts = [slice(lo, lo + step) for lo in range(0, n, step)]
+        futs = [_pool(threads).submit(kern, fa[s], fb[s], negb, out[s],
+                                      fl[s] if want_flags else fl) for s in parts]
+        orv = 0
+        for f in futs:
+            orv |= int(f.result())
     bad = 0
-    if int(np.bitwise_or.reduce(acc)) > fmt.mask:
+    if int(orv) > fmt.mask:
         bad = int(np.count_nonzero((fa > fmt.mask) | (fb > fmt.mask)))
     return out, (fl if want_flags else None), bad
 
