@@ -11,7 +11,7 @@ import functools
 import numpy as np
 import pytest
 
-from raplas_hdl.fp import ROUNDINGS, FPFormat
+from raplas_hdl.fp import FP16, FP24, FP32, ROUNDINGS, FPFormat
 from raplas_hdl.fp import model
 
 FORMATS = {"FP16": (5, 10), "FP24": (7, 16), "FP32": (8, 23)}
@@ -93,3 +93,25 @@ def test_fast_path_edges():
         model.add(wide, b[:n], fmt)
     with pytest.raises(ValueError, match="path must be"):
         model._binary(a[:4], b[:4], fmt, 0, False, path="fastest")
+
+
+@pytest.mark.parametrize("fmt", [FP16, FP24, FP32])
+@pytest.mark.parametrize("rounding", ["rtz", "rne", "chop"])
+def test_nan_operand_raises_no_flag_in_small_arrays(fmt, rounding):
+    """Regression: chop's alignment once shifted by a NaN's exponent and raised overflow.
+
+    Small arrays take the per-element kernels (not the blocked fast path), so this checks
+    ``add_k``/``sub_k`` as other models inline them.
+    """
+    fmt = fmt.with_rounding(rounding)
+    rng = np.random.default_rng(7)
+    a = rng.integers(0, fmt.inf, 4000, dtype=np.int64).astype(np.uint32)
+    a |= rng.integers(0, 2, a.size, dtype=np.int64).astype(np.uint32) << (fmt.width - 1)
+    if fmt.exp_bits == 8:
+        a[0] = 0x4D31D7A6      # the pattern that exposed the bug (FP32 chop)
+    nan = np.full_like(a, fmt.nan)
+    for op in (model.add, model.sub):
+        for x, y in ((a, nan), (nan, a)):
+            bits, flags = op(x, y, fmt, flags=True)
+            assert np.all(bits == fmt.nan)
+            assert np.all(flags == 0), f"{op.__name__} {fmt}: flags {np.unique(flags)}"

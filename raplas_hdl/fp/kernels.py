@@ -333,7 +333,7 @@ def add_f64_k(a, b, e, m, rmode):
     x = _to_f64(a, e, m)
     y = _to_f64(b, e, m)
     nan_in = _is_nan_pat(a, e, m) or _is_nan_pat(b, e, m)
-    if rmode == CHOP:
+    if rmode == CHOP and not nan_in:                 # (a NaN operand has no exponent to align to)
         swap = abs(y) > abs(x)
         hi = y if swap else x
         lo = x if swap else y
