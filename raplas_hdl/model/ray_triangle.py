@@ -1,0 +1,224 @@
+"""Bit-exact golden model of the ray-triangle unit (division-free Moller-Trumbore).
+
+The model performs the same floating-point operations, in the same order and with the same
+operands, as :class:`raplas_hdl.rtl.ray_triangle.RayTriangleUnit`, so the two agree on
+every bit. One compiled numba loop runs over the pairs and calls the scalar kernels of
+:mod:`raplas_hdl.fp.kernels`.
+
+Operations (``sub(a, b) = add(a, neg(b))``; vectors are ``(x, y, z)``)::
+
+     1- 3  T  = V0 - O          tx = sub(v0x, ox), ty = sub(v0y, oy), tz = sub(v0z, oz)
+     4- 8  det = N.D            add(add(mul(nx, dx), mul(ny, dy)), mul(nz, dz))
+     9-13  t'  = N.T            add(add(mul(nx, tx), mul(ny, ty)), mul(nz, tz))
+    14-22  Q   = D x T          qx = sub(mul(dy, tz), mul(dz, ty))
+                                qy = sub(mul(dz, tx), mul(dx, tz))
+                                qz = sub(mul(dx, ty), mul(dy, tx))
+    23-27  u'  = neg(Q.E2)      neg(add(add(mul(qx, e2x), mul(qy, e2y)), mul(qz, e2z)))
+    28-32  v'  = Q.E1           add(add(mul(qx, e1x), mul(qy, e1y)), mul(qz, e1z))
+    33     s   = add(u', v')
+    34     w   = sub(det, s)    conservative mode only
+
+Every dot product is ``(x*x' + y*y') + z*z'``. ``neg`` is a sign flip (a NaN becomes the
+canonical NaN) and raises no flag.
+
+Decision, paper mode (raplas.md, "Ray-triangle test")::
+
+    lt(0, det):  hit = le(0, u') & le(0, v') & le(s, det) & le(0, t')
+    lt(det, 0):  hit = le(u', 0) & le(v', 0) & le(det, s) & le(t', 0)
+    otherwise:   miss
+
+Conservative mode: see :mod:`raplas_hdl.model.conservative` (margins from exponent
+arithmetic; either sign of det while ``|det|`` is within its margin; NaN or overflow gives
+a hit).
+
+Compilation: the loop is cached on disk by numba, but numba's cache does not notice when
+a *callee's* source changes (the FP kernels are compiled into the loop). So at import the
+module compares a hash of the kernel sources with the one recorded beside its cache and
+drops its own cache entries when they differ.
+
+Outputs: ``hit``, ``t = t'``, ``u = u'``, ``v = v'``, ``det`` (bit patterns) and ``flags``,
+the OR of the event flags of the pair's operations (33 in paper mode, 34 in
+conservative mode). The caller carries the ray and triangle IDs.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+from numba import njit
+
+from ..fp.format import FLAG_OVERFLOW, FPFormat
+from ..fp.kernels import add_k, le_k, lt_k, mul_k, neg_k, rmode_code, sub_k
+from .conservative import MARGIN_NAMES, margin_constants, margins
+
+__all__ = ["intersect", "MODES", "N_OPS"]
+
+MODES = ("paper", "conservative")
+#: Arithmetic operations per pair, by mode.
+N_OPS = {"paper": 33, "conservative": 34}
+
+_OVF = np.uint8(FLAG_OVERFLOW)
+
+
+def _drop_stale_cache():
+    """Remove this module's numba cache files if the FP kernels changed since they were made."""
+    from ..fp import format as _fmt_mod
+    from ..fp import kernels as _kernels_mod
+
+    digest = hashlib.sha256()
+    for mod in (_kernels_mod, _fmt_mod):
+        digest.update(Path(mod.__file__).read_bytes())
+    cache_dir = Path(__file__).resolve().parent / "__pycache__"
+    stamp = cache_dir / f"{Path(__file__).stem}.kernels-sha256"
+    try:
+        if stamp.exists() and stamp.read_text() == digest.hexdigest():
+            return
+        for path in cache_dir.glob(f"{Path(__file__).stem}.*.nb[ic]"):
+            path.unlink(missing_ok=True)
+        cache_dir.mkdir(exist_ok=True)
+        stamp.write_text(digest.hexdigest())
+    except OSError:         # read-only checkout: numba cannot cache there either
+        pass
+
+
+_drop_stale_cache()
+
+
+@njit(cache=True)
+def _dot(a0, a1, a2, b0, b1, b2, e, m, r):
+    p0, f0 = mul_k(a0, b0, e, m, r)
+    p1, f1 = mul_k(a1, b1, e, m, r)
+    p2, f2 = mul_k(a2, b2, e, m, r)
+    s01, f3 = add_k(p0, p1, e, m, r)
+    s, f4 = add_k(s01, p2, e, m, r)
+    return s, f0 | f1 | f2 | f3 | f4
+
+
+@njit(cache=True)
+def _cross_term(a, b, c, d, e, m, r):
+    """``a*b - c*d``."""
+    p, f0 = mul_k(a, b, e, m, r)
+    q, f1 = mul_k(c, d, e, m, r)
+    x, f2 = sub_k(p, q, e, m, r)
+    return x, f0 | f1 | f2
+
+
+@njit(cache=True)
+def _is_nan(a, e, m):
+    a = np.int64(a)
+    emf = (1 << e) - 1
+    return ((a >> m) & emf) == emf and (a & ((1 << m) - 1)) != 0
+
+
+@njit(cache=True)
+def _loop(o, d, v0, e1, e2, nn, e, m, r, conservative, marg, hit, t_o, u_o, v_o, det_o, fl_o):
+    sign = np.uint32(1) << (e + m)
+    zero = np.uint32(0)
+    for i in range(o.shape[0]):
+        tx, f0 = sub_k(v0[i, 0], o[i, 0], e, m, r)
+        ty, f1 = sub_k(v0[i, 1], o[i, 1], e, m, r)
+        tz, f2 = sub_k(v0[i, 2], o[i, 2], e, m, r)
+        det, f3 = _dot(nn[i, 0], nn[i, 1], nn[i, 2], d[i, 0], d[i, 1], d[i, 2], e, m, r)
+        tp, f4 = _dot(nn[i, 0], nn[i, 1], nn[i, 2], tx, ty, tz, e, m, r)
+        qx, f5 = _cross_term(d[i, 1], tz, d[i, 2], ty, e, m, r)
+        qy, f6 = _cross_term(d[i, 2], tx, d[i, 0], tz, e, m, r)
+        qz, f7 = _cross_term(d[i, 0], ty, d[i, 1], tx, e, m, r)
+        qe2, f8 = _dot(qx, qy, qz, e2[i, 0], e2[i, 1], e2[i, 2], e, m, r)
+        up = neg_k(qe2, e, m)
+        vp, f9 = _dot(qx, qy, qz, e1[i, 0], e1[i, 1], e1[i, 2], e, m, r)
+        s, f10 = add_k(up, vp, e, m, r)
+        fl = f0 | f1 | f2 | f3 | f4 | f5 | f6 | f7 | f8 | f9 | f10
+        if not conservative:
+            if lt_k(zero, det, e, m):
+                h = (le_k(zero, up, e, m) and le_k(zero, vp, e, m) and le_k(s, det, e, m)
+                     and le_k(zero, tp, e, m))
+            elif lt_k(det, zero, e, m):
+                h = (le_k(up, zero, e, m) and le_k(vp, zero, e, m) and le_k(det, s, e, m)
+                     and le_k(tp, zero, e, m))
+            else:
+                h = False
+        else:
+            w, f11 = sub_k(det, s, e, m, r)
+            fl = fl | f11
+            m_det, m_t, m_u, m_v, m_w = marg[i, 0], marg[i, 1], marg[i, 2], marg[i, 3], marg[i, 4]
+            bad = (_is_nan(det, e, m) or _is_nan(tp, e, m) or _is_nan(up, e, m)
+                   or _is_nan(vp, e, m) or _is_nan(w, e, m) or (fl & _OVF) != 0)
+            pos = (le_k(m_u ^ sign, up, e, m) and le_k(m_v ^ sign, vp, e, m)
+                   and le_k(m_w ^ sign, w, e, m) and le_k(m_t ^ sign, tp, e, m))
+            neg = (le_k(up, m_u, e, m) and le_k(vp, m_v, e, m) and le_k(w, m_w, e, m)
+                   and le_k(tp, m_t, e, m))
+            h = (bad or (le_k(m_det ^ sign, det, e, m) and pos)
+                 or (le_k(det, m_det, e, m) and neg))
+        hit[i] = h
+        t_o[i] = tp
+        u_o[i] = up
+        v_o[i] = vp
+        det_o[i] = det
+        fl_o[i] = fl
+
+
+def _vec(x, fmt, name):
+    a = np.asarray(x)
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (n, 3), not {a.shape}")
+    if a.dtype.kind not in "iu":
+        raise ValueError(f"{name} must hold integer bit patterns, not dtype {a.dtype}")
+    if a.size and (a.min() < 0 or a.max() > fmt.mask):
+        raise ValueError(f"{name} holds patterns wider than the {fmt.width}-bit format "
+                         f"{fmt.name}")
+    return np.ascontiguousarray(a, dtype=np.uint32)
+
+
+def intersect(o, d, v0, e1, e2, n, fmt: FPFormat, mode: str = "paper",
+              margin_scale: float = 1.0) -> dict:
+    """Run the ray-triangle unit's arithmetic on ``len(o)`` (ray, triangle) pairs.
+
+    Parameters
+    ----------
+    o, d : array_like of uint32, shape (n, 3)
+        Ray origin and direction, bit patterns of ``fmt``.
+    v0, e1, e2, n : array_like of uint32, shape (n, 3)
+        Triangle record (V0, E1 = V1 - V0, E2 = V2 - V0, N = E1 x E2), bit patterns.
+    fmt : FPFormat
+        Format and rounding.
+    mode : {"paper", "conservative"}
+        The paper's exact inequalities, or the widened tests of the conservative mode.
+    margin_scale : float
+        ``s`` of the conservative margin (1: the derivation); ignored in paper mode.
+
+    Returns
+    -------
+    dict
+        ``hit`` (bool), ``t``, ``u``, ``v``, ``det`` (uint32: t', u', v', det) and
+        ``flags`` (uint8, OR of the event flags of the pair's operations).
+
+    Raises
+    ------
+    ValueError
+        For a wrong shape, a pattern wider than the format, an unknown mode, or a format
+        the conservative mode does not support.
+    """
+    if not isinstance(fmt, FPFormat):
+        raise ValueError(f"fmt must be an FPFormat, not {fmt!r}")
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {', '.join(MODES)}, not {mode!r}")
+    arrs = [_vec(x, fmt, name) for x, name in zip((o, d, v0, e1, e2, n),
+                                                   ("o", "d", "v0", "e1", "e2", "n"))]
+    count = arrs[0].shape[0]
+    if any(a.shape[0] != count for a in arrs):
+        raise ValueError("o, d, v0, e1, e2 and n must have the same number of rows")
+    conservative = mode == "conservative"
+    if conservative:
+        mg = margins(*arrs, fmt, constants=margin_constants(fmt, margin_scale))
+        marg = np.ascontiguousarray(np.stack([mg[k] for k in MARGIN_NAMES], axis=1))
+    else:
+        marg = np.zeros((count, 5), dtype=np.uint32)
+    hit = np.empty(count, dtype=np.bool_)
+    outs = [np.empty(count, dtype=np.uint32) for _ in range(4)]
+    fl = np.empty(count, dtype=np.uint8)
+    _loop(*arrs, fmt.exp_bits, fmt.man_bits, rmode_code(fmt), conservative, marg, hit, *outs,
+          fl)
+    return {"hit": hit, "t": outs[0], "u": outs[1], "v": outs[2], "det": outs[3],
+            "flags": fl}

@@ -1,0 +1,376 @@
+"""The ray-triangle unit: division-free Moller-Trumbore, fully pipelined, one pair per clock.
+
+The datapath is the golden model's (:mod:`raplas_hdl.model.ray_triangle`) operation for
+operation: 33 operations (18 :class:`FPMul`, 15 :class:`FPAdd`), 34 in the conservative
+mode, which adds ``w = det - s``. With adder latency ``La`` and multiplier latency ``Lm``
+(4 and 3 by default) the schedule, in cycles after a pair is accepted, is:
+
+1. cycle 0: ``T = V0 - O`` (3 subs) and the products ``N*D`` of ``det`` (3 muls) start;
+   the margin exponents of the conservative mode are formed from the input exponent
+   fields and registered into a delay line.
+2. ``La``: ``T`` ready; the products ``N*T`` (t') and ``D*T`` (Q) start.
+3. ``Lm .. Lm+2La``: ``det`` summed, ``(n0 d0 + n1 d1) + n2 d2``.
+4. ``La+Lm .. 2La+Lm``: ``Q = D x T`` (3 subs); ``t'`` summed by ``3La+Lm``.
+5. ``2La+Lm``: the products ``Q*E2`` and ``Q*E1`` start (E1, E2 delayed to meet Q).
+6. ``4La+2Lm``: ``u' = neg(Q.E2)`` (a sign flip), ``v' = Q.E1``; ``s = u' + v'`` starts.
+7. ``5La+2Lm``: ``s`` ready. Conservative mode: ``w = det - s`` ready at ``6La+2Lm``.
+8. decision cycle ``D`` (``5La+2Lm`` or ``6La+2Lm``): the contract comparisons and the
+   hit decision (combinational), the event flags ORed along the pipeline, the IDs from
+   their delay line: all registered into the output register at ``D+1``.
+9. the output register is written into the output FIFO; ``o`` shows the FIFO's head.
+
+``latency`` (``D + 2``: 28 for the defaults in paper mode, 32 in conservative mode; the
+paper's unit has 29 stages) is the number of clock edges from the one that accepts a pair
+on ``i`` to the one that can take its result from ``o``, with an empty FIFO.
+
+Back-pressure: the pipeline never stalls (its clock enable is tied high). Every accepted
+pair will land in the output FIFO, whose depth is ``D + 3``; a credit counter counts the
+pairs accepted and not yet taken from ``o``, and ``i.ready`` is high while it is below the
+FIFO depth, so the FIFO can never overflow. ``i.ready`` is a function of that counter
+register only: there is no combinational path from ``o.ready`` into the pipeline or to
+``i.ready``. With ``o.ready`` held high the unit takes one pair per clock indefinitely.
+Results leave in the order the pairs came in.
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Const, Module, Mux, Signal, signed
+from amaranth.lib import data, stream, wiring
+from amaranth.lib.fifo import SyncFIFO
+from amaranth.lib.wiring import In, Out
+
+from ..fp.format import FLAG_OVERFLOW, FPFormat
+from ..model.conservative import MARGIN_NAMES, margin_constants
+from .fp_add import FPAdd
+from .fp_mul import FPMul
+from .pipeline import delay
+
+__all__ = ["RayTriangleUnit", "vec3_layout", "input_layout", "output_layout", "MODES"]
+
+MODES = ("paper", "conservative")
+
+
+def vec3_layout(width: int) -> data.StructLayout:
+    """``x``, ``y``, ``z``: three bit patterns, ``x`` in the low bits."""
+    return data.StructLayout({"x": width, "y": width, "z": width})
+
+
+def input_layout(fmt: FPFormat, ray_id_bits: int = 16, tri_id_bits: int = 16):
+    """Payload of the unit's input stream (fields from the low bits up)."""
+    v = vec3_layout(fmt.width)
+    return data.StructLayout({"ray_id": ray_id_bits, "tri_id": tri_id_bits, "o": v, "d": v,
+                              "v0": v, "e1": v, "e2": v, "n": v})
+
+
+def output_layout(fmt: FPFormat, ray_id_bits: int = 16, tri_id_bits: int = 16):
+    """Payload of the unit's output stream (fields from the low bits up)."""
+    w = fmt.width
+    return data.StructLayout({"ray_id": ray_id_bits, "tri_id": tri_id_bits, "hit": 1,
+                              "t": w, "u": w, "v": w, "det": w, "flags": 3})
+
+
+class _Timed:
+    """A value and the cycle (after acceptance) at which it is valid."""
+
+    def __init__(self, value, time):
+        self.value = value
+        self.time = time
+        self._delayed = {}
+
+
+class RayTriangleUnit(wiring.Component):
+    """Fully pipelined ray-triangle test, one (ray, triangle) pair per clock.
+
+    Parameters
+    ----------
+    fmt : FPFormat
+        Format and rounding of every operation.
+    mode : {"paper", "conservative"}
+        The paper's exact inequalities, or the conservative mode's widened tests
+        (:mod:`raplas_hdl.model.conservative`; needs ``man_bits >= 8``).
+    margin_scale : float
+        ``s``, the factor on the derived conservative margin (1 = the derivation).
+    ray_id_bits, tri_id_bits : int
+        Widths of the IDs carried with each pair.
+    add_stages, mul_stages : int
+        Depths of the FP adders (default 4) and multipliers (default 3).
+
+    Attributes
+    ----------
+    i : In(stream.Signature(input_layout(...)))
+        Pairs: ``ray_id``, ``tri_id``, ``o``, ``d``, ``v0``, ``e1``, ``e2``, ``n``.
+    o : Out(stream.Signature(output_layout(...)))
+        Results: ``ray_id``, ``tri_id``, ``hit``, ``t``, ``u``, ``v``, ``det`` (t', u', v',
+        det as bit patterns) and ``flags`` (OR of the event flags of the pair's operations).
+
+    Raises
+    ------
+    ValueError
+        For a bad format, mode, scale or ID width.
+    """
+
+    def __init__(self, fmt, *, mode: str = "paper", margin_scale: float = 1,
+                 ray_id_bits: int = 16, tri_id_bits: int = 16, add_stages: int = 4,
+                 mul_stages: int = 3):
+        if not isinstance(fmt, FPFormat):
+            raise ValueError(f"fmt must be an FPFormat, not {fmt!r}")
+        if mode not in MODES:
+            raise ValueError(f"mode must be one of {', '.join(MODES)}, not {mode!r}")
+        for name, bits in (("ray_id_bits", ray_id_bits), ("tri_id_bits", tri_id_bits)):
+            if not isinstance(bits, int) or isinstance(bits, bool) or not 1 <= bits <= 64:
+                raise ValueError(f"{name} must be an integer from 1 to 64, not {bits!r}")
+        self._fmt = fmt
+        self._mode = mode
+        self._consts = margin_constants(fmt, margin_scale) if mode == "conservative" else None
+        self._margin_scale = float(margin_scale)
+        self._ray_id_bits = ray_id_bits
+        self._tri_id_bits = tri_id_bits
+        for name, st in (("add_stages", add_stages), ("mul_stages", mul_stages)):
+            if not isinstance(st, int) or isinstance(st, bool) or st < 1:
+                raise ValueError(f"{name} must be a positive integer, not {st!r}")
+        self._add_stages = add_stages
+        self._mul_stages = mul_stages
+        # the FP units' latency equals their stage count (checked in elaborate)
+        self._la = add_stages
+        self._lm = mul_stages
+        super().__init__({
+            "i": In(stream.Signature(input_layout(fmt, ray_id_bits, tri_id_bits))),
+            "o": Out(stream.Signature(output_layout(fmt, ray_id_bits, tri_id_bits))),
+        })
+
+    @property
+    def fmt(self) -> FPFormat:
+        return self._fmt
+
+    @property
+    def mode(self) -> str:
+        return self._mode
+
+    @property
+    def margin_scale(self) -> float:
+        return self._margin_scale
+
+    @property
+    def decision_cycle(self) -> int:
+        """Cycle (after acceptance) of the combinational hit decision."""
+        d = 5 * self._la + 2 * self._lm
+        return d + self._la if self._mode == "conservative" else d
+
+    @property
+    def fifo_depth(self) -> int:
+        return self.decision_cycle + 3
+
+    @property
+    def latency(self) -> int:
+        """Clock edges from accepting a pair on ``i`` to taking its result from ``o``
+        (FIFO empty, ``o.ready`` high)."""
+        return self.decision_cycle + 2
+
+    # -- helpers -------------------------------------------------------------------------
+    def _at(self, m, tv: _Timed, time: int):
+        if time < tv.time:
+            raise AssertionError("schedule error: value used before it is ready")
+        if time == tv.time:
+            return tv.value
+        if time not in tv._delayed:
+            self._n_delay += 1
+            tv._delayed[time] = delay(m, tv.value, time - tv.time,
+                                      name=f"dl{self._n_delay}")
+        return tv._delayed[time]
+
+    def _op(self, m, kind, a: _Timed, b: _Timed, sub=False):
+        t = max(a.time, b.time)
+        if kind == "mul":
+            unit = FPMul(self._fmt, self._mul_stages)
+        else:
+            unit = FPAdd(self._fmt, self._add_stages)
+        self._n_ops += 1
+        m.submodules[f"{kind}{self._n_ops}"] = unit
+        m.d.comb += [unit.a.eq(self._at(m, a, t)), unit.b.eq(self._at(m, b, t)),
+                     unit.i_valid.eq(1), unit.en.eq(1)]
+        if kind != "mul":
+            m.d.comb += unit.sub.eq(int(sub))
+        if unit.latency != (self._lm if kind == "mul" else self._la):
+            raise AssertionError(f"{kind} latency {unit.latency} differs from its stages")
+        out = _Timed(unit.o, t + unit.latency)
+        self._flag_taps.append((unit.flags, out.time))
+        return out
+
+    def _dot(self, m, a, b):
+        p = [self._op(m, "mul", x, y) for x, y in zip(a, b)]
+        return self._op(m, "add", self._op(m, "add", p[0], p[1]), p[2])
+
+    def _neg(self, m, x: _Timed):
+        f = self._fmt
+        v = x.value
+        nan = (v[f.man_bits:f.width - 1] == f.exp_max_field) & (v[:f.man_bits] != 0)
+        r = Signal(f.width, name=f"neg{self._n_ops}")
+        m.d.comb += r.eq(Mux(nan, f.nan, v ^ f.sign_bit))
+        return _Timed(r, x.time)
+
+    def _nan(self, v):
+        f = self._fmt
+        return (v[f.man_bits:f.width - 1] == f.exp_max_field) & (v[:f.man_bits] != 0)
+
+    def _key(self, v):
+        f = self._fmt
+        mag = v[:f.width - 1]
+        zero = v[f.man_bits:f.width - 1] == 0
+        k = Signal(signed(f.width + 1))
+        self._keys.append(k)
+        return k, Mux(zero, 0, Mux(v[f.width - 1], -mag, mag))
+
+    def _le(self, m, a, b):
+        """The contract's ``le(a, b)`` as a combinational value."""
+        ka, va = self._key(a)
+        kb, vb = self._key(b)
+        m.d.comb += [ka.eq(va), kb.eq(vb)]
+        return ~self._nan(a) & ~self._nan(b) & (ka <= kb)
+
+    def _lt(self, m, a, b):
+        ka, va = self._key(a)
+        kb, vb = self._key(b)
+        m.d.comb += [ka.eq(va), kb.eq(vb)]
+        return ~self._nan(a) & ~self._nan(b) & (ka < kb)
+
+    def _margin_fields(self, m, p):
+        """Exponent fields of the five margins (plus an infinity bit), from the inputs."""
+        f = self._fmt
+        c = self._consts
+        ys = signed(f.exp_bits + 5)
+
+        def maxfield(vec):
+            fields = [vec[k][f.man_bits:f.width - 1] for k in ("x", "y", "z")]
+            a = Mux(fields[0] > fields[1], fields[0], fields[1])
+            r = Signal(f.exp_bits)
+            m.d.comb += r.eq(Mux(a > fields[2], a, fields[2]))
+            return r
+
+        def smax(a, b):
+            r = Signal(ys)
+            m.d.comb += r.eq(Mux(a > b, a, b))
+            return r
+
+        lv = {}
+        for name in ("o", "d", "v0", "e1", "e2", "n"):
+            sig = Signal(ys, name=f"L_{name}")
+            m.d.comb += sig.eq(maxfield(getattr(p, name)) - f.bias + 1)
+            lv[name] = sig
+        lvo = smax(lv["v0"], lv["o"])
+        le12 = smax(lv["e1"], lv["e2"])
+        y = {"det": lv["n"] + lv["d"], "t": lv["n"] + lvo, "u": lv["d"] + lvo + lv["e2"],
+             "v": lv["d"] + lvo + lv["e1"], "w": lv["d"] + smax(lv["n"], le12 + lvo)}
+        out = {}
+        for name in MARGIN_NAMES:
+            yy = Signal(ys, name=f"Y_{name}")
+            m.d.comb += yy.eq(y[name])
+            field = Signal(signed(f.exp_bits + 6), name=f"mfield_{name}")
+            m.d.comb += field.eq(c.k_field[name] + Mux(yy > c.floor[name], yy, c.floor[name]))
+            bits = Signal(f.width, name=f"margin_{name}")
+            m.d.comb += bits.eq(Mux(field >= f.exp_max_field, f.inf,
+                                    Mux(field < 1, Const(1 << f.man_bits, f.width)
+                                        | c.k_frac[name],
+                                        (field[:f.exp_bits] << f.man_bits) | c.k_frac[name])))
+            out[name] = bits
+        return out
+
+    # -- elaboration ---------------------------------------------------------------------
+    def elaborate(self, platform):
+        m = Module()
+        f = self._fmt
+        self._n_ops = 0
+        self._n_delay = 0
+        self._flag_taps = []
+        self._keys = []
+        dec = self.decision_cycle
+
+        fifo = m.submodules.fifo = SyncFIFO(width=len(self.o.payload.as_value()),
+                                            depth=self.fifo_depth)
+        credits = Signal(range(self.fifo_depth + 1))
+        accept = Signal()
+        m.d.comb += [
+            self.i.ready.eq(credits < self.fifo_depth),
+            accept.eq(self.i.valid & self.i.ready),
+            self.o.valid.eq(fifo.r_rdy),
+            fifo.r_en.eq(self.o.ready),
+            self.o.payload.eq(fifo.r_data),
+        ]
+        m.d.sync += credits.eq(credits + accept - (fifo.r_rdy & self.o.ready))
+
+        p = self.i.payload
+        vec = {name: [_Timed(getattr(p, name)[k], 0) for k in ("x", "y", "z")]
+               for name in ("o", "d", "v0", "e1", "e2", "n")}
+        o, d, v0 = vec["o"], vec["d"], vec["v0"]
+        e1, e2, n = vec["e1"], vec["e2"], vec["n"]
+
+        # 1-3: T = V0 - O
+        t = [self._op(m, "add", v0[k], o[k], sub=True) for k in range(3)]
+        # 4-8: det = N.D; 9-13: t' = N.T
+        det = self._dot(m, n, d)
+        tp = self._dot(m, n, t)
+        # 14-22: Q = D x T
+        q = [self._op(m, "add", self._op(m, "mul", d[1], t[2]), self._op(m, "mul", d[2], t[1]),
+                      sub=True),
+             self._op(m, "add", self._op(m, "mul", d[2], t[0]), self._op(m, "mul", d[0], t[2]),
+                      sub=True),
+             self._op(m, "add", self._op(m, "mul", d[0], t[1]), self._op(m, "mul", d[1], t[0]),
+                      sub=True)]
+        # 23-27: u' = neg(Q.E2); 28-32: v' = Q.E1; 33: s = u' + v'
+        up = self._neg(m, self._dot(m, q, e2))
+        vp = self._dot(m, q, e1)
+        s = self._op(m, "add", up, vp)
+        if self._mode == "conservative":
+            w = self._op(m, "add", det, s, sub=True)             # 34: w = det - s
+        assert max(tv.time for tv in (det, tp, up, vp, s)) <= dec
+
+        # event flags: ORed along the pipeline as they appear
+        acc, acc_t = Const(0, 3), 0
+        for time in sorted({tm for _, tm in self._flag_taps}):
+            here = [fl for fl, tm in self._flag_taps if tm == time]
+            new = Signal(3, name=f"flags_at_{time}")
+            m.d.comb += new.eq(delay(m, acc, time - acc_t, name=f"fl{time}")
+                               if acc_t != time else acc)
+            for fl in here:
+                new = new | fl
+            acc, acc_t = new, time
+        flags = delay(m, acc, dec - acc_t, name="fldec")
+
+        # the decision, combinational at cycle `dec`
+        zero = Const(0, f.width)
+        det_d, tp_d = self._at(m, det, dec), self._at(m, tp, dec)
+        up_d, vp_d, s_d = self._at(m, up, dec), self._at(m, vp, dec), self._at(m, s, dec)
+        hit = Signal()
+        if self._mode == "paper":
+            pos = (self._le(m, zero, up_d) & self._le(m, zero, vp_d) & self._le(m, s_d, det_d)
+                   & self._le(m, zero, tp_d))
+            neg = (self._le(m, up_d, zero) & self._le(m, vp_d, zero) & self._le(m, det_d, s_d)
+                   & self._le(m, tp_d, zero))
+            m.d.comb += hit.eq((self._lt(m, zero, det_d) & pos) | (self._lt(m, det_d, zero) & neg))
+        else:
+            mg = self._margin_fields(m, p)
+            mg = {k: delay(m, v, dec, name=f"mg_{k}") for k, v in mg.items()}
+            w_d = self._at(m, w, dec)
+            sign = f.sign_bit
+            bad = (self._nan(det_d) | self._nan(tp_d) | self._nan(up_d) | self._nan(vp_d)
+                   | self._nan(w_d) | (flags & FLAG_OVERFLOW).any())
+            pos = (self._le(m, mg["u"] ^ sign, up_d) & self._le(m, mg["v"] ^ sign, vp_d)
+                   & self._le(m, mg["w"] ^ sign, w_d) & self._le(m, mg["t"] ^ sign, tp_d))
+            neg = (self._le(m, up_d, mg["u"]) & self._le(m, vp_d, mg["v"])
+                   & self._le(m, w_d, mg["w"]) & self._le(m, tp_d, mg["t"]))
+            m.d.comb += hit.eq(bad | (self._le(m, mg["det"] ^ sign, det_d) & pos)
+                               | (self._le(m, det_d, mg["det"]) & neg))
+
+        valid_d = delay(m, accept, dec, name="valid", reset_less=False)
+        ids_d = delay(m, p.ray_id, dec, name="ray_id")
+        tid_d = delay(m, p.tri_id, dec, name="tri_id")
+
+        # output register (cycle dec + 1), then the FIFO
+        res = Signal(output_layout(f, self._ray_id_bits, self._tri_id_bits))
+        res_valid = Signal()
+        m.d.sync += [
+            res.ray_id.eq(ids_d), res.tri_id.eq(tid_d), res.hit.eq(hit),
+            res.t.eq(tp_d), res.u.eq(up_d), res.v.eq(vp_d), res.det.eq(det_d),
+            res.flags.eq(flags), res_valid.eq(valid_d),
+        ]
+        m.d.comb += [fifo.w_data.eq(res.as_value()), fifo.w_en.eq(res_valid)]
+        return m
