@@ -99,6 +99,11 @@ def simulator_env(simulator: str) -> dict:
                 raise SimulatorNotFound(f"Verilator needs `{tool}`: install it with "
                                         f"`apt-get install {pkg}`")
         env["VERILATOR_ROOT"] = str(root)
+        # The wheel's verilated.mk leaves the precompiled-header include flag empty, so a
+        # model split into several C++ files fails to compile ("__pch.h.fast: linker input
+        # file not found"). A variable given in MAKEFLAGS acts as a command-line override.
+        if "CFG_CXXFLAGS_PCH_I" not in env.get("MAKEFLAGS", ""):
+            env["MAKEFLAGS"] = (env.get("MAKEFLAGS", "") + " CFG_CXXFLAGS_PCH_I=-include").strip()
         env["PATH"] = os.pathsep.join([str(root / "bin"), str(_shim_dir()),
                                        env.get("PATH", "")])
         return env

@@ -15,8 +15,8 @@ def add_format_options(parser):
                         help="exponent bits E (default 7)")
     parser.add_argument("--man-bits", type=int, default=FP24.man_bits,
                         help="fraction bits M (default 16)")
-    parser.add_argument("--rounding", choices=ROUNDINGS, default="rtz",
-                        help="rounding (default rtz)")
+    parser.add_argument("--rounding", choices=ROUNDINGS, default=None,
+                        help="rounding (default rtz, or the one --format names)")
 
 
 def format_from_args(args):
@@ -24,7 +24,7 @@ def format_from_args(args):
 
     if args.format:
         return parse_format(args.format, args.rounding)
-    return FPFormat(args.exp_bits, args.man_bits, args.rounding)
+    return FPFormat(args.exp_bits, args.man_bits, args.rounding or "rtz")
 
 
 def add_parser(subparsers):
