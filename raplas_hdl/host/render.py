@@ -1,0 +1,501 @@
+"""The render pipeline: scene -> spheres -> memories -> primary bundles -> shading ->
+shadow bundles -> image, with every skip counted and every stage timed.
+
+Stages (each timed in :attr:`RenderResult.timings`):
+
+1. ``spheres``: drop degenerate triangles (counted), build the sphere hierarchy
+   (:mod:`raplas_hdl.host.spheres`) with the unit's conservative margin when that mode is
+   on;
+2. ``load``: write Triangle Memory and Sphere Memory (:meth:`Backend.load`);
+3. ``primary``: the camera's ``rows`` x ``cols`` tiles as bundles (lattice points outside
+   the image are disabled rays); per bundle the host culls the hierarchy top-down
+   (``primary cull``), then the unit runs the surviving leaf spheres (``primary unit``);
+   the nearest hit wins (ties to the lowest triangle ID);
+4. ``shading``: hit points, normals, Phong terms; shadow bundles for the points that need
+   one (the others counted);
+5. ``shadows``: per shadow bundle, the hierarchy cull (``shadow cull``), then the
+   surviving leaves in batches of ``batch_spheres`` (``shadow unit``); between batches
+   the rays already blocked are disabled (early-out), and a bundle whose rays are all
+   blocked runs no further batch;
+6. ``image``: compose and tone-map.
+
+The summary counts rays, bundles, spheres, plane tests (host hierarchy and unit), pairs
+issued against brute force (every ray against every triangle), pairs skipped by
+early-out, hits, the unit's arithmetic events, and the hierarchy's skips per level.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .backends import COUNTERS, Backend, RunResult
+from .scenes import Scene
+from .shading import face_normals, nearest_hits, phong, shadow_bundles
+from .spheres import CullStats, build_sphere_tree, cull_tree, unit_margin
+
+__all__ = [
+    "RenderResult",
+    "RenderSettings",
+    "compare",
+    "difference_image",
+    "format_summary",
+    "render",
+    "save_ids",
+    "save_png",
+    "to_uint8",
+]
+
+
+@dataclass
+class RenderSettings:
+    """Parameters of a render.
+
+    Attributes
+    ----------
+    width, height : int
+        Image size.
+    rows, cols : int
+        Primary bundle (tile) size.
+    shadow_rows, shadow_cols : int
+        Light lattice of a shadow bundle; 0 turns shadows off (every point lit).
+    tris_per_sphere, fanout : int
+        Sphere hierarchy shape.
+    hierarchy : bool
+        Cull the hierarchy on the host (False: every leaf goes to the unit).
+    early_out : bool
+        Disable blocked shadow rays between sphere batches.
+    batch_spheres : int
+        Leaf spheres per shadow run.
+    chunk : int
+        Bundles handed to the backend at once (the RTL backend runs one simulation per
+        chunk and batch round).
+    bound : float
+        The scene's normalisation bound (coordinates in ``[-bound, bound]``).
+    progress : bool
+        Show a tqdm progress bar.
+    threads : int or None
+        Numba threads for the per-bundle kernels (default 1; None leaves numba's setting).
+    """
+
+    width: int = 128
+    height: int = 128
+    rows: int = 8
+    cols: int = 8
+    shadow_rows: int = 4
+    shadow_cols: int = 4
+    tris_per_sphere: int = 8
+    fanout: int = 8
+    hierarchy: bool = True
+    early_out: bool = True
+    batch_spheres: int = 32
+    chunk: int = 512
+    bound: float = 8.0
+    progress: bool = True
+    threads: int | None = 1
+
+    def __post_init__(self):
+        for name in ("width", "height", "rows", "cols", "tris_per_sphere", "batch_spheres",
+                     "chunk"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"{name} must be at least 1, not {getattr(self, name)}")
+        if (self.shadow_rows == 0) != (self.shadow_cols == 0) or min(
+                self.shadow_rows, self.shadow_cols) < 0:
+            raise ValueError("shadow_rows and shadow_cols must both be positive (or both 0 "
+                             "for no shadows)")
+
+    @property
+    def shadows(self) -> bool:
+        return self.shadow_rows > 0
+
+
+@dataclass
+class RenderResult:
+    """A rendered image with its per-pixel data and the run's figures.
+
+    Attributes
+    ----------
+    image : ndarray (H, W, 3) float64
+        Linear colour.
+    tri_id : ndarray (H, W) int64
+        Nearest triangle of each pixel's primary ray, -1 for none.
+    t : ndarray (H, W) float64
+        Its distance (inf for none).
+    visibility : ndarray (H, W) float64
+        Fraction of the light each pixel's point sees (NaN where there is no point).
+    stats : dict
+    timings : dict
+        Seconds per stage.
+    """
+
+    image: np.ndarray
+    tri_id: np.ndarray
+    t: np.ndarray
+    visibility: np.ndarray
+    stats: dict = field(default_factory=dict)
+    timings: dict = field(default_factory=dict)
+
+
+class _Timer:
+    def __init__(self):
+        self.times = {}
+
+    @contextmanager
+    def __call__(self, name):
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.times[name] = self.times.get(name, 0.0) + time.perf_counter() - t0
+
+
+def _add_counters(total: dict, counters: dict):
+    for k, v in counters.items():
+        total[k] = total.get(k, 0) + int(v)
+
+
+def _shadow_eps(backend: Backend, bound: float) -> float:
+    """Lift of shadow origins and their ``tmin``: ``bound * max(2**-11, 2**(4-M))``."""
+    m = backend.fmt.man_bits if backend.fmt is not None else 52
+    return bound * max(2.0 ** -11, 2.0 ** (4 - m))
+
+
+def _light_hits(origin, dirs, light, t_hit):
+    """Rays that see the area light before their hit (host-only, float64)."""
+    n = light.normal
+    c = np.asarray(light.corner, float)
+    u, v = np.asarray(light.edge_u, float), np.asarray(light.edge_v, float)
+    dn = dirs @ n
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((c - origin) @ n) / dn
+    p = origin + t[:, None] * dirs - c
+    a = (p @ u) / (u @ u)
+    b = (p @ v) / (v @ v)
+    return (dn < 0) & (t > 0) & (t < t_hit) & (a >= 0) & (a <= 1) & (b >= 0) & (b <= 1)
+
+
+@contextmanager
+def _numba_threads(n: int | None):
+    """Run the per-bundle kernels on ``n`` threads (the bundles are small: thread
+    start-up costs more than it saves, especially on a shared machine)."""
+    if n is None:
+        yield
+        return
+    import numba
+
+    old = numba.get_num_threads()
+    numba.set_num_threads(max(1, min(n, numba.config.NUMBA_NUM_THREADS)))
+    try:
+        yield
+    finally:
+        numba.set_num_threads(old)
+
+
+def render(scene: Scene, backend: Backend, settings: RenderSettings | None = None):
+    """Render ``scene`` (normalised into ``settings.bound``) through ``backend``.
+
+    Returns
+    -------
+    RenderResult
+
+    Raises
+    ------
+    ValueError
+        When the scene has no usable triangle, or a parameter is out of range.
+    """
+    s = settings or RenderSettings()
+    with _numba_threads(s.threads):
+        return _render(scene, backend, s)
+
+
+def _render(scene: Scene, backend: Backend, settings: RenderSettings):
+    from tqdm import tqdm
+
+    s = settings
+    timer = _Timer()
+    stats: dict = {"backend": backend.describe(), "scene": scene.name,
+                   "triangles": scene.n_triangles, "size": f"{s.width}x{s.height}"}
+    W, H = s.width, s.height
+
+    # 1. spheres ---------------------------------------------------------------------
+    with timer("spheres"):
+        tris = scene.triangles
+        ok, skipped = backend.usable(tris)
+        usable = np.flatnonzero(ok)
+        stats["skipped_triangles"] = skipped
+        stats["degenerate_triangles"] = int(scene.n_triangles - usable.size)
+        if usable.size == 0:
+            raise ValueError(f"scene {scene.name!r} has no usable triangle ({skipped})")
+        o_max = 2.0 * s.bound
+        margin = (np.zeros(usable.size) if backend.fmt is None else
+                  unit_margin(tris[usable], backend.fmt, o_max, backend.mode))
+        tree = build_sphere_tree(tris[usable], s.tris_per_sphere, s.fanout, margin)
+        tree.leaf_tris = np.where(tree.leaf_tris >= 0, usable[tree.leaf_tris.clip(0)], -1)
+        stats.update(spheres=tree.n_leaves, sphere_nodes=tree.n_nodes, levels=tree.levels,
+                     sphere_margin_median=float(np.median(margin)))
+    # 2. load ------------------------------------------------------------------------
+    with timer("load"):
+        stats.update(backend.load(tris, tree, s.bound) or {})
+    normals_all = face_normals(tris)
+
+    unit = {}
+    cull = CullStats.zero(tree.levels)
+    counts = {"primary_bundles": 0, "primary_rays": 0, "shadow_bundles": 0,
+              "shadow_rays": 0, "host_plane_tests": 0, "brute_force_pairs": 0,
+              "shadow_spheres_skipped": 0, "early_out_pairs_skipped": 0,
+              "unguaranteed_bundles": 0}
+    F = scene.n_triangles
+
+    def culled(job):
+        def touched(nodes):
+            counts["host_plane_tests"] += len(nodes) * job.bundle.n_planes
+            return backend.touched(job, nodes)
+        leaves, st = cull_tree(tree, touched, s.hierarchy)
+        nonlocal cull
+        cull += st
+        if not getattr(job, "guaranteed", True):
+            counts["unguaranteed_bundles"] += 1
+        return leaves
+
+    tiles = scene.camera.tiles(W, H, s.rows, s.cols)
+    tri_img = np.full((H, W), -1, np.int64)
+    t_img = np.full((H, W), np.inf)
+    dir_img = np.zeros((H, W, 3))
+    org = np.zeros(3)
+
+    n_shadow_est = W * H if s.shadows else 0
+    bar = tqdm(total=len(tiles) + n_shadow_est, unit="bundle", disable=not s.progress,
+               desc=f"render {scene.name} [{backend.name}]", leave=False)
+    try:
+        # 3. primary ---------------------------------------------------------------------
+        for lo in range(0, len(tiles), s.chunk):
+            part = tiles[lo:lo + s.chunk]
+            runs = []
+            with timer("primary cull"):
+                for tile in part:
+                    from .bundles import RayBundle
+
+                    b = RayBundle(tile.origin, tile.centre, 0.5 * tile.cols * tile.step_col,
+                                  0.5 * tile.rows * tile.step_row, tile.rows, tile.cols)
+                    job = backend.prepare(b, tile.valid.reshape(-1))
+                    n_en = int(job.enable.sum())
+                    counts["primary_bundles"] += 1
+                    counts["primary_rays"] += n_en
+                    counts["brute_force_pairs"] += n_en * F
+                    runs.append((job, culled(job)))
+            with timer("primary unit"):
+                # a bundle whose cull left no sphere needs no run: its result is empty
+                todo = [k for k, (_, ids) in enumerate(runs) if len(ids)]
+                done = backend.run_many([runs[k] for k in todo])
+                results = [RunResult.empty(dict.fromkeys(COUNTERS, 0)) for _ in runs]
+                for k, res in zip(todo, done):
+                    results[k] = res
+            with timer("primary cull"):
+                for tile, (job, _), res in zip(part, runs, results):
+                    _add_counters(unit, res.counters)
+                    n = job.bundle.n_rays
+                    tri, t, _ = nearest_hits(n, res.ray_id, res.tri_id, res.hit, res.t, 0.0)
+                    y, x = tile.pixels()
+                    v = tile.valid
+                    tri_img[y[v], x[v]] = tri.reshape(tile.rows, tile.cols)[v]
+                    t_img[y[v], x[v]] = t.reshape(tile.rows, tile.cols)[v]
+                    dir_img[y[v], x[v]] = job.directions.reshape(tile.rows, tile.cols, 3)[v]
+                    org = job.origin
+            bar.update(len(part))
+
+        # 4. shading ---------------------------------------------------------------------
+        with timer("shading"):
+            hit_px = tri_img >= 0
+            ys, xs = np.nonzero(hit_px)
+            tri_h = tri_img[ys, xs]
+            pts = org + t_img[ys, xs, None] * dir_img[ys, xs]
+            nrm = normals_all[tri_h]
+            flip = np.einsum("ij,ij->i", nrm, dir_img[ys, xs]) > 0
+            nrm[flip] *= -1.0
+            vis = np.ones(len(ys))
+            eps = _shadow_eps(backend, s.bound)
+            if s.shadows:
+                plan = shadow_bundles(pts, nrm, scene.light, s.shadow_rows, s.shadow_cols, eps)
+                no_bundle = np.ones(len(ys), bool)
+                no_bundle[plan.point] = False
+                vis[no_bundle] = 0.0      # behind the light or facing away: unlit
+                stats["points_behind_light"] = plan.behind_light
+                stats["points_facing_away"] = plan.facing_away
+                bar.total = len(tiles) + len(plan.bundles)
+                bar.refresh()
+
+        # 5. shadows ---------------------------------------------------------------------
+        if s.shadows:
+            nr = s.shadow_rows * s.shadow_cols
+            for lo in range(0, len(plan.bundles), s.chunk):
+                hi = min(lo + s.chunk, len(plan.bundles))
+                jobs, batches, blocked = [], [], []
+                with timer("shadow cull"):
+                    for k in range(lo, hi):
+                        job = backend.prepare(plan.bundles[k])
+                        counts["shadow_bundles"] += 1
+                        counts["shadow_rays"] += nr
+                        counts["brute_force_pairs"] += nr * F
+                        leaves = culled(job)
+                        step = s.batch_spheres if s.early_out else max(1, len(leaves))
+                        jobs.append(job)
+                        batches.append([leaves[i:i + step] for i in range(0, len(leaves), step)])
+                        blocked.append(np.zeros(nr, bool))
+                rnd = 0
+                while True:
+                    live = [k for k in range(len(jobs)) if rnd < len(batches[k])]
+                    if not live:
+                        break
+                    runs = []
+                    with timer("shadow cull"):
+                        for k in live:
+                            if jobs[k].enable.any():
+                                runs.append(k)
+                            else:
+                                counts["shadow_spheres_skipped"] += len(batches[k][rnd])
+                    with timer("shadow unit"):
+                        results = backend.run_many([(jobs[k], batches[k][rnd]) for k in runs])
+                    with timer("shadow cull"):
+                        for k, res in zip(runs, results):
+                            _add_counters(unit, res.counters)
+                            counts["early_out_pairs_skipped"] += res.counters.get(
+                                "pairs_skipped", 0)
+                            g = lo + k
+                            own = tri_h[plan.point[g]]
+                            tri, _, _ = nearest_hits(nr, res.ray_id, res.tri_id, res.hit, res.t,
+                                                     eps, plan.tmax[g], own)
+                            blocked[k] |= tri >= 0
+                            if s.early_out:
+                                jobs[k].enable &= ~blocked[k]
+                    rnd += 1
+                for k in range(len(jobs)):
+                    vis[plan.point[lo + k]] = 1.0 - blocked[k].mean()
+                bar.update(hi - lo)
+
+        # 6. image -----------------------------------------------------------------------
+        with timer("image"):
+            img = np.empty((H, W, 3))
+            img[:] = np.asarray(scene.background, float)
+            col = phong(pts, nrm, scene.colours[tri_h], np.asarray(scene.camera.position, float),
+                        scene.light, scene.material, vis)
+            img[ys, xs] = col
+            d = dir_img.reshape(-1, 3)
+            sees = _light_hits(np.asarray(scene.camera.position, float), d, scene.light,
+                               t_img.reshape(-1)).reshape(H, W)
+            img[sees] = np.asarray(scene.light.colour, float)
+            vis_img = np.full((H, W), np.nan)
+            vis_img[ys, xs] = vis
+    finally:
+        bar.close()
+
+    stats.update(counts)
+    stats["rays"] = counts["primary_rays"] + counts["shadow_rays"]
+    stats["bundles"] = counts["primary_bundles"] + counts["shadow_bundles"]
+    stats["unit"] = unit
+    stats["pairs_issued"] = unit.get("pairs_issued", 0)
+    stats["plane_tests"] = counts["host_plane_tests"] + unit.get("plane_tests", 0)
+    bf = counts["brute_force_pairs"]
+    stats["pair_fraction"] = stats["pairs_issued"] / bf if bf else 0.0
+    stats["hits"] = unit.get("hits", 0)
+    stats["events"] = {k: unit.get(k, 0) for k in ("overflow", "underflow", "invalid")}
+    stats["hierarchy"] = {"tested": cull.tested.tolist(), "dropped": cull.dropped.tolist(),
+                          "triangles_dropped": cull.tris_dropped.tolist(),
+                          "leaves_to_unit": int(cull.leaves)}
+    stats["pixels_hit"] = int(hit_px.sum())
+    return RenderResult(img, tri_img, t_img, vis_img, stats, dict(timer.times))
+
+
+# -- output ------------------------------------------------------------------------------
+
+def to_uint8(image: np.ndarray, gamma: float = 2.2) -> np.ndarray:
+    """Linear colour to 8-bit sRGB-ish (clip, gamma)."""
+    return np.round(255.0 * np.clip(image, 0.0, 1.0) ** (1.0 / gamma)).astype(np.uint8)
+
+
+def save_png(image: np.ndarray, path, linear: bool = True):
+    """Write an image (float linear colour, or uint8) as PNG with Pillow."""
+    from PIL import Image
+
+    arr = to_uint8(image) if linear and image.dtype != np.uint8 else image
+    Image.fromarray(arr).save(path)
+
+
+def save_ids(result: RenderResult, path):
+    """Per-pixel nearest triangle IDs (-1: none), distances and visibility as ``.npz``."""
+    np.savez_compressed(path, tri_id=result.tri_id, t=result.t, visibility=result.visibility)
+
+
+def difference_image(a: RenderResult, b: RenderResult, gain: float = 4.0) -> np.ndarray:
+    """``|a - b|`` of the 8-bit images times ``gain``, with pixels whose nearest triangle
+    differs marked magenta (uint8)."""
+    d = np.abs(to_uint8(a.image).astype(np.int16) - to_uint8(b.image).astype(np.int16))
+    out = np.clip(d * gain, 0, 255).astype(np.uint8)
+    out[a.tri_id != b.tri_id] = (255, 0, 255)
+    return out
+
+
+def compare(result: RenderResult, reference: RenderResult) -> dict:
+    """Image error of ``result`` against ``reference`` (same size).
+
+    Returns
+    -------
+    dict
+        ``psnr`` (dB, on 8-bit images; ``inf`` when equal), ``max_abs`` (8-bit levels),
+        ``tri_differs`` (fraction of pixels whose nearest triangle differs),
+        ``hit_differs`` (fraction where one hits and the other does not).
+    """
+    if result.image.shape != reference.image.shape:
+        raise ValueError(f"image sizes differ: {result.image.shape} and "
+                         f"{reference.image.shape}")
+    a = to_uint8(result.image).astype(np.float64)
+    b = to_uint8(reference.image).astype(np.float64)
+    mse = float(np.mean((a - b) ** 2))
+    psnr = math.inf if mse == 0 else 10.0 * math.log10(255.0 ** 2 / mse)
+    return {"psnr": psnr, "max_abs": float(np.max(np.abs(a - b))),
+            "tri_differs": float(np.mean(result.tri_id != reference.tri_id)),
+            "hit_differs": float(np.mean((result.tri_id >= 0) != (reference.tri_id >= 0)))}
+
+
+def format_summary(result: RenderResult, comparison: dict | None = None) -> str:
+    """A human-readable summary of a render."""
+    st, tm = result.stats, result.timings
+    bf = st["brute_force_pairs"]
+    skipped = ", ".join(f"{k} {v}" for k, v in st["skipped_triangles"].items() if v) or "none"
+    lines = [
+        (f"scene {st['scene']} ({st['triangles']} triangles, skipped: {skipped}), "
+        f"{st['size']}, backend {st['backend']}"),
+        (f"  rays      {st['rays']:>12,}  (primary {st['primary_rays']:,}, shadow "
+        f"{st['shadow_rays']:,})"),
+        (f"  bundles   {st['bundles']:>12,}  (primary {st['primary_bundles']:,}, shadow "
+        f"{st['shadow_bundles']:,}; unguaranteed {st['unguaranteed_bundles']:,})"),
+        (f"  spheres   {st['spheres']:>12,}  leaf spheres of <= tris/sphere, {st['levels']} "
+        f"levels; runs tested {st['unit'].get('spheres', 0):,} leaf spheres"),
+        (f"  plane tests {st['plane_tests']:>10,}  (host hierarchy {st['host_plane_tests']:,}, "
+        f"unit {st['unit'].get('plane_tests', 0):,})"),
+        (f"  pairs     {st['pairs_issued']:>12,}  of {bf:,} brute force "
+        f"({100.0 * st['pair_fraction']:.3f} %); early-out skipped "
+        f"{st['early_out_pairs_skipped']:,} pairs and {st['shadow_spheres_skipped']:,} "
+        f"sphere runs"),
+        f"  hits      {st['hits']:>12,}  pixels hit {st['pixels_hit']:,}",
+        (f"  events    overflow {st['events']['overflow']:,}, underflow "
+        f"{st['events']['underflow']:,}, invalid {st['events']['invalid']:,} (pairs)"),
+    ]
+    if "points_behind_light" in st:
+        lines.append(f"  shading points without a shadow bundle: behind the light "
+                     f"{st['points_behind_light']:,}, facing away {st['points_facing_away']:,}")
+    h = st["hierarchy"]
+    lvl = ", ".join(f"L{k}: {d}/{t} nodes ({tr:,} tris)" for k, (t, d, tr) in
+                    enumerate(zip(h["tested"], h["dropped"], h["triangles_dropped"])) if t)
+    lines.append(f"  hierarchy dropped {lvl}")
+    lines.append("  time      " + ", ".join(f"{k} {v:.2f}s" for k, v in tm.items())
+                 + f"; total {sum(tm.values()):.2f}s")
+    if comparison:
+        lines.append(f"  vs float64: PSNR {comparison['psnr']:.2f} dB, max diff "
+                     f"{comparison['max_abs']:.0f}/255, nearest triangle differs on "
+                     f"{100 * comparison['tri_differs']:.3f} % of pixels, hit/miss differs on "
+                     f"{100 * comparison['hit_differs']:.3f} %")
+    return "\n".join(lines)

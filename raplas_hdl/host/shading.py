@@ -1,0 +1,198 @@
+"""Shading: nearest-hit selection, Phong lighting, and soft shadows as ray bundles.
+
+Nearest hit (:func:`nearest_hits`): of a ray's hits, only those with
+``tmin <= t <= tmax`` count (a shadow ray also ignores its own triangle); the smallest
+``t`` wins and equal ``t`` goes to the lowest triangle ID, so the choice does not depend
+on the order of the unit's stream.
+
+Lighting (the local model of the CPU ray-tracing seed, section 3.2.3)::
+
+    I = ka * albedo * light  +  vis * light * (kd * albedo * max(0, N.L) + ks * max(0, R.V)^n)
+
+with ``N`` the triangle's geometric normal turned towards the viewer, ``L`` the unit vector
+to the light's centre, ``R = 2 (N.L) N - L`` the mirror direction, ``V`` the unit vector to
+the eye, and ``vis`` the fraction of the light's lattice that the point sees.
+
+Soft shadows (:func:`shadow_bundles`): from each shading point, one bundle to the
+``rows`` x ``cols`` lattice of cell centres on the area light (the bundle's virtual screen
+*is* the light). The origin is lifted off the surface by ``eps`` along the normal.
+Shading points that get no bundle are counted, not errors:
+
+- ``behind_light``: on or behind the light's plane (the light does not shine there, and
+  the bundle would be degenerate);
+- ``facing_away``: the surface faces away from the light's centre (``N.L <= 0``: no
+  diffuse or specular term to shadow).
+
+A shadow ray is blocked by a hit with ``eps <= t <= |P - X| - eps`` (``X`` its lattice
+point: anything beyond the light does not shadow) on a triangle other than the point's
+own.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .bundles import RayBundle
+from .scenes import AreaLight, Material
+
+__all__ = [
+    "ShadowPlan",
+    "blocked_rays",
+    "face_normals",
+    "nearest_hits",
+    "phong",
+    "shadow_bundles",
+]
+
+
+def face_normals(tris: np.ndarray) -> np.ndarray:
+    """Unit geometric normals ``unit((V1-V0) x (V2-V0))`` (zero for degenerate ones)."""
+    n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    ln = np.linalg.norm(n, axis=1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(ln > 0, n / np.where(ln > 0, ln, 1.0), 0.0)
+
+
+def nearest_hits(n_rays: int, ray_id, tri_id, hit, t, tmin=0.0, tmax=np.inf,
+                 exclude_tri=None):
+    """The nearest valid hit of every ray.
+
+    Parameters
+    ----------
+    n_rays : int
+    ray_id, tri_id : int arrays
+        Pairs (any order).
+    hit : bool array
+    t : float array
+        Hit distances (NaN where not a hit).
+    tmin, tmax : float or per-ray array
+        Accepted interval (inclusive).
+    exclude_tri : int or per-ray array, optional
+        A triangle ID to ignore per ray (-1: none).
+
+    Returns
+    -------
+    tri : ndarray (n_rays,) int64
+        Nearest triangle, -1 for none.
+    t : ndarray (n_rays,) float64
+        Its distance, ``inf`` for none.
+    index : ndarray (n_rays,) int64
+        Position of the winning pair in the input, -1 for none.
+    """
+    ray_id = np.asarray(ray_id, np.int64)
+    tri_id = np.asarray(tri_id, np.int64)
+    t = np.asarray(t, np.float64)
+    ok = np.asarray(hit, bool) & np.isfinite(t)
+    lo = np.broadcast_to(np.asarray(tmin, np.float64), (n_rays,))
+    hi = np.broadcast_to(np.asarray(tmax, np.float64), (n_rays,))
+    with np.errstate(invalid="ignore"):
+        ok &= (t >= lo[ray_id]) & (t <= hi[ray_id])
+    if exclude_tri is not None:
+        ex = np.broadcast_to(np.asarray(exclude_tri, np.int64), (n_rays,))
+        ok &= tri_id != ex[ray_id]
+    idx = np.flatnonzero(ok)
+    best_tri = np.full(n_rays, -1, np.int64)
+    best_t = np.full(n_rays, np.inf)
+    best_i = np.full(n_rays, -1, np.int64)
+    if idx.size:
+        order = idx[np.lexsort((tri_id[idx], t[idx], ray_id[idx]))]
+        first = np.ones(order.size, bool)
+        first[1:] = ray_id[order[1:]] != ray_id[order[:-1]]
+        win = order[first]
+        best_tri[ray_id[win]] = tri_id[win]
+        best_t[ray_id[win]] = t[win]
+        best_i[ray_id[win]] = win
+    return best_tri, best_t, best_i
+
+
+def phong(points, normals, albedo, eye, light: AreaLight, material: Material, visibility):
+    """Phong colour of shading points.
+
+    Parameters
+    ----------
+    points, normals, albedo : ndarray (n, 3)
+        ``normals`` unit, facing the viewer.
+    eye : ndarray (3,)
+    light : AreaLight
+    material : Material
+    visibility : ndarray (n,)
+        Fraction of the light seen (1: unshadowed).
+
+    Returns
+    -------
+    ndarray (n, 3) float64 (linear, not clipped)
+    """
+    lc = np.asarray(light.colour, float)
+    L = light.centre - points
+    L /= np.linalg.norm(L, axis=1, keepdims=True)
+    V = eye - points
+    V /= np.linalg.norm(V, axis=1, keepdims=True)
+    ndl = np.einsum("ij,ij->i", normals, L)
+    R = 2.0 * ndl[:, None] * normals - L
+    rdv = np.clip(np.einsum("ij,ij->i", R, V), 0.0, None)
+    diffuse = material.diffuse * albedo * np.clip(ndl, 0.0, None)[:, None]
+    spec = material.specular * np.where(ndl > 0, rdv ** material.shininess, 0.0)[:, None]
+    direct = (diffuse + spec) * np.asarray(visibility, float)[:, None]
+    return (material.ambient * albedo + direct) * lc
+
+
+@dataclass
+class ShadowPlan:
+    """Shadow bundles of a set of shading points.
+
+    Attributes
+    ----------
+    point : ndarray (k,) int64
+        Index (into the caller's shading points) of each bundle.
+    bundles : list of RayBundle
+    tmax : ndarray (k, rows*cols)
+        Per ray: distance to its lattice point minus ``eps``.
+    behind_light, facing_away : int
+        Shading points that got no bundle, by reason.
+    """
+
+    point: np.ndarray
+    bundles: list
+    tmax: np.ndarray
+    behind_light: int
+    facing_away: int
+
+
+def shadow_bundles(points, normals, light: AreaLight, rows: int, cols: int,
+                   eps: float) -> ShadowPlan:
+    """One ``rows`` x ``cols`` bundle per shading point towards the light's lattice.
+
+    ``normals`` are unit normals facing the viewer; the origin is ``P + eps * N``.
+    """
+    points = np.asarray(points, float)
+    normals = np.asarray(normals, float)
+    ln = light.normal
+    lc = light.centre
+    origins = points + eps * normals
+    in_front = (origins - lc) @ ln > 0.0
+    facing = np.einsum("ij,ij->i", normals, lc - points) > 0.0
+    want = in_front & facing
+    behind = int(np.count_nonzero(~in_front))
+    away = int(np.count_nonzero(in_front & ~facing))
+    col_axis = 0.5 * np.asarray(light.edge_v, float)
+    row_axis = 0.5 * np.asarray(light.edge_u, float)
+    idx, bundles, tmax = [], [], []
+    for k in np.flatnonzero(want):
+        try:
+            b = RayBundle(origins[k], lc, col_axis, row_axis, rows, cols)
+        except ValueError:
+            behind += 1      # numerically on the light's plane
+            continue
+        idx.append(k)
+        bundles.append(b)
+        tmax.append(np.linalg.norm(b.points.reshape(-1, 3) - origins[k], axis=1) - eps)
+    tm = np.array(tmax) if tmax else np.zeros((0, rows * cols))
+    return ShadowPlan(np.array(idx, np.int64), bundles, tm, behind, away)
+
+
+def blocked_rays(n_rays: int, ray_id, tri_id, hit, t, eps: float, tmax, own_tri: int):
+    """Rays of one shadow bundle that some pair blocks (bool (n_rays,))."""
+    tri, _, _ = nearest_hits(n_rays, ray_id, tri_id, hit, t, eps, tmax, own_tri)
+    return tri >= 0

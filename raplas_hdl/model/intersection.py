@@ -1,0 +1,174 @@
+"""Transaction-level golden model of the whole intersection unit.
+
+It produces the result stream of :class:`raplas_hdl.rtl.intersection.IntersectionUnit`
+bit for bit, and the same counters (all but ``cycles``), for one *run*: a start command
+that names the spheres to test against the bundle in the memories. It is also the ``model``
+backend of the host, called once per run, so it works on whole arrays (NumPy, and the numba
+kernels behind the plane-sphere and ray-triangle models); no Amaranth.
+
+Order of the result stream (the unit's, by construction):
+
+1. spheres in the order of the run (``sphere_ids``, default every sphere in memory order);
+2. for each sphere, the rays (i, j) whose row plane i and column plane j both flag it,
+   rows ascending, then columns ascending;
+3. for each such ray, if its enable bit is set, the sphere's triangles in list order; a
+   disabled ray issues no pair (its pairs are counted as skipped).
+
+Every pair issued gives one result beat. The last beat of the run has ``last`` set; a run
+that issues no pair gives exactly one beat with ``last`` and ``empty`` set and every other
+field zero.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .memory_image import COUNTER_NAMES, BundleMemory, SceneMemory, UnitConfig
+
+__all__ = ["RESULT_DTYPE", "run_bundle", "enumerate_pairs", "empty_counters"]
+
+#: One beat of the unit's result stream.
+RESULT_DTYPE = np.dtype([("ray_id", "u4"), ("tri_id", "u4"), ("hit", "u1"), ("t", "u4"),
+                         ("u", "u4"), ("v", "u4"), ("det", "u4"), ("flags", "u1"),
+                         ("last", "u1"), ("empty", "u1")])
+
+
+def empty_counters() -> dict:
+    """Counters at zero, keyed by :data:`~raplas_hdl.model.memory_image.COUNTER_NAMES`."""
+    return {name: 0 for name in COUNTER_NAMES}
+
+
+def _sphere_ids(config, scene, sphere_ids):
+    if sphere_ids is None:
+        return np.arange(scene.n_spheres, dtype=np.int64)
+    ids = np.asarray(sphere_ids)
+    if ids.size == 0 and ids.ndim == 1:
+        ids = ids.astype(np.int64)
+    if ids.dtype.kind not in "ui" or ids.ndim != 1:
+        raise ValueError("sphere_ids must be a 1-D integer array")
+    ids = ids.astype(np.int64)
+    if ids.size > config.max_spheres:
+        raise ValueError(f"a run names at most max_spheres={config.max_spheres} spheres")
+    if ids.size and (ids.min() < 0 or ids.max() >= scene.n_spheres):
+        raise ValueError("sphere_ids names a sphere that is not in the scene")
+    return ids
+
+
+def enumerate_pairs(config: UnitConfig, row_mask, col_mask, tri_counts, tri_lists, enable):
+    """Pairs a run issues, in stream order, from the spheres' plane masks.
+
+    Parameters
+    ----------
+    row_mask : (S, rows) bool
+    col_mask : (S, cols) bool
+    tri_counts : (S,) int
+        Triangles of each sphere of the run.
+    tri_lists : (S, L) uint32
+        Their triangle IDs.
+    enable : (rows*cols,) bool
+
+    Returns
+    -------
+    ray_ids, tri_ids : int64 arrays
+        The issued pairs in order.
+    skipped : int
+        Pairs not issued because their ray is disabled.
+    """
+    rows, cols = config.rows, config.cols
+    s_n = row_mask.shape[0]
+    ray_parts, tri_parts = [], []
+    skipped = 0
+    chunk = max(1, (1 << 22) // max(1, rows * cols))
+    for lo in range(0, s_n, chunk):
+        hi = min(s_n, lo + chunk)
+        both = row_mask[lo:hi, :, None] & col_mask[lo:hi, None, :]   # (s, rows, cols)
+        s_idx, ray = np.nonzero(both.reshape(hi - lo, rows * cols))  # s-major, ray ascending
+        s_idx = s_idx + lo
+        cnt = tri_counts[s_idx].astype(np.int64)
+        en = enable[ray]
+        skipped += int(cnt[~en].sum())
+        s_idx, ray, cnt = s_idx[en], ray[en], cnt[en]
+        total = int(cnt.sum())
+        rep_s = np.repeat(s_idx, cnt)
+        rep_r = np.repeat(ray, cnt)
+        starts = np.cumsum(cnt) - cnt
+        k = np.arange(total, dtype=np.int64) - np.repeat(starts, cnt)
+        ray_parts.append(rep_r.astype(np.int64))
+        tri_parts.append(tri_lists[rep_s, k].astype(np.int64))
+    if not ray_parts:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), skipped
+    return np.concatenate(ray_parts), np.concatenate(tri_parts), skipped
+
+
+def run_bundle(config: UnitConfig, scene: SceneMemory, bundle: BundleMemory,
+               sphere_ids=None):
+    """Run the unit once: the spheres ``sphere_ids`` against the bundle.
+
+    Parameters
+    ----------
+    config : UnitConfig
+    scene : SceneMemory
+    bundle : BundleMemory
+    sphere_ids : 1-D integer array, optional
+        Spheres of the run, in order (default: all, in memory order). Repeats are allowed
+        and give repeated pairs, as in the unit.
+
+    Returns
+    -------
+    results : numpy structured array of :data:`RESULT_DTYPE`
+        The result stream, one element per beat.
+    counters : dict
+        ``spheres``, ``plane_tests`` (``rows + cols`` per sphere), ``pairs_issued``,
+        ``pairs_skipped`` (pairs of disabled rays), ``hits``, and ``overflow``,
+        ``underflow``, ``invalid``: the number of issued pairs whose ray-triangle
+        operations raised that event (the unit ORs the events of a pair's operations).
+
+    Raises
+    ------
+    ValueError
+        When the scene or the bundle does not fit ``config``, or ``sphere_ids`` is invalid.
+    """
+    from .plane_sphere import sphere_masks
+    from .ray_triangle import intersect
+
+    scene.check(config)
+    bundle.check(config)
+    ids = _sphere_ids(config, scene, sphere_ids)
+    counters = empty_counters()
+    counters["spheres"] = int(ids.size)
+    counters["plane_tests"] = int(ids.size) * config.n_planes
+    if ids.size:
+        row_mask, col_mask = sphere_masks(bundle.plane_n, bundle.plane_p, scene.centres[ids],
+                                          scene.radii[ids], config.rows, config.cols,
+                                          config.fmt)
+        ray_ids, tri_ids, skipped = enumerate_pairs(
+            config, np.asarray(row_mask, bool), np.asarray(col_mask, bool),
+            scene.tri_counts[ids], scene.tri_lists[ids], bundle.enable)
+    else:
+        ray_ids = tri_ids = np.zeros(0, np.int64)
+        skipped = 0
+    counters["pairs_skipped"] = skipped
+    n = ray_ids.size
+    counters["pairs_issued"] = int(n)
+    if n == 0:
+        out = np.zeros(1, RESULT_DTYPE)
+        out["last"] = 1
+        out["empty"] = 1
+        return out, counters
+    res = intersect(bundle.ray_o[ray_ids], bundle.ray_d[ray_ids], scene.v0[tri_ids],
+                    scene.e1[tri_ids], scene.e2[tri_ids], scene.n[tri_ids], config.fmt,
+                    mode=config.mode, margin_scale=config.margin_scale)
+    out = np.zeros(n, RESULT_DTYPE)
+    out["ray_id"] = ray_ids
+    out["tri_id"] = tri_ids
+    out["hit"] = np.asarray(res["hit"]).astype(np.uint8)
+    for key in ("t", "u", "v", "det"):
+        out[key] = res[key]
+    flags = np.asarray(res["flags"]).astype(np.uint8)
+    out["flags"] = flags
+    out["last"][-1] = 1
+    counters["hits"] = int(out["hit"].sum())
+    counters["overflow"] = int(np.count_nonzero(flags & 1))
+    counters["underflow"] = int(np.count_nonzero(flags & 2))
+    counters["invalid"] = int(np.count_nonzero(flags & 4))
+    return out, counters

@@ -1,0 +1,387 @@
+"""What the host writes into the intersection unit: configuration, memories, address map.
+
+Shared by the golden model (:mod:`raplas_hdl.model.intersection`), the host backends and
+the RTL driver, so that all of them read the same memories the same way. No Amaranth.
+
+The four memories of ``shared/spec/raplas.md`` hold bit patterns of the unit's format
+(``uint32`` arrays):
+
+- :class:`SceneMemory` (written once per scene): Triangle Memory (V0, E1, E2, N) and Sphere
+  Memory (centre, radius, the IDs of up to ``tris_per_sphere`` triangles);
+- :class:`BundleMemory` (written once per bundle, into one of two banks): Plane Memory
+  (``rows`` row planes then ``cols`` column planes, unit normal n and offset p) and Ray
+  Memory (origin, direction and an enable bit per ray; ray ``(i, j)`` has ID ``i*cols+j``),
+  plus the bank's *run list* of sphere IDs when a run names its spheres by list.
+
+Address map of the unit's write port
+------------------------------------
+One 32-bit word per write; a field narrower than 32 bits takes the low bits of the word::
+
+    addr = region << 28 | bank << 27 | index << 4 | field
+
+==========  ======  =====  =========================  ==============================
+region      name    bank   index                      field
+==========  ======  =====  =========================  ==============================
+0           TRI     0      triangle ID                0-2 V0 xyz, 3-5 E1, 6-8 E2, 9-11 N
+1           SPHERE  0      sphere ID                  0-2 centre xyz, 3 radius,
+                                                      4 number of triangles
+2           TLIST   0      sphere ID * tris_per_sphere  0: triangle ID of list entry
+                           + k                        k of the sphere
+3           PLANE   0/1    plane ID (rows, then cols)  0-2 n xyz, 3 p
+4           RAY     0/1    ray ID (i*cols + j)         0-2 O xyz, 3-5 D xyz, 6 enable (bit 0)
+5           RLIST   0/1    position in the run list    0: sphere ID
+==========  ======  =====  =========================  ==============================
+
+Writes to an index outside the memory's depth, or to an unused field, are ignored.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..fp.format import FP24, FPFormat
+
+__all__ = ["UnitConfig", "SceneMemory", "BundleMemory", "REGIONS", "write_address",
+           "scene_writes", "bundle_writes", "run_list_writes", "COUNTER_NAMES", "MODES"]
+
+#: Ray-triangle modes (``mode`` of the ray-triangle unit).
+MODES = ("paper", "conservative")
+
+#: Regions of the write-port address map.
+REGIONS = {"tri": 0, "sphere": 1, "tlist": 2, "plane": 3, "ray": 4, "rlist": 5}
+_REGION_SHIFT = 28
+_BANK_SHIFT = 27
+_INDEX_SHIFT = 4
+_MAX_INDEX = (1 << (_BANK_SHIFT - _INDEX_SHIFT)) - 1
+
+#: Counters kept by the unit and by the model, in the order of the RTL's ``counters`` port.
+#: ``cycles`` exists only in the RTL (the model has no clock).
+COUNTER_NAMES = ("spheres", "plane_tests", "pairs_issued", "pairs_skipped", "hits",
+                 "overflow", "underflow", "invalid")
+
+
+def _bits_for(n: int) -> int:
+    """Bits of an unsigned field holding the values 0 .. n-1 (at least 1)."""
+    return max(1, (int(n) - 1).bit_length())
+
+
+def _check_int(name, value, lo, hi=None):
+    if not isinstance(value, (int, np.integer)) or isinstance(value, bool):
+        raise ValueError(f"{name} must be an integer, not {value!r}")
+    if value < lo or (hi is not None and value > hi):
+        rng = f"at least {lo}" if hi is None else f"between {lo} and {hi}"
+        raise ValueError(f"{name} must be {rng}, not {value}")
+
+
+@dataclass(frozen=True)
+class UnitConfig:
+    """Build parameters of the intersection unit (and of its model).
+
+    Parameters
+    ----------
+    fmt : FPFormat
+        Arithmetic format of every unit and memory.
+    rows, cols : int
+        Bundle lattice, 1 to 64 each.
+    testers : int or None
+        Plane-sphere testers in the array (``None``: ``rows + cols``, one per plane).
+    tris_per_sphere : int
+        Largest triangle list of a sphere (1 to 4096).
+    max_triangles, max_spheres : int
+        Depths of Triangle Memory and Sphere Memory (1 to 2**20).
+    mode : str
+        Ray-triangle mode, ``"paper"`` or ``"conservative"``.
+    margin_scale : int
+        Scale of the conservative margin (the ray-triangle unit's parameter).
+    fifo_depth : int
+        Depth of the pair FIFO in front of the ray-triangle unit (2 to 1024).
+
+    Raises
+    ------
+    ValueError
+        Naming the parameter that is out of range.
+    """
+
+    fmt: FPFormat = FP24
+    rows: int = 4
+    cols: int = 4
+    testers: int | None = None
+    tris_per_sphere: int = 8
+    max_triangles: int = 1024
+    max_spheres: int = 256
+    mode: str = "paper"
+    margin_scale: int = 1
+    fifo_depth: int = 16
+
+    def __post_init__(self):
+        if not isinstance(self.fmt, FPFormat):
+            raise ValueError(f"fmt must be an FPFormat, not {self.fmt!r}")
+        _check_int("rows", self.rows, 1, 64)
+        _check_int("cols", self.cols, 1, 64)
+        if self.testers is not None:
+            _check_int("testers", self.testers, 1, 128)
+        _check_int("tris_per_sphere", self.tris_per_sphere, 1, 4096)
+        _check_int("max_triangles", self.max_triangles, 1, 1 << 20)
+        _check_int("max_spheres", self.max_spheres, 1, 1 << 20)
+        if self.mode not in MODES:
+            raise ValueError(f"mode must be one of {', '.join(MODES)}, not {self.mode!r}")
+        _check_int("margin_scale", self.margin_scale, 1)
+        _check_int("fifo_depth", self.fifo_depth, 2, 1024)
+        if self.max_spheres * self.tris_per_sphere > _MAX_INDEX + 1:
+            raise ValueError("max_spheres * tris_per_sphere exceeds the address map "
+                             f"({_MAX_INDEX + 1} list entries)")
+
+    # -- derived ----------------------------------------------------------------------
+    @property
+    def n_testers(self) -> int:
+        return self.rows + self.cols if self.testers is None else self.testers
+
+    @property
+    def n_planes(self) -> int:
+        return self.rows + self.cols
+
+    @property
+    def n_rays(self) -> int:
+        return self.rows * self.cols
+
+    @property
+    def ray_id_bits(self) -> int:
+        return _bits_for(self.n_rays)
+
+    @property
+    def tri_id_bits(self) -> int:
+        return _bits_for(self.max_triangles)
+
+    @property
+    def sphere_id_bits(self) -> int:
+        return _bits_for(self.max_spheres)
+
+    @property
+    def count_bits(self) -> int:
+        """Bits of a triangle count 0 .. tris_per_sphere."""
+        return _bits_for(self.tris_per_sphere + 1)
+
+    @property
+    def run_count_bits(self) -> int:
+        """Bits of a run's sphere count 0 .. max_spheres."""
+        return _bits_for(self.max_spheres + 1)
+
+    def params(self) -> dict:
+        """JSON-serialisable parameters (for headers, manifests and reports)."""
+        return {"exp_bits": self.fmt.exp_bits, "man_bits": self.fmt.man_bits,
+                "rounding": self.fmt.rounding, "rows": self.rows, "cols": self.cols,
+                "testers": self.n_testers, "tris_per_sphere": self.tris_per_sphere,
+                "max_triangles": self.max_triangles, "max_spheres": self.max_spheres,
+                "mode": self.mode, "margin_scale": self.margin_scale,
+                "fifo_depth": self.fifo_depth}
+
+
+def _u32(name, a, shape_tail, fmt=None):
+    a = np.asarray(a)
+    if a.dtype.kind not in "ui":
+        raise ValueError(f"{name} must be an integer array of bit patterns, not {a.dtype}")
+    if a.ndim != 1 + len(shape_tail) or tuple(a.shape[1:]) != tuple(shape_tail):
+        raise ValueError(f"{name} must have shape (n, {', '.join(map(str, shape_tail))}), "
+                         f"not {a.shape}".replace(", )", ")"))
+    if a.size and (a.min() < 0 or (fmt is not None and a.max() > fmt.mask)):
+        raise ValueError(f"{name} holds patterns wider than the format")
+    return np.ascontiguousarray(a, dtype=np.uint32)
+
+
+@dataclass
+class SceneMemory:
+    """Triangle Memory and Sphere Memory of one scene, as bit patterns.
+
+    Parameters
+    ----------
+    v0, e1, e2, n : (T, 3) uint32
+        Triangle records (V0, E1 = V1-V0, E2 = V2-V0, N = E1 x E2); triangle ID = row.
+    centres : (S, 3) uint32
+        Sphere centres; sphere ID = row.
+    radii : (S,) uint32
+        Sphere radii (already inflated by the host as the culling bound requires).
+    tri_lists : (S, L) uint32, L <= tris_per_sphere
+        Triangle IDs of each sphere; entries past ``tri_counts[s]`` are ignored.
+    tri_counts : (S,) uint32
+        Number of triangles of each sphere (0 .. L).
+    """
+
+    v0: np.ndarray
+    e1: np.ndarray
+    e2: np.ndarray
+    n: np.ndarray
+    centres: np.ndarray
+    radii: np.ndarray
+    tri_lists: np.ndarray
+    tri_counts: np.ndarray
+
+    def __post_init__(self):
+        for name in ("v0", "e1", "e2", "n", "centres"):
+            setattr(self, name, _u32(name, getattr(self, name), (3,)))
+        self.radii = _u32("radii", self.radii, ())
+        tl = np.asarray(self.tri_lists)
+        if tl.ndim != 2:
+            raise ValueError(f"tri_lists must have shape (n_spheres, L), not {tl.shape}")
+        self.tri_lists = _u32("tri_lists", tl, (tl.shape[1],))
+        self.tri_counts = _u32("tri_counts", self.tri_counts, ())
+        t = self.v0.shape[0]
+        if not (self.e1.shape[0] == self.e2.shape[0] == self.n.shape[0] == t):
+            raise ValueError("v0, e1, e2 and n must have the same number of triangles")
+        s = self.centres.shape[0]
+        if not (self.radii.shape[0] == self.tri_lists.shape[0] == self.tri_counts.shape[0]
+                == s):
+            raise ValueError("centres, radii, tri_lists and tri_counts must have the same "
+                             "number of spheres")
+        if s and self.tri_counts.max() > self.tri_lists.shape[1]:
+            raise ValueError("tri_counts exceeds the width of tri_lists")
+        used = np.arange(self.tri_lists.shape[1])[None, :] < self.tri_counts[:, None]
+        if used.any() and self.tri_lists[used].max() >= t:
+            raise ValueError("tri_lists names a triangle ID beyond the triangle records")
+
+    @property
+    def n_triangles(self) -> int:
+        return self.v0.shape[0]
+
+    @property
+    def n_spheres(self) -> int:
+        return self.centres.shape[0]
+
+    def check(self, config: UnitConfig):
+        """Raise ``ValueError`` if the scene does not fit the unit ``config``."""
+        if self.n_triangles > config.max_triangles:
+            raise ValueError(f"{self.n_triangles} triangles exceed max_triangles="
+                             f"{config.max_triangles}")
+        if self.n_spheres > config.max_spheres:
+            raise ValueError(f"{self.n_spheres} spheres exceed max_spheres="
+                             f"{config.max_spheres}")
+        if self.n_spheres and self.tri_counts.max() > config.tris_per_sphere:
+            raise ValueError(f"a sphere holds {int(self.tri_counts.max())} triangles, more "
+                             f"than tris_per_sphere={config.tris_per_sphere}")
+        for name in ("v0", "e1", "e2", "n", "centres", "radii"):
+            a = getattr(self, name)
+            if a.size and a.max() > config.fmt.mask:
+                raise ValueError(f"{name} holds patterns wider than {config.fmt}")
+
+
+@dataclass
+class BundleMemory:
+    """Plane Memory and Ray Memory of one bundle, as bit patterns.
+
+    Parameters
+    ----------
+    plane_n : (rows+cols, 3) uint32
+        Unit normals: row planes 0..rows-1, then column planes.
+    plane_p : (rows+cols,) uint32
+        Plane offsets (plane: n.x + p = 0).
+    ray_o, ray_d : (rows*cols, 3) uint32
+        Ray origins and unit directions; ray (i, j) is row ``i*cols + j``.
+    enable : (rows*cols,) bool, optional
+        Enable bit of each ray (default: all enabled).
+    """
+
+    plane_n: np.ndarray
+    plane_p: np.ndarray
+    ray_o: np.ndarray
+    ray_d: np.ndarray
+    enable: np.ndarray | None = None
+
+    def __post_init__(self):
+        self.plane_n = _u32("plane_n", self.plane_n, (3,))
+        self.plane_p = _u32("plane_p", self.plane_p, ())
+        self.ray_o = _u32("ray_o", self.ray_o, (3,))
+        self.ray_d = _u32("ray_d", self.ray_d, (3,))
+        if self.plane_p.shape[0] != self.plane_n.shape[0]:
+            raise ValueError("plane_n and plane_p must have the same number of planes")
+        if self.ray_o.shape != self.ray_d.shape:
+            raise ValueError("ray_o and ray_d must have the same shape")
+        if self.enable is None:
+            self.enable = np.ones(self.ray_o.shape[0], dtype=bool)
+        else:
+            en = np.asarray(self.enable)
+            if en.shape != (self.ray_o.shape[0],):
+                raise ValueError(f"enable must have shape ({self.ray_o.shape[0]},), "
+                                 f"not {en.shape}")
+            self.enable = en.astype(bool)
+
+    def check(self, config: UnitConfig):
+        """Raise ``ValueError`` if the bundle does not fit the unit ``config``."""
+        if self.plane_n.shape[0] != config.n_planes:
+            raise ValueError(f"the bundle has {self.plane_n.shape[0]} planes; the unit "
+                             f"needs rows+cols = {config.n_planes}")
+        if self.ray_o.shape[0] != config.n_rays:
+            raise ValueError(f"the bundle has {self.ray_o.shape[0]} rays; the unit needs "
+                             f"rows*cols = {config.n_rays}")
+        for name in ("plane_n", "plane_p", "ray_o", "ray_d"):
+            a = getattr(self, name)
+            if a.size and a.max() > config.fmt.mask:
+                raise ValueError(f"{name} holds patterns wider than {config.fmt}")
+
+
+# -- address map ----------------------------------------------------------------------------
+def write_address(region: str, index, field=0, bank: int = 0):
+    """Word address of ``field`` of entry ``index`` in ``region`` (vectorised over index)."""
+    if region not in REGIONS:
+        raise ValueError(f"region must be one of {', '.join(REGIONS)}, not {region!r}")
+    if bank not in (0, 1):
+        raise ValueError(f"bank must be 0 or 1, not {bank!r}")
+    index = np.asarray(index, dtype=np.uint64)
+    if index.size and index.max() > _MAX_INDEX:
+        raise ValueError(f"index beyond the address map ({_MAX_INDEX})")
+    field = np.asarray(field, dtype=np.uint64)
+    if field.size and field.max() > 15:
+        raise ValueError("field must be 0 .. 15")
+    addr = ((np.uint64(REGIONS[region]) << np.uint64(_REGION_SHIFT))
+            | (np.uint64(bank) << np.uint64(_BANK_SHIFT))
+            | (index << np.uint64(_INDEX_SHIFT)) | field)
+    return addr.astype(np.uint32)
+
+
+def _record_writes(region, fields: list, bank=0):
+    """(addr, data) for records whose field ``f`` of entry ``i`` is ``fields[f][i]``."""
+    n = len(fields[0])
+    idx = np.repeat(np.arange(n, dtype=np.uint64), len(fields))
+    fld = np.tile(np.arange(len(fields), dtype=np.uint64), n)
+    data = np.stack([np.asarray(f, dtype=np.uint32) for f in fields], axis=1).reshape(-1)
+    return write_address(region, idx, fld, bank), data
+
+
+def scene_writes(config: UnitConfig, scene: SceneMemory):
+    """Writes ``(addr, data)`` (uint32 arrays) that load ``scene`` into the unit."""
+    scene.check(config)
+    tri_fields = [scene.v0[:, k] for k in range(3)] + [scene.e1[:, k] for k in range(3)] + \
+        [scene.e2[:, k] for k in range(3)] + [scene.n[:, k] for k in range(3)]
+    a1, d1 = _record_writes("tri", tri_fields)
+    sph_fields = [scene.centres[:, k] for k in range(3)] + [scene.radii, scene.tri_counts]
+    a2, d2 = _record_writes("sphere", sph_fields)
+    s_idx, k_idx = np.nonzero(np.arange(scene.tri_lists.shape[1])[None, :]
+                              < scene.tri_counts[:, None])
+    a3 = write_address("tlist", s_idx.astype(np.uint64) * config.tris_per_sphere + k_idx)
+    d3 = scene.tri_lists[s_idx, k_idx]
+    return np.concatenate([a1, a2, a3]), np.concatenate([d1, d2, d3]).astype(np.uint32)
+
+
+def bundle_writes(config: UnitConfig, bundle: BundleMemory, bank: int = 0,
+                  enable_only: bool = False):
+    """Writes that load ``bundle`` into ``bank`` (only the enable bits if ``enable_only``)."""
+    bundle.check(config)
+    en = bundle.enable.astype(np.uint32)
+    if enable_only:
+        return write_address("ray", np.arange(config.n_rays), 6, bank), en
+    pf = [bundle.plane_n[:, k] for k in range(3)] + [bundle.plane_p]
+    a1, d1 = _record_writes("plane", pf, bank)
+    rf = [bundle.ray_o[:, k] for k in range(3)] + [bundle.ray_d[:, k] for k in range(3)] + [en]
+    a2, d2 = _record_writes("ray", rf, bank)
+    return np.concatenate([a1, a2]), np.concatenate([d1, d2]).astype(np.uint32)
+
+
+def run_list_writes(config: UnitConfig, sphere_ids, bank: int = 0):
+    """Writes that put ``sphere_ids`` into the run list of ``bank``."""
+    ids = np.asarray(sphere_ids, dtype=np.int64).reshape(-1)
+    if ids.size > config.max_spheres:
+        raise ValueError(f"a run list holds at most max_spheres={config.max_spheres} IDs")
+    if ids.size and (ids.min() < 0 or ids.max() >= config.max_spheres):
+        raise ValueError("sphere ID outside Sphere Memory")
+    return write_address("rlist", np.arange(ids.size), 0, bank), ids.astype(np.uint32)
+

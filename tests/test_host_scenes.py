@@ -1,0 +1,102 @@
+"""Scenes: procedural builders, mesh files (good and bad), the load normalisation."""
+
+import math
+
+import numpy as np
+import pytest
+
+from raplas_hdl.host.scenes import SCENES, get_scene, load_mesh, mesh_scene
+
+
+@pytest.mark.parametrize("name", sorted(SCENES))
+def test_procedural_scene_normalised(name):
+    scene = get_scene(name, bound=8.0)
+    pts = scene.points_of_interest()
+    extent = np.abs(pts).max()
+    assert 4.0 < extent <= 8.0
+    assert math.log2(scene.scale).is_integer()            # power-of-two scale
+    assert scene.n_triangles > 10
+    assert np.all((scene.colours >= 0) & (scene.colours <= 1))
+    # the scale is exact: normalising again changes nothing
+    again = scene.normalised(8.0)
+    assert again.scale == scene.scale
+    np.testing.assert_array_equal(again.vertices, scene.vertices)
+    # the camera and the light went through the same map
+    raw = SCENES[name]()
+    np.testing.assert_allclose(
+        np.asarray(scene.camera.position),
+        (np.asarray(raw.camera.position) + scene.translation) * scene.scale)
+    np.testing.assert_allclose(scene.light.centre,
+                               (raw.light.centre + scene.translation) * scene.scale)
+
+
+def test_normalisation_maps_vertices_exactly():
+    raw = SCENES["terrain"](n=6)
+    scene = raw.normalised(2.0)
+    t, s = scene.translation, scene.scale
+    np.testing.assert_array_equal(scene.vertices, (raw.vertices + t) * s)
+    assert np.abs(scene.points_of_interest()).max() <= 2.0
+
+
+def test_lights_face_the_scene():
+    for name in SCENES:
+        scene = get_scene(name)
+        centre = scene.vertices.mean(axis=0)
+        assert (centre - scene.light.centre) @ scene.light.normal > 0, name
+
+
+def test_unknown_scene():
+    with pytest.raises(ValueError, match="unknown scene"):
+        get_scene("no-such-scene")
+
+
+@pytest.mark.parametrize("suffix", ["obj", "ply", "stl"])
+def test_mesh_roundtrip(tmp_path, suffix):
+    import trimesh
+
+    box = trimesh.creation.box(extents=(1.0, 2.0, 0.5))
+    path = tmp_path / f"box.{suffix}"
+    box.export(path)
+    verts, faces = load_mesh(path)
+    assert faces.shape == (12, 3)
+    assert np.ptp(verts[faces].reshape(-1, 3), axis=0) == pytest.approx([1.0, 2.0, 0.5])
+    scene = get_scene(str(path))
+    assert scene.n_triangles == 12 + 8          # the box on a 2x2 floor
+    assert np.abs(scene.points_of_interest()).max() <= 8.0
+
+
+@pytest.mark.parametrize("name, content, message", [
+    ("empty.obj", b"", "is empty"),
+    ("points.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", "no triangles"),
+    ("bad.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n",
+     "malformed"),
+    ("junk.ply", b"this is not a ply file", "malformed"),
+    ("junk.stl", b"garbage\x00\x01", "no triangles|malformed"),
+    ("mesh.xyz", b"1 2 3", "unsupported type"),
+])
+def test_bad_mesh_files(tmp_path, name, content, message):
+    path = tmp_path / name
+    path.write_bytes(content)
+    with pytest.raises(ValueError, match=message):
+        load_mesh(path)
+
+
+def test_missing_mesh_file(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        mesh_scene(tmp_path / "nothing.obj")
+
+
+def test_bad_scene_arrays():
+    from raplas_hdl.host.camera import Camera
+    from raplas_hdl.host.scenes import AreaLight, Scene
+
+    cam = Camera((0, 0, 5), (0, 0, 0))
+    light = AreaLight((0, 3, 0), (1, 0, 0), (0, 0, 1))
+    v = np.eye(3)
+    with pytest.raises(ValueError, match="no triangles"):
+        Scene("x", v, np.zeros((0, 3), int), (1, 1, 1), cam, light)
+    with pytest.raises(ValueError, match="does not exist"):
+        Scene("x", v, [[0, 1, 3]], (1, 1, 1), cam, light)
+    with pytest.raises(ValueError, match="NaN"):
+        Scene("x", np.array([[0, 0, 0], [1, 0, 0], [0, np.nan, 0]]), [[0, 1, 2]], (1, 1, 1),
+              cam, light)
