@@ -1,0 +1,86 @@
+"""Synthesis table of issue 6, point 3: every unit through Yosys ``synth_xilinx -family xc4v``.
+
+Runs the FP adder and multiplier at FP16/FP20/FP24/FP32 x rtz/rne/chop, the plane-sphere
+tester, the 4x4 plane-sphere array, the ray-triangle unit and the intersection unit at the
+formats given by ``--big-formats`` (FP24 by default) and all roundings, and the significand
+multiplier as DSP48 primitives against the inferred one (point 4), then writes
+``docs/results/synthesis.json`` and ``docs/synthesis.md`` (the table beside the paper's and
+the XC4VSX35 capacity). Results are cached under ``build/synth/``: a re-run only
+synthesises what changed.
+
+Usage::
+
+    python benchmarks/bench_synth.py [--big-formats FP24 FP16 ...] [--roundings rtz ...]
+                                     [--units ...] [--no-cache]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from raplas_hdl.fp import PRESETS, ROUNDINGS, parse_format  # noqa: E402
+from raplas_hdl.synth.report import build_report, dsp48_option_rows, write_report  # noqa: E402
+
+FP_UNITS = ("fp-add", "fp-mul")
+BIG_UNITS = ("plane-sphere-tester", "plane-sphere", "ray-triangle", "intersection-unit")
+RUN_ORDER = ("plane-sphere-tester", "ray-triangle", "intersection-unit", "plane-sphere",
+             "fp-mul", "fp-add")
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--formats", nargs="+", default=list(PRESETS),
+                   help="formats of the FP units (default FP16 FP20 FP24 FP32)")
+    p.add_argument("--big-formats", nargs="+", default=["FP24"],
+                   help="formats of the tester, arrays and units (default FP24)")
+    p.add_argument("--roundings", nargs="+", default=list(ROUNDINGS),
+                   help="roundings (default rtz rne chop)")
+    p.add_argument("--big-roundings", nargs="+", default=None,
+                   help="roundings of the tester, arrays and units (default: --roundings)")
+    p.add_argument("--cached-only", action="store_true",
+                   help="report only what build/synth/ already holds (no Yosys run)")
+    p.add_argument("--units", nargs="+", default=list(RUN_ORDER),
+                   help="units to run, in this order (default all, the big ones first)")
+    p.add_argument("--no-cache", action="store_true", help="synthesise everything again")
+    p.add_argument("--no-dsp48-option", action="store_true",
+                   help="skip the DSP48-primitive multiplier rows (issue 6, point 4)")
+    p.add_argument("--md", default=str(ROOT / "docs" / "synthesis.md"))
+    p.add_argument("--json", default=str(ROOT / "docs" / "results" / "synthesis.json"))
+    args = p.parse_args(argv)
+
+    def fmts(names, roundings):
+        return [parse_format(n).with_rounding(r) for n in names for r in roundings]
+
+    big_roundings = args.big_roundings or args.roundings
+    formats = {u: fmts(args.formats, args.roundings) if u in FP_UNITS
+               else fmts(args.big_formats, big_roundings) for u in args.units}
+    t0 = time.monotonic()
+    report = build_report(args.units, formats, use_cache=not args.no_cache,
+                          cached_only=args.cached_only, progress=lambda line: print(line, flush=True))
+    command = "python benchmarks/bench_synth.py" + (" " + " ".join(argv or sys.argv[1:])
+                                                   if (argv or sys.argv[1:]) else "")
+    if not args.no_dsp48_option:
+        report["dsp48_option"] = dsp48_option_rows(
+            [parse_format(n) for n in args.formats], use_cache=not args.no_cache,
+            cached_only=args.cached_only, progress=lambda line: print(line, flush=True))
+    report["command"] = command
+    report["wall_seconds"] = round(time.monotonic() - t0, 1)
+    for path in write_report(report, args.md, args.json, command=command):
+        print(f"wrote {path}")
+    for cap in report["capacity"]:
+        print(f"capacity {cap['format']}/{cap['rounding']}: {cap['units']} unit(s) "
+              f"(limits {cap['limits']}), {cap['ratio_vs_paper']:.2f}x the paper's pairs/s")
+    for m in report["missing"]:
+        print(f"missing: {m['unit']} ({m['reason']})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

