@@ -1,7 +1,7 @@
 """``raplas-hdl demo``: the README's main job.
 
 1. Emit the Verilog of every unit into ``build/verilog/`` (one file and JSON manifest
-   each; a unit whose generator is not there yet is reported and skipped);
+   each; a unit that fails is reported, the render still runs, and the exit status is 1);
 2. render the default scene (the Cornell box) with the bit-accurate ``model`` backend
    (FP24) and with the ``float64`` reference;
 3. write both PNGs and the difference image, and print the summary with the image error
@@ -68,7 +68,7 @@ def run(args) -> int:
         for path in written:
             print(f"      {path}")
         for name, why in failed:
-            print(f"      {name}: skipped: {why}", file=sys.stderr)
+            print(f"      {name}: FAILED: {why}", file=sys.stderr)
     size = _size(args.size)
     settings = settings_from_args(args, size)
     scene = get_scene(args.scene, bound=settings.bound)
@@ -96,4 +96,8 @@ def run(args) -> int:
     print(f"wrote {paths['model']}, {paths['float64']}, {paths['diff']} (x4 difference, "
           f"magenta: nearest triangle differs), {summary}")
     print(f"demo done in {time.perf_counter() - t0:.1f} s")
+    if not args.no_verilog and failed:
+        print(f"raplas-hdl demo: {len(failed)} unit(s) failed to emit Verilog (see above)",
+              file=sys.stderr)
+        return 1
     return 0

@@ -26,6 +26,9 @@ from numba import get_num_threads, njit, prange
 from .format import FLAG_INVALID, FLAG_NAMES, FLAG_OVERFLOW, FLAG_UNDERFLOW, FPFormat
 from .kernels import (CHOP, DOWN, RNE, RTZ, UP, abs_le_k, add_int_k, add_k, decode_k,
                       encode_k, le_k, lt_k, mul_int_k, mul_k, neg_k, rmode_code)
+from .numba_cache import drop_stale_cache
+
+drop_stale_cache(__file__)
 
 __all__ = ["encode", "decode", "add", "sub", "mul", "neg", "le", "lt", "abs_le",
            "flags_names"]

@@ -28,6 +28,9 @@ from numba import njit, prange
 
 from raplas_hdl.fp import FPFormat
 from raplas_hdl.fp.kernels import add_k, lt_k, mul_k, rmode_code
+from raplas_hdl.fp.numba_cache import drop_stale_cache
+
+drop_stale_cache(__file__)
 
 __all__ = ["tester_flags", "plane_distances", "sphere_masks", "schedule", "n_passes",
            "pack_masks"]

@@ -43,14 +43,12 @@ conservative mode). The caller carries the ray and triangle IDs.
 
 from __future__ import annotations
 
-import hashlib
-from pathlib import Path
-
 import numpy as np
 from numba import njit
 
 from ..fp.format import FLAG_OVERFLOW, FPFormat
 from ..fp.kernels import add_k, le_k, lt_k, mul_k, neg_k, rmode_code, sub_k
+from ..fp.numba_cache import drop_stale_cache
 from .conservative import MARGIN_NAMES, margin_constants, margins
 
 __all__ = ["intersect", "MODES", "N_OPS"]
@@ -62,28 +60,7 @@ N_OPS = {"paper": 33, "conservative": 34}
 _OVF = np.uint8(FLAG_OVERFLOW)
 
 
-def _drop_stale_cache():
-    """Remove this module's numba cache files if the FP kernels changed since they were made."""
-    from ..fp import format as _fmt_mod
-    from ..fp import kernels as _kernels_mod
-
-    digest = hashlib.sha256()
-    for mod in (_kernels_mod, _fmt_mod):
-        digest.update(Path(mod.__file__).read_bytes())
-    cache_dir = Path(__file__).resolve().parent / "__pycache__"
-    stamp = cache_dir / f"{Path(__file__).stem}.kernels-sha256"
-    try:
-        if stamp.exists() and stamp.read_text() == digest.hexdigest():
-            return
-        for path in cache_dir.glob(f"{Path(__file__).stem}.*.nb[ic]"):
-            path.unlink(missing_ok=True)
-        cache_dir.mkdir(exist_ok=True)
-        stamp.write_text(digest.hexdigest())
-    except OSError:         # read-only checkout: numba cannot cache there either
-        pass
-
-
-_drop_stale_cache()
+drop_stale_cache(__file__)
 
 
 @njit(cache=True)
