@@ -28,7 +28,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 __all__ = ["SIMULATORS", "SimulatorNotFound", "available_simulators", "require_simulator",
-           "simulator_env", "build", "run_cocotb", "build_plain_verilator", "verilator_flags",
+           "simulator_env", "build", "mark_ports_public", "run_cocotb", "build_plain_verilator", "verilator_flags",
            "REPO_ROOT", "BUILD_ROOT"]
 
 SIMULATORS = ("icarus", "verilator")
@@ -206,6 +206,31 @@ def _tail(path: Path, n: int = 40) -> str:
         return "(no log)"
 
 
+_PUBLIC = "/*verilator public_flat_rw*/"
+
+
+def mark_ports_public(verilog_text: str, toplevel: str) -> str:
+    """Mark the non-ANSI port declarations of module ``toplevel`` public for Verilator.
+
+    Verilator built without ``--public-flat-rw`` hides every signal that is not marked, the
+    top's ports included, and cocotb then finds no root handle. Lines that already carry
+    the mark (a hand-written ANSI wrapper) are left alone.
+    """
+    out, inside = [], False
+    for line in verilog_text.splitlines(keepends=True):
+        stripped = line.lstrip()
+        if stripped.startswith("module "):
+            inside = stripped[7:].split("(")[0].strip() == toplevel
+        elif stripped.startswith("endmodule"):
+            inside = False
+        elif (inside and stripped.startswith(("input ", "output ", "inout "))
+              and "verilator public" not in line and line.rstrip().endswith(";")):
+            body = line.rstrip()[:-1]
+            line = f"{body} {_PUBLIC};\n"
+        out.append(line)
+    return "".join(out)
+
+
 def build(simulator: str, verilog_text: str, toplevel: str, build_key: str,
           build_args=(), timeout_s: float | None = None, public_all: bool = True) -> Path:
     """Build (or reuse) the cocotb model of ``verilog_text``; returns its build directory.
@@ -219,6 +244,8 @@ def build(simulator: str, verilog_text: str, toplevel: str, build_key: str,
     env = simulator_env(simulator)
     waves = _waves()
     flags = list(build_args)
+    if simulator == "verilator" and not public_all:
+        verilog_text = mark_ports_public(verilog_text, toplevel)
     if simulator == "verilator":
         flags = verilator_flags(waves) + flags + ([] if public_all else ["(no-public-flat-rw)"])
     digest = hashlib.sha256("\0".join([verilog_text, toplevel, simulator, *flags,

@@ -309,7 +309,11 @@ def run_runs(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
         with _verilator_pch_fix(simulator):
             run_cocotb(simulator, text, "intersection_unit", "sim.tb_intersection",
                        build_key or f"unit-{config.fmt.name}-{config.rows}x{config.cols}",
-                       env=env, build_args=ICARUS_ARGS if simulator == "icarus" else ())
+                       env=env, build_args=ICARUS_ARGS if simulator == "icarus" else (),
+                       # the testbench touches only the top's ports; with every signal
+                       # public (cocotb's default) Verilator's C++ of this unit does not
+                       # compile in useful time on 2 cores
+                       public_all=False)
         res = np.load(out_path, allow_pickle=False)
         beats = [int(x, 16) for x in res["beats"]]
         run_of_beat = res["run_of_beat"]

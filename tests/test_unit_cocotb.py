@@ -26,10 +26,9 @@ def scene_runs():
 
 
 @pytest.mark.parametrize("overlap", [False, True], ids=["sequential", "overlap"])
-# The whole unit under Verilator takes longer to compile than `make test` allows on 2 cores
-# (the first build did not finish in 40 minutes here), so it runs in `make test-full`.
-@pytest.mark.parametrize("simulator", ["icarus",
-                                       pytest.param("verilator", marks=pytest.mark.full)])
+# Verilator builds the unit in about 35 s because only the top's ports are public
+# (see sim/runner.py, mark_ports_public); with every signal public it took over 40 min.
+@pytest.mark.parametrize("simulator", ["icarus", "verilator"])
 def test_unit_cocotb_matches_model(simulator, overlap, scene_runs):
     scene, runs = scene_runs
     results = run_runs(simulator, CFG, scene, runs, seed=3 + overlap, ready_density=0.6,
