@@ -89,7 +89,8 @@ def main(argv=None) -> int:
               "backends": {}}
     results = {}
     for name in args.backends.split(","):
-        backend = make_backend(name, fmt, mode=args.mode)
+        backend = make_backend(name, fmt, mode=args.mode,
+                               **({"sim": args.rtl_sim or "verilator"} if name == "rtl" else {}))
         t0 = time.perf_counter()
         res = render(scene, backend, settings)
         wall = time.perf_counter() - t0
@@ -98,13 +99,18 @@ def main(argv=None) -> int:
         entry["wall_seconds"] = wall
         if name != "float64" and "float64" in results:
             entry["vs_float64"] = compare(res, results["float64"])
+        if name == "rtl" and "model" in results:
+            entry["equal_to_model"] = bool(
+                (res.tri_id == results["model"].tri_id).all()
+                and (res.image == results["model"].image).all()
+                and (res.visibility == results["model"].visibility).all())
             save_png(difference_image(res, results["float64"]),
                      out.parent / f"render_bench_{scene.name}_diff.png", linear=False)
         report["backends"][backend.describe()] = entry
         save_png(res.image, out.parent / f"render_bench_{scene.name}_{name}.png")
         print(format_summary(res, entry.get("vs_float64")), flush=True)
         out.write_text(json.dumps(_jsonable(report), indent=2))
-    if args.rtl_sim:
+    if args.rtl_sim and "rtl" not in args.backends.split(","):
         small = get_scene("soup", n=24)
         st = RenderSettings(16, 16, 4, 4, 0, 0, progress=False)
         try:

@@ -13,15 +13,16 @@ must show false rejections (so the test can fail).
 
 from __future__ import annotations
 
-import math
-from fractions import Fraction
-
 import numpy as np
 import pytest
 
 from raplas_hdl.fp import FP24, FPFormat
 from raplas_hdl.fp import model as fpm
 from raplas_hdl.host.bundles import RayBundle, encode_bundles
+# the generators are shared with the stress campaign
+from raplas_hdl.host.campaign import _line_gap as line_gap
+from raplas_hdl.host.campaign import (adversarial_spheres, exact_line_hit, random_bundle,
+                                      random_spheres)
 from raplas_hdl.host.culling import CullingBudget, bundle_slack, bundle_slacks, encode_spheres
 from raplas_hdl.model import plane_sphere as ps_model
 
@@ -41,79 +42,6 @@ def closed_form(fmt: FPFormat, o_max, margin, r, c_norm):
     b0 = (u + 2.0 ** -50 + delta0 + g3 * (1 + u)) * o_max * nu0 + phi
     value = (nu0 + delta0) * r + (delta0 + g3 * nu0) * c_norm + b0 + 6 * phi + margin
     return value * (1 + 2.0 ** -45)
-
-
-def random_bundle(rng):
-    rows, cols = (int(x) for x in rng.integers(1, 9, 2))
-    o_norm = 10 ** rng.uniform(-3, math.log10(O_MAX * 0.95))
-    origin = rng.normal(size=3)
-    origin *= o_norm / np.linalg.norm(origin)
-    dist = 10 ** rng.uniform(-2, 1)
-    axis = rng.normal(size=3)
-    axis /= np.linalg.norm(axis)
-    a = np.cross(axis, rng.normal(size=3))
-    a /= np.linalg.norm(a)
-    b = np.cross(axis, a)
-    ang = rng.uniform(0.5, 1.0) * math.pi / 2      # axes 45..90 degrees apart
-    b = math.cos(ang) * a + math.sin(ang) * b
-    half = dist * 10 ** rng.uniform(-3, 0, 2)
-    return RayBundle(origin, origin + dist * axis, a * half[0], b * half[1], rows, cols)
-
-
-def _perp(rng, d):
-    """Random unit vectors perpendicular to the rows of ``d`` (or to one vector)."""
-    e = np.cross(d, rng.normal(size=np.shape(d)))
-    return e / np.linalg.norm(e, axis=-1, keepdims=True)
-
-
-def random_spheres(rng, bundle, n):
-    """Centres near O, along the bundle (far) and behind O; radii over 4 decades."""
-    dirs = bundle.directions[rng.integers(0, bundle.n_rays, n)]
-    t = 10 ** rng.uniform(-3, 2, n) * rng.choice([1, 1, 1, -1], n)
-    r = 10 ** rng.uniform(-4, 0, n) * np.maximum(np.abs(t), 1e-2)
-    off = _perp(rng, dirs) * (r * rng.uniform(0, 3, n))[:, None]
-    return bundle.origin + t[:, None] * dirs + off, r
-
-
-def adversarial_spheres(rng, bundle, n, fmt):
-    """Spheres at distance r(1 +- k 2^-M) from a ray (half) or from a plane (half)."""
-    ks = np.array([0.25, 0.5, 1, 2, 4, 8, 16])
-    k = rng.choice(ks, n) * rng.choice([-1, 1], n)
-    r = 10 ** rng.uniform(-4, 0, n)
-    scale = 1 + k * fmt.ulp
-    t = 10 ** rng.uniform(-1, 3, n) * r * rng.choice([1, 1, -1], n)
-    rays = rng.integers(0, bundle.n_rays, n)
-    d = bundle.directions[rays]
-    # half of them from the ray's line ...
-    c_ray = bundle.origin + t[:, None] * d + _perp(rng, d) * (r * scale)[:, None]
-    # ... the other half from one of the ray's two planes, beside a point of the plane
-    plane = np.where(rng.random(n) < 0.5, rays // bundle.cols, bundle.rows + rays % bundle.cols)
-    nrm = bundle.plane_n[plane]
-    inplane = np.cross(nrm, _perp(rng, nrm))
-    x = bundle.origin + t[:, None] * (d + rng.uniform(-1, 1, n)[:, None] * inplane)
-    c_plane = x + nrm * (r * scale * rng.choice([-1, 1], n))[:, None]
-    centres = np.where((np.arange(n) % 2 == 0)[:, None], c_ray, c_plane)
-    return centres, r
-
-
-def exact_line_hit(o, d, c, r):
-    """Does the line O + tD meet the ball |X - C| <= r?  Exact (Fraction)."""
-    o, d, c = ([Fraction(float(x)) for x in v] for v in (o, d, c))
-    w = [c[i] - o[i] for i in range(3)]
-    cx = [w[1] * d[2] - w[2] * d[1], w[2] * d[0] - w[0] * d[2], w[0] * d[1] - w[1] * d[0]]
-    dd = sum(x * x for x in d)
-    return sum(x * x for x in cx) <= Fraction(float(r)) ** 2 * dd
-
-
-def line_gap(o, d, c, r):
-    """float64 ``|w x D|^2 - r^2 |D|^2`` (negative: the line meets the ball) for every
-    (ray, sphere), shape (rays, spheres), and a scale for its rounding error."""
-    w = c[None, :, :] - o[None, None, :]
-    dd = np.sum(d * d, axis=1)[:, None]
-    cross = np.cross(w, d[:, None, :])
-    gap = np.sum(cross * cross, axis=2) - (r * r)[None, :] * dd
-    scale = (np.sum(w * w, axis=2) + (r * r)[None, :]) * dd
-    return gap, scale
 
 
 def check_bundles(fmt, n_bundles, seed, n_random=10, n_adv=6, batch=500):

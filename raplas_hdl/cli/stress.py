@@ -1,5 +1,8 @@
 """``raplas-hdl stress ray-triangle``: the seeded numerical stress suite of the ray-triangle
-unit (golden model) against the exact reference R, as a table per format and mode."""
+unit (golden model) against the exact reference R, as a table per format and mode.
+
+``raplas-hdl stress campaign``: the same families and the plane-culling proof at scale,
+sharded over the machine's cores, resumable (:mod:`raplas_hdl.host.campaign`)."""
 
 from __future__ import annotations
 
@@ -16,7 +19,9 @@ def add_parser(subparsers):
         "stress", help="numerical stress suites against exact references",
         description="Run a seeded stress suite and print false hits, false misses, leaks and "
                     "the relative error of t per case family, against the exact reference R.")
-    p.add_argument("target", choices=["ray-triangle"], help="the unit to stress")
+    p.add_argument("target", choices=["ray-triangle", "campaign"],
+                   help="the unit to stress, or the whole campaign (both units, every format, "
+                        "rounding and mode)")
     p.add_argument("--format", action="append", dest="formats", metavar="FMT",
                    help="format, e.g. FP24/rtz, FP24/chop, FP32 (repeatable; default FP24/rtz)")
     p.add_argument("--mode", choices=["paper", "conservative", "both"], default="both")
@@ -30,6 +35,36 @@ def add_parser(subparsers):
     p.add_argument("--bisect", action="store_true",
                    help="also find the smallest s with zero false misses (conservative mode)")
     p.add_argument("--json", default=None, metavar="FILE", help="write the results as JSON")
+    g = p.add_argument_group("campaign options")
+    g.add_argument("--formats", dest="campaign_formats", default="FP16,FP20,FP24,FP32",
+                   help="campaign: comma-separated formats (FP24 = every rounding of "
+                        "--roundings; FP24/rne = that one). Default FP16,FP20,FP24,FP32")
+    g.add_argument("--roundings", default="rtz,rne,chop",
+                   help="campaign: roundings of the formats given without one")
+    g.add_argument("--rays-per-family", type=int, default=50000, metavar="N",
+                   help="campaign: rays per family, format and rounding (default 50000)")
+    g.add_argument("--shard-rays", type=int, default=5000, metavar="N",
+                   help="campaign: rays per ray-triangle shard (default 5000)")
+    g.add_argument("--bundles", type=int, default=5000, metavar="N",
+                   help="campaign: culling bundles per sphere kind, format and rounding "
+                        "(default 5000)")
+    g.add_argument("--shard-bundles", type=int, default=250, metavar="N",
+                   help="campaign: bundles per culling shard (default 250)")
+    g.add_argument("--spheres", type=int, default=16, metavar="N",
+                   help="campaign: spheres per bundle (default 16)")
+    g.add_argument("--campaign-seed", type=int, default=2026, metavar="S",
+                   help="campaign: seed (default 2026)")
+    g.add_argument("--out-dir", default="build/campaign", metavar="DIR",
+                   help="campaign: shard directory (default build/campaign)")
+    g.add_argument("--jobs", type=int, default=None, metavar="N",
+                   help="campaign: worker processes (default: os.cpu_count())")
+    g.add_argument("--max-shards", type=int, default=None, metavar="K",
+                   help="campaign: run at most K new shards, then stop (no merge)")
+    g.add_argument("--results", default="docs/results/stress_campaign.json", metavar="FILE",
+                   help="campaign: merged JSON (default docs/results/stress_campaign.json)")
+    g.add_argument("--report", default="docs/stress-campaign.md", metavar="FILE",
+                   help="campaign: markdown summary (default docs/stress-campaign.md)")
+    g.add_argument("--no-progress", action="store_true", help="campaign: no progress bar")
     return p
 
 
@@ -46,7 +81,65 @@ def format_table(table: dict, pooled: dict) -> str:
     return "\n".join(lines)
 
 
+def _split(text):
+    return tuple(x.strip() for x in text.split(",") if x.strip())
+
+
+def run_campaign(args) -> int:
+    """``stress campaign``: run the missing shards, then merge and write the reports."""
+    import sys
+    import time
+
+    from ..host import campaign
+
+    params = campaign.CampaignParams(
+        formats=_split(args.campaign_formats), roundings=_split(args.roundings),
+        families=() if args.families is None else _split(args.families),
+        rays_per_family=args.rays_per_family, shard_rays=args.shard_rays,
+        bundles=args.bundles, shard_bundles=args.shard_bundles,
+        spheres_per_bundle=args.spheres, seed=args.campaign_seed)
+    t0 = time.perf_counter()
+    try:
+        info = campaign.run_campaign(params, args.out_dir, args.jobs, args.max_shards,
+                                     progress=not args.no_progress)
+    except KeyboardInterrupt:
+        print("\ninterrupted: finished shards are kept; run the same command to resume",
+              file=sys.stderr)
+        return 130
+    print(f"{info['run']} shards run, {info['reused']} reused, {info['pending']} of "
+          f"{info['shards']} missing ({info['wall_s']:.1f} s)")
+    if info["pending"]:
+        print("campaign incomplete: run the same command again to resume; not merged")
+        return 0
+    command = " ".join(["raplas-hdl stress campaign", "--formats", args.campaign_formats,
+                        "--roundings", args.roundings]
+                       + (["--families", args.families] if args.families else [])
+                       + ["--rays-per-family", str(args.rays_per_family),
+                          "--shard-rays", str(args.shard_rays), "--bundles", str(args.bundles),
+                          "--shard-bundles", str(args.shard_bundles),
+                          "--spheres", str(args.spheres),
+                          "--campaign-seed", str(args.campaign_seed),
+                          "--out-dir", args.out_dir]
+                       + (["--jobs", str(args.jobs)] if args.jobs else []))
+    doc = campaign.merge(params, args.out_dir, command,
+                         {"wall_s": time.perf_counter() - t0, "shards_run": info["run"],
+                          "shards_reused": info["reused"]})
+    campaign.write_outputs(doc, args.results, args.report)
+    tot, g = doc["totals"], doc["guarantees"]
+    print(f"{tot['cases']:,} cases ({tot['raytri_pairs']:,} ray-triangle pairs x 2 modes, "
+          f"{tot['sphere_tests']:,} culling sphere tests); CPU {doc['cpu_s']:.0f} s")
+    print(f"in-domain culling false rejections {g['culling_false_rejections']}; conservative "
+          f"false misses {g['conservative_false_misses']}, leaks {g['conservative_leaks']}")
+    print(f"written {args.results} and {args.report}")
+    if not g["ok"]:
+        print("GUARANTEE VIOLATED (see the report)")
+        return 1
+    return 0
+
+
 def run(args) -> int:
+    if args.target == "campaign":
+        return run_campaign(args)
     from ..fp import parse_format
     from ..host import stress
 

@@ -121,11 +121,11 @@ def float64_intersect(o, d, v0, v1, v2) -> dict:
     """
     o, d, v0, v1, v2 = (np.asarray(x, dtype=np.float64) for x in (o, d, v0, v1, v2))
     e1, e2 = v1 - v0, v2 - v0
-    n = np.cross(e1, e2)
+    n = _cross(e1, e2)           # the same products as np.cross, without its overhead
     t = v0 - o
     det = _dot(n, d)
     tp = _dot(n, t)
-    q = np.cross(d, t)
+    q = _cross(d, t)
     up = -_dot(q, e2)
     vp = _dot(q, e1)
     s = up + vp
