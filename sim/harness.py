@@ -439,7 +439,7 @@ def _sources(spec: HarnessSpec, dut_verilog: str) -> str:
 def run_batch(simulator: str, spec: HarnessSpec, dut_verilog: str, build_key: str,
               columns: dict, valid_density: float = 1.0, stall_density: float = 0.0,
               seed: int = 1, n_out: int | None = None, timeout_s: float | None = None,
-              workdir=None, ext_clk: bool = False) -> tuple[dict, dict]:
+              workdir=None, ext_clk: bool = False, build_args=()) -> tuple[dict, dict]:
     """Run ``columns`` through the batch harness at full clock rate.
 
     Parameters
@@ -464,6 +464,8 @@ def run_batch(simulator: str, spec: HarnessSpec, dut_verilog: str, build_key: st
         Where the stimulus and result files go (default: a temporary directory).
     ext_clk : bool
         Clock and reset from cocotb (a GPI call per edge) instead of the harness.
+    build_args : sequence of str
+        Extra simulator build options (:func:`sim.runner.run_cocotb`).
 
     Returns
     -------
@@ -488,7 +490,7 @@ def run_batch(simulator: str, spec: HarnessSpec, dut_verilog: str, build_key: st
         res = run_cocotb(simulator, _sources(spec, dut_verilog), spec.toplevel, TB_MODULE,
                          build_key, env=env,
                          plusargs=plus, timeout_s=timeout_s, testcase="test_batch",
-                         public_all=False)
+                         public_all=False, build_args=build_args)
         outputs = read_results(vout, spec)
         cycles = json.loads(stats.read_text())["cycles"]
     got = len(outputs[spec.outputs[0].name])

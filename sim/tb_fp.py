@@ -187,8 +187,14 @@ def fp_spec(op: str, fmt) -> HarnessSpec:
                        en="en")
 
 
-def fp_verilog(op: str, fmt, stages: int | None = None) -> tuple[str, int]:
-    """``(verilog text, latency)`` of the FP unit, module named ``fp_add``/``fp_mul``."""
+def fp_verilog(op: str, fmt, stages: int | None = None, multiplier: str = "generic"
+               ) -> tuple[str, int]:
+    """``(verilog text, latency)`` of the FP unit, module named ``fp_add``/``fp_mul``.
+
+    ``multiplier`` (``fp-mul`` only; ignored by the adder) picks the significand multiplier;
+    with ``"virtex4"`` the text instantiates ``DSP48`` and a simulation needs
+    :func:`raplas_hdl.rtl.dsp48.dsp48_sim_model` appended (once per design).
+    """
     from raplas_hdl.rtl.emit import emit_verilog
 
     if op == "fp-add":
@@ -197,9 +203,14 @@ def fp_verilog(op: str, fmt, stages: int | None = None) -> tuple[str, int]:
         from raplas_hdl.rtl.fp_mul import FPMul as cls
     else:
         raise ValueError(f"op must be one of {', '.join(FP_OPS)}, not {op!r}")
-    comp = cls(fmt) if stages is None else cls(fmt, stages=stages)
+    kw = {} if stages is None else {"stages": stages}
+    if op == "fp-mul" and multiplier != "generic":
+        kw["multiplier"] = multiplier
+    comp = cls(fmt, **kw)
     params = {"exp_bits": fmt.exp_bits, "man_bits": fmt.man_bits, "rounding": fmt.rounding,
               "stages": stages if stages is not None else "default"}
+    if "multiplier" in kw:
+        params["multiplier"] = multiplier
     text, _ = emit_verilog(comp, op.replace("-", "_"), params)
     return text, comp.latency
 
@@ -309,7 +320,7 @@ def format_mismatches(res: dict, a, b, sub=None, limit: int = 5) -> str:
 
 
 def fp_bundle(exp_bits: int, man_bits: int, roundings=("rtz", "rne", "chop"),
-              ops=FP_OPS) -> tuple[HarnessSpec, str, dict]:
+              ops=FP_OPS, multipliers=("generic",)) -> tuple[HarnessSpec, str, dict]:
     """One DUT holding every (op, rounding) unit of a format, fed the same operands.
 
     Lets one simulator build (and one batch run) check all roundings of both units: the
@@ -318,24 +329,31 @@ def fp_bundle(exp_bits: int, man_bits: int, roundings=("rtz", "rne", "chop"),
     ``valids`` (one ``o_valid`` per unit, all 1 on every beat when the units agree on
     timing). Shorter units are delayed (on enabled edges) to the longest latency.
 
+    ``multipliers`` lists the multiplier targets to build (each rounding once per target);
+    the generic units keep the suffix ``mul_<rounding>``, the others get
+    ``mul_<rounding>_<target>``. With ``"virtex4"`` (``DSP48`` primitives) Yosys's ``DSP48``
+    simulation model (:func:`raplas_hdl.rtl.dsp48.dsp48_sim_model`) is appended to the
+    text. As every unit is delayed to the longest *stated* latency, ``valids`` all 1 on every
+    beat (checked by :func:`check_bundle`) shows that the targets' ``latency`` values are
+    true, stalls included.
+
     Returns ``(spec, verilog, units)`` with ``units = {output suffix: (op, FPFormat)}``.
     """
     from raplas_hdl.fp import FPFormat
 
+    if isinstance(multipliers, str):
+        multipliers = (multipliers,)
     units, texts, lat = {}, [], {}
     for op in ops:
         for r in roundings:
-            fmt = FPFormat(exp_bits, man_bits, r)
-            text, latency = fp_verilog(op, fmt)
-            suffix = f"{op.split('-')[1]}_{r}"
-            name = f"fp_{suffix}"
-            # rename the unit's modules (top and escaped submodules) to be unique
-            base = op.replace("-", "_")
-            text = re.sub(rf"(?m)^module {base}\(", f"module {name}(", text)
-            text = text.replace(f"\\{base}.", f"\\{name}.")
-            texts.append(text)
-            units[suffix] = (op, fmt)
-            lat[suffix] = latency
+            for target in (multipliers if op == "fp-mul" else ("generic",)):
+                fmt = FPFormat(exp_bits, man_bits, r)
+                text, latency = fp_verilog(op, fmt, multiplier=target)
+                suffix = f"{op.split('-')[1]}_{r}" + ("" if target == "generic" else
+                                                      f"_{target}")
+                units[suffix] = (op, fmt)
+                lat[suffix] = latency
+                texts.append(_rename_unit(text, op, suffix))
     w = 1 + exp_bits + man_bits
     top = max(lat.values())
     n = len(units)
@@ -381,7 +399,19 @@ def fp_bundle(exp_bits: int, man_bits: int, roundings=("rtz", "rne", "chop"),
     if "fp-add" not in ops:
         lines = [ln.replace(", input wire sub", "") for ln in lines]
     spec = HarnessSpec(dut="fp_bundle", inputs=ins, outputs=outputs, en="en")
+    if "fp-mul" in ops and set(multipliers) - {"generic"}:
+        from raplas_hdl.rtl.dsp48 import dsp48_sim_model
+
+        texts.append(dsp48_sim_model())
     return spec, "\n\n".join(texts) + "\n\n" + "\n".join(lines) + "\n", units
+
+
+def _rename_unit(text: str, op: str, suffix: str) -> str:
+    """Rename a unit's modules (top and escaped submodules) to ``fp_<suffix>``."""
+    base = op.replace("-", "_")
+    name = f"fp_{suffix}"
+    text = re.sub(rf"(?m)^module {base}\(", f"module {name}(", text)
+    return text.replace(f"\\{base}.", f"\\{name}.")
 
 
 def check_bundle(units: dict, outputs: dict, a, b, sub=None) -> list[str]:
@@ -402,7 +432,8 @@ def check_bundle(units: dict, outputs: dict, a, b, sub=None) -> list[str]:
         bad = np.flatnonzero((got != eb) | (gf != ef))
         if bad.size:
             first = bad[:3]
-            msgs.append(f"{op} {fmt.name}: {bad.size} of {n} mismatch; first: " + "; ".join(
+            tag = "" if suffix.endswith(fmt.rounding) else f" ({suffix.rsplit('_', 1)[1]})"
+            msgs.append(f"{op} {fmt.name}{tag}: {bad.size} of {n} mismatch; first: " + "; ".join(
                 f"a={int(a[i]):x} b={int(b[i]):x}"
                 + (f" sub={int(sub[i])}" if sub is not None and op == "fp-add" else "")
                 + f" expected {int(eb[i]):x}/{int(ef[i])} got {int(got[i]):x}/{int(gf[i])}"

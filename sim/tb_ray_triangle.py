@@ -8,12 +8,17 @@ hexadecimal line per pair, and names the files in environment variables:
 ``RAPLAS_RT_IDLE``   probability of a gap (``i.valid`` low) in a cycle;
 ``RAPLAS_RT_STALL``  probability that ``o.ready`` is low in a cycle (back-pressure);
 ``RAPLAS_RT_SEED``   seed of both inserters.
+``RAPLAS_RT_LATENCY_OUT`` (optional) where ``test_latency`` writes the latency it measured.
 
 :class:`RayTriangleTB` drives and monitors every cycle: it sets its inputs at the falling
 edge, samples the handshakes in the read-only phase before the rising edge, and counts a
 transfer when ``valid`` and ``ready`` were both high there. The TB compares nothing with
 a model; it checks only that the unit never offers more results than it took pairs, and
 the pytest side compares every bit in bulk.
+
+``test_latency`` then sends the first pair alone into the empty unit with ``o.ready`` high
+and counts the clock edges from the one that accepts it to the one that takes its result
+(the unit's ``latency``).
 """
 
 from __future__ import annotations
@@ -117,3 +122,34 @@ async def test_stream(dut):
     got, cycles = await tb.run(payloads)
     write_payloads(os.environ["RAPLAS_RT_OUT"], got)
     dut._log.info("%d pairs in %d cycles", len(got), cycles)
+
+
+@cocotb.test()
+async def test_latency(dut):
+    """Edges from accepting one pair (empty unit, ``o.ready`` high) to taking its result."""
+    payloads = read_payloads(os.environ["RAPLAS_RT_IN"])
+    tb = RayTriangleTB(dut)
+    await tb.reset()
+    dut.o__ready.value = 1
+    dut.i__valid.value = 1
+    dut.i__payload.value = payloads[0]
+    await ReadOnly()
+    assert int(dut.i__ready.value), "an empty unit must take a pair"
+    await RisingEdge(dut.clk)             # the accepting edge
+    await FallingEdge(dut.clk)
+    dut.i__valid.value = 0
+    edges = 0
+    while True:
+        await ReadOnly()
+        if int(dut.o__valid.value):
+            break                         # taken at the next edge
+        if edges > 1000:
+            raise AssertionError("no result within 1000 cycles")
+        await RisingEdge(dut.clk)
+        await FallingEdge(dut.clk)
+        edges += 1
+    latency = edges + 1
+    dut._log.info("latency %d cycles", latency)
+    if os.environ.get("RAPLAS_RT_LATENCY_OUT"):
+        with open(os.environ["RAPLAS_RT_LATENCY_OUT"], "w") as fh:
+            fh.write(f"{latency}\n")

@@ -15,7 +15,8 @@ import sys
 from .. import __version__
 
 #: Subcommand modules, in the order ``--help`` lists them.
-SUBCOMMANDS = ("demo", "verilog", "cosim", "render", "bench", "stress", "synth")
+SUBCOMMANDS = ("demo", "verilog", "cosim", "render", "bench", "stress", "synth",
+               "constraints")
 
 
 def _load(name):

@@ -62,6 +62,8 @@ def run(args) -> int:
     unit, comp, opts = build_unit(args.unit, fmt, **options)
     params = {"exp_bits": fmt.exp_bits, "man_bits": fmt.man_bits, "rounding": fmt.rounding,
               **opts}
+    if "target" in unit.options:   # the manifest always says which multiplier was built
+        params.setdefault("target", unit.options["target"][1])
     vpath, mpath = write_unit(comp, unit.module, params, args.output)
     print(f"wrote {vpath} ({unit.module}, latency {getattr(comp, 'latency', 'n/a')}) "
           f"and {mpath}", file=sys.stderr)

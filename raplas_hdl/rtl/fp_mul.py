@@ -33,6 +33,25 @@ depth) gives:
 3. ``normalise`` + ``round`` + ``pack``: the result and its flags, on the output registers.
 
 ``stages`` can be anything from 1 (all five steps in one clock) to 5 (one step each).
+
+**Multiplier target.** ``multiplier="generic"`` (the default) is the above: the multiply
+is :class:`SigMul`, an inferred ``a * b``. ``multiplier="virtex4"`` replaces it with
+:class:`~.dsp48.DSP48Mul`, Virtex-4 ``DSP48`` primitives with their own pipeline registers
+in use, and re-plans the pipeline around it:
+
+1. ``unpack`` feeds the DSP48's operand registers (``AREG``/``BREG``) directly; the
+   fields that ride beside the product (sign, exponent, specials) and the valid bit go
+   into fabric registers that stay level with the DSP48;
+2. ``multiply``: the product register (``MREG``);
+3. the DSP48's output register (``PREG``); at FP32 (24-bit significands, four DSP48) one
+   more stage adds the limb products (:func:`.dsp48.multiplier_latency`);
+4. ``normalise``, ``round``, ``pack`` with the registers that the generic plan of the same
+   ``stages`` puts behind the multiply (at least the output register).
+
+So ``latency = multiplier_latency(M+1) + (registers behind the multiply)``: 4 at FP24 with
+the default ``stages=3`` (the generic unit's 3, plus ``PREG``), 5 at FP32;
+:func:`fp_mul_latency` gives it without building the unit. Every DSP48 register has its
+clock enable on ``en``, so a stall holds the whole unit as in the generic one.
 """
 
 from __future__ import annotations
@@ -41,15 +60,54 @@ from amaranth.hdl import Module, Mux
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
+from .dsp48 import LIMB, DSP48Mul, multiplier_latency
 from .fp_common import check_format, pack, round_significand, unpack
-from .pipeline import Step, build_pipeline, group_steps, place_registers
+from .pipeline import Step, build_pipeline, delay, group_steps, place_registers
 
-__all__ = ["FPMul", "SigMul"]
+__all__ = ["FPMul", "SigMul", "MULTIPLIERS", "fp_mul_latency"]
+
+#: Significand-multiplier targets of :class:`FPMul`.
+MULTIPLIERS = ("generic", "virtex4")
 
 #: (name, weight) of each combinational step, in datapath order.
 MUL_STEPS = (("unpack", 2), ("multiply", 5), ("normalise", 2), ("round", 2), ("pack", 1))
 
 _CARRIED = ("sign", "exp", "nan", "invalid", "inf", "zero")
+
+#: Index of the ``multiply`` step in :data:`MUL_STEPS`.
+_MULTIPLY = 1
+
+
+def check_multiplier(multiplier) -> str:
+    """Return ``multiplier`` if it is a known target, else raise ``ValueError``."""
+    if multiplier not in MULTIPLIERS:
+        raise ValueError(f"multiplier must be one of {', '.join(MULTIPLIERS)}, "
+                         f"not {multiplier!r}")
+    return multiplier
+
+
+def _plan(fmt, stages, multiplier):
+    """``(generic registered steps, latency)`` of an :class:`FPMul`."""
+    registered = place_registers([w for _, w in MUL_STEPS], stages)
+    if check_multiplier(multiplier) == "generic":
+        return registered, stages
+    width = fmt.man_bits + 1
+    if width > 2 * LIMB:
+        raise ValueError(f"multiplier='virtex4' handles significands of up to {2 * LIMB} "
+                         f"bits, not {width} (man_bits={fmt.man_bits})")
+    behind = sum(1 for i in registered if i > _MULTIPLY)
+    return registered, multiplier_latency(width) + behind
+
+
+def fp_mul_latency(fmt, stages: int = 3, multiplier: str = "generic") -> int:
+    """Latency of ``FPMul(fmt, stages, multiplier)``, without building it.
+
+    Raises
+    ------
+    ValueError
+        As :class:`FPMul` does.
+    """
+    return _plan(check_format(fmt), stages, multiplier)[1]
 
 
 class SigMul(wiring.Component):
@@ -92,7 +150,12 @@ class FPMul(wiring.Component):
     fmt : FPFormat
         Format and rounding (``rtz``, ``rne`` or ``chop``, which equals ``rtz`` here).
     stages : int
-        Pipeline depth, 1 to 5 (default 3, as in the paper).
+        Pipeline depth, 1 to 5 (default 3, as in the paper). With ``multiplier="virtex4"``
+        it places the registers behind the multiply as in the generic unit (module
+        docstring).
+    multiplier : {"generic", "virtex4"}
+        The significand multiply: an inferred ``a * b`` (:class:`SigMul`), or Virtex-4
+        ``DSP48`` primitives with AREG/BREG/MREG/PREG (:class:`~.dsp48.DSP48Mul`).
 
     Attributes
     ----------
@@ -108,19 +171,25 @@ class FPMul(wiring.Component):
         Event flags of the result: ``FLAG_OVERFLOW``, ``FLAG_UNDERFLOW``, ``FLAG_INVALID``.
     o_valid : Out(1)
         ``o`` and ``flags`` belong to an operation.
+    latency : int
+        ``stages`` (generic); ``multiplier_latency(M+1)`` plus the registers behind the
+        multiply (virtex4: 4 at FP24 with ``stages=3``).
 
     Raises
     ------
     ValueError
-        If ``fmt`` is not an :class:`FPFormat` or ``stages`` is out of range.
+        If ``fmt`` is not an :class:`FPFormat`, ``stages`` is out of range or
+        ``multiplier`` is not a known target (or, for ``virtex4``, the significand is wider
+        than 34 bits).
     """
 
-    def __init__(self, fmt, stages: int = 3):
+    def __init__(self, fmt, stages: int = 3, multiplier: str = "generic"):
         self._fmt = check_format(fmt)
         self._steps = tuple(Step(name, getattr(self, f"_step_{name}"), weight)
                             for name, weight in MUL_STEPS)
-        self._registered = place_registers([s.weight for s in self._steps], stages)
+        self._registered, self._latency = _plan(fmt, stages, multiplier)
         self._stages = stages
+        self._multiplier = multiplier
         w = fmt.width
         super().__init__({
             "a": In(w), "b": In(w), "i_valid": In(1), "en": In(1),
@@ -136,14 +205,27 @@ class FPMul(wiring.Component):
         return self._stages
 
     @property
+    def multiplier(self) -> str:
+        return self._multiplier
+
+    @property
     def latency(self) -> int:
-        """Enabled clock edges from an input to its result (equal to ``stages``)."""
-        return self._stages
+        """Enabled clock edges from an input to its result (``stages`` for the generic
+        multiplier; see the module docstring for ``virtex4``)."""
+        return self._latency
 
     @property
     def stage_steps(self) -> tuple[tuple[str, ...], ...]:
-        """The names of the combinational steps in each pipeline stage."""
-        return group_steps(self._steps, self._registered)
+        """The names of the combinational steps in each pipeline stage.
+
+        With ``virtex4`` the DSP48's stages appear as ``("unpack",)`` (into ``AREG``/``BREG``),
+        then ``("multiply",)`` for ``MREG``, ``PREG`` and, for four DSP48, the limb sum."""
+        if self._multiplier == "generic":
+            return group_steps(self._steps, self._registered)
+        post = [i - _MULTIPLY - 1 for i in self._registered if i > _MULTIPLY]
+        lat_m = multiplier_latency(self._fmt.man_bits + 1)
+        return ((("unpack",),) + (("multiply",),) * (lat_m - 1)
+                + group_steps(self._steps[_MULTIPLY + 1:], post))
 
     # -- combinational steps -----------------------------------------------------------
     def _step_unpack(self, m, v):
@@ -186,8 +268,26 @@ class FPMul(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        out, valid = build_pipeline(m, self._steps, {"a": self.a, "b": self.b},
-                                    self._registered, en=self.en, valid=self.i_valid)
+        if self._multiplier == "generic":
+            out, valid = build_pipeline(m, self._steps, {"a": self.a, "b": self.b},
+                                        self._registered, en=self.en, valid=self.i_valid)
+        else:
+            out, valid = self._virtex4_pipeline(m)
         m.d.comb += [self.o.eq(out["bits"]), self.flags.eq(out["flags"]),
                      self.o_valid.eq(valid)]
         return m
+
+    def _virtex4_pipeline(self, m):
+        """``unpack`` -> DSP48 (AREG/BREG, MREG, PREG) -> the steps behind the multiply."""
+        en = self.en
+        # unpack, combinational, straight into the DSP48's operand registers
+        v, valid = build_pipeline(m, self._steps[:_MULTIPLY], {"a": self.a, "b": self.b},
+                                  (), en=en, valid=self.i_valid)
+        m.submodules.multiply = dsp = DSP48Mul(self._fmt.man_bits + 1)
+        m.d.comb += [dsp.a.eq(v["sig_a"]), dsp.b.eq(v["sig_b"]), dsp.en.eq(en)]
+        lat = dsp.latency
+        carried = {k: delay(m, v[k], lat, en=en, name=f"{k}_dly") for k in _CARRIED}
+        valid = delay(m, valid, lat, en=en, name="valid_dly", reset_less=False)
+        post = [i - _MULTIPLY - 1 for i in self._registered if i > _MULTIPLY]
+        return build_pipeline(m, self._steps[_MULTIPLY + 1:], {**carried, "prod": dsp.p},
+                              post, en=en, valid=valid)

@@ -95,6 +95,11 @@ class IntersectionUnit(wiring.Component):
     ----------
     config : UnitConfig, optional
         Build parameters; alternatively pass them as keywords (``rows=4, cols=4, ...``).
+    multiplier : {"generic", "virtex4"}
+        Significand multiplier of every :class:`~raplas_hdl.rtl.fp_mul.FPMul` in the
+        plane-sphere array and the ray-triangle unit (``virtex4``: Virtex-4 ``DSP48``
+        primitives, one cycle more per multiplier). An implementation choice only: the
+        results, and so the golden model, do not depend on it.
 
     Members
     -------
@@ -125,7 +130,11 @@ class IntersectionUnit(wiring.Component):
         On out-of-range parameters (see :class:`UnitConfig`).
     """
 
-    def __init__(self, config: UnitConfig | None = None, **params):
+    def __init__(self, config: UnitConfig | None = None, *, multiplier: str = "generic",
+                 **params):
+        from .fp_mul import check_multiplier
+
+        self._multiplier = check_multiplier(multiplier)
         if config is None:
             config = UnitConfig(**params)
         elif params:
@@ -153,6 +162,10 @@ class IntersectionUnit(wiring.Component):
         return self._cfg
 
     @property
+    def multiplier(self) -> str:
+        return self._multiplier
+
+    @property
     def latency(self):
         """None: the unit's delay depends on the scene (see the stage list)."""
         return None
@@ -164,9 +177,11 @@ class IntersectionUnit(wiring.Component):
 
         cfg = self._cfg
         psa = PlaneSphereArray(cfg.fmt, rows=cfg.rows, cols=cfg.cols, testers=cfg.n_testers,
-                               sphere_id_bits=cfg.sphere_id_bits + 2)
+                               sphere_id_bits=cfg.sphere_id_bits + 2,
+                               multiplier=self._multiplier)
         rtu = RayTriangleUnit(cfg.fmt, mode=cfg.mode, margin_scale=cfg.margin_scale,
-                              ray_id_bits=cfg.ray_id_bits + 1, tri_id_bits=cfg.tri_id_bits)
+                              ray_id_bits=cfg.ray_id_bits + 1, tri_id_bits=cfg.tri_id_bits,
+                              multiplier=self._multiplier)
         return psa, rtu
 
     def elaborate(self, platform):
@@ -520,8 +535,10 @@ class IntersectionUnit(wiring.Component):
         return m
 
 
-def build_intersection_unit(fmt=None, **params) -> IntersectionUnit:
-    """Builder for ``raplas-hdl verilog intersection-unit`` (keywords of :class:`UnitConfig`)."""
+def build_intersection_unit(fmt=None, multiplier: str = "generic", **params
+                            ) -> IntersectionUnit:
+    """Builder for ``raplas-hdl verilog intersection-unit`` (keywords of :class:`UnitConfig`,
+    and ``multiplier``)."""
     if fmt is not None:
         params["fmt"] = fmt
-    return IntersectionUnit(UnitConfig(**params))
+    return IntersectionUnit(UnitConfig(**params), multiplier=multiplier)

@@ -3,7 +3,8 @@
 :class:`PlaneSphereTester` computes ``d = n . C + p`` for one sphere per clock and flags
 whether the sphere may touch the plane: ``flag = NOT(|d| > r')`` (a NaN keeps the
 sphere). Its stages, with the default FP units (multiplier 3, adder 4 stages), 12 in all
-as in the paper:
+as in the paper (13 with ``multiplier="virtex4"``, whose multipliers take 4 cycles at FP24:
+the stage numbers below then shift by one after the products):
 
 1. stages 1-3, three :class:`~.fp_mul.FPMul`: ``mx = n.x*C.x``, ``my = n.y*C.y``,
    ``mz = n.z*C.z``; the plane comes from the tester's plane registers (slot ``sel``);
@@ -52,7 +53,7 @@ from amaranth.lib.wiring import In, Out
 from ..fp import FP24
 from .fp_add import FPAdd
 from .fp_common import check_format
-from .fp_mul import FPMul
+from .fp_mul import FPMul, check_multiplier, fp_mul_latency
 from .pipeline import delay
 
 __all__ = ["PlaneSphereTester", "PlaneSphereArray", "build_plane_sphere", "plane_layout",
@@ -120,6 +121,9 @@ class PlaneSphereTester(wiring.Component):
         one per pass when it time-shares).
     mul_stages, add_stages : int
         Depths of the FP units (defaults 3 and 4: latency 12).
+    multiplier : {"generic", "virtex4"}
+        Significand multiplier of the three :class:`~.fp_mul.FPMul` (``virtex4``: DSP48
+        primitives, one cycle more at FP24).
 
     Attributes
     ----------
@@ -141,15 +145,17 @@ class PlaneSphereTester(wiring.Component):
         ``NOT(|d| > r')``: 1 keeps the sphere.
     o_valid : Out(1)
     latency : int
-        ``mul_stages + 2*add_stages + 1`` (12 by default).
+        ``Lm + 2*add_stages + 1`` with ``Lm`` the multiplier's latency (12 by default, 13
+        with ``multiplier="virtex4"`` at FP24).
 
     Raises
     ------
     ValueError
-        For a bad format or a slot count below 1.
+        For a bad format, a slot count below 1 or an unknown multiplier.
     """
 
-    def __init__(self, fmt=FP24, planes: int = 1, mul_stages: int = 3, add_stages: int = 4):
+    def __init__(self, fmt=FP24, planes: int = 1, mul_stages: int = 3, add_stages: int = 4,
+                 multiplier: str = "generic"):
         self._fmt = check_format(fmt)
         _check_int("planes", planes, 1)
         self._planes = planes
@@ -157,6 +163,8 @@ class PlaneSphereTester(wiring.Component):
         _check_int("add_stages", add_stages, 1)
         self._mul_stages = mul_stages
         self._add_stages = add_stages
+        self._multiplier = check_multiplier(multiplier)
+        self._mul_latency = fp_mul_latency(fmt, mul_stages, multiplier)
         w = fmt.width
         super().__init__({
             "pw_en": In(1), "pw_addr": In(range(planes)), "pw_data": In(plane_layout(fmt)),
@@ -174,15 +182,19 @@ class PlaneSphereTester(wiring.Component):
         return self._planes
 
     @property
+    def multiplier(self) -> str:
+        return self._multiplier
+
+    @property
     def latency(self) -> int:
         """Enabled clock edges from a sphere to its flag."""
-        return self._mul_stages + 2 * self._add_stages + 1
+        return self._mul_latency + 2 * self._add_stages + 1
 
     def elaborate(self, platform):
         m = Module()
         fmt = self._fmt
-        # The FP units' latencies equal their stage counts.
-        mul_x, mul_y, mul_z = muls = [FPMul(fmt, self._mul_stages) for _ in range(3)]
+        mul_x, mul_y, mul_z = muls = [FPMul(fmt, self._mul_stages, self._multiplier)
+                                      for _ in range(3)]
         add_s1, add_s2, add_d = [FPAdd(fmt, self._add_stages) for _ in range(3)]
         for i, u in enumerate(muls):
             m.submodules[f"mul_{'xyz'[i]}"] = u
@@ -249,6 +261,8 @@ class PlaneSphereArray(wiring.Component):
         Width of the sphere ID carried through (default 16).
     mul_stages, add_stages : int
         Depths of the FP units in each tester.
+    multiplier : {"generic", "virtex4"}
+        Significand multiplier of the testers' :class:`~.fp_mul.FPMul`.
 
     Attributes
     ----------
@@ -279,7 +293,8 @@ class PlaneSphereArray(wiring.Component):
     """
 
     def __init__(self, fmt=FP24, *, rows: int, cols: int, testers: int | None = None,
-                 sphere_id_bits: int = 16, mul_stages: int = 3, add_stages: int = 4):
+                 sphere_id_bits: int = 16, mul_stages: int = 3, add_stages: int = 4,
+                 multiplier: str = "generic"):
         self._fmt = check_format(fmt)
         _check_int("rows", rows, 1)
         _check_int("cols", cols, 1)
@@ -294,10 +309,11 @@ class PlaneSphereArray(wiring.Component):
         self._id_bits = sphere_id_bits
         # The testers' parameters: the array builds its testers in elaborate, so that an
         # array that is never elaborated leaves no unused elaboratables behind.
-        self._tester_args = (fmt, self._passes, mul_stages, add_stages)
+        self._tester_args = (fmt, self._passes, mul_stages, add_stages, multiplier)
         _check_int("mul_stages", mul_stages, 1)
         _check_int("add_stages", add_stages, 1)
-        self._tester_latency = mul_stages + 2 * add_stages + 1
+        self._multiplier = check_multiplier(multiplier)
+        self._tester_latency = fp_mul_latency(fmt, mul_stages, multiplier) + 2 * add_stages + 1
         self._fifo_depth = self.latency + 2
         super().__init__({
             "pw_en": In(1), "pw_addr": In(range(self._n_planes)),
@@ -331,6 +347,10 @@ class PlaneSphereArray(wiring.Component):
     @property
     def tester_latency(self) -> int:
         return self._tester_latency
+
+    @property
+    def multiplier(self) -> str:
+        return self._multiplier
 
     @property
     def latency(self) -> int:

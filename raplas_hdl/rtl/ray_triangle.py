@@ -20,7 +20,8 @@ mode, which adds ``w = det - s``. With adder latency ``La`` and multiplier laten
 9. the output register is written into the output FIFO; ``o`` shows the FIFO's head.
 
 ``latency`` (``D + 2``: 28 for the defaults in paper mode, 32 in conservative mode; the
-paper's unit has 29 stages) is the number of clock edges from the one that accepts a pair
+paper's unit has 29 stages; with ``multiplier="virtex4"`` ``Lm`` is 4 at FP24, so 30 and
+34) is the number of clock edges from the one that accepts a pair
 on ``i`` to the one that can take its result from ``o``, with an empty FIFO.
 
 Back-pressure: the pipeline never stalls (its clock enable is tied high). Every accepted
@@ -42,7 +43,7 @@ from amaranth.lib.wiring import In, Out
 from ..fp.format import FLAG_OVERFLOW, FPFormat
 from ..model.conservative import MARGIN_NAMES, margin_constants
 from .fp_add import FPAdd
-from .fp_mul import FPMul
+from .fp_mul import FPMul, check_multiplier, fp_mul_latency
 from .pipeline import delay
 
 __all__ = ["RayTriangleUnit", "vec3_layout", "input_layout", "output_layout", "MODES"]
@@ -94,6 +95,9 @@ class RayTriangleUnit(wiring.Component):
         Widths of the IDs carried with each pair.
     add_stages, mul_stages : int
         Depths of the FP adders (default 4) and multipliers (default 3).
+    multiplier : {"generic", "virtex4"}
+        Significand multiplier of the 18 :class:`~.fp_mul.FPMul` (``virtex4``: one DSP48
+        each at FP24 and one cycle more, so ``latency`` grows by 2).
 
     Attributes
     ----------
@@ -106,12 +110,12 @@ class RayTriangleUnit(wiring.Component):
     Raises
     ------
     ValueError
-        For a bad format, mode, scale or ID width.
+        For a bad format, mode, scale, ID width or multiplier.
     """
 
     def __init__(self, fmt, *, mode: str = "paper", margin_scale: float = 1,
                  ray_id_bits: int = 16, tri_id_bits: int = 16, add_stages: int = 4,
-                 mul_stages: int = 3):
+                 mul_stages: int = 3, multiplier: str = "generic"):
         if not isinstance(fmt, FPFormat):
             raise ValueError(f"fmt must be an FPFormat, not {fmt!r}")
         if mode not in MODES:
@@ -130,9 +134,10 @@ class RayTriangleUnit(wiring.Component):
                 raise ValueError(f"{name} must be a positive integer, not {st!r}")
         self._add_stages = add_stages
         self._mul_stages = mul_stages
-        # the FP units' latency equals their stage count (checked in elaborate)
+        self._multiplier = check_multiplier(multiplier)
+        # the FP units' latencies (checked against the built units in elaborate)
         self._la = add_stages
-        self._lm = mul_stages
+        self._lm = fp_mul_latency(fmt, mul_stages, multiplier)
         super().__init__({
             "i": In(stream.Signature(input_layout(fmt, ray_id_bits, tri_id_bits))),
             "o": Out(stream.Signature(output_layout(fmt, ray_id_bits, tri_id_bits))),
@@ -149,6 +154,10 @@ class RayTriangleUnit(wiring.Component):
     @property
     def margin_scale(self) -> float:
         return self._margin_scale
+
+    @property
+    def multiplier(self) -> str:
+        return self._multiplier
 
     @property
     def decision_cycle(self) -> int:
@@ -181,7 +190,7 @@ class RayTriangleUnit(wiring.Component):
     def _op(self, m, kind, a: _Timed, b: _Timed, sub=False):
         t = max(a.time, b.time)
         if kind == "mul":
-            unit = FPMul(self._fmt, self._mul_stages)
+            unit = FPMul(self._fmt, self._mul_stages, self._multiplier)
         else:
             unit = FPAdd(self._fmt, self._add_stages)
         self._n_ops += 1
@@ -191,7 +200,7 @@ class RayTriangleUnit(wiring.Component):
         if kind != "mul":
             m.d.comb += unit.sub.eq(int(sub))
         if unit.latency != (self._lm if kind == "mul" else self._la):
-            raise AssertionError(f"{kind} latency {unit.latency} differs from its stages")
+            raise AssertionError(f"{kind} latency {unit.latency} differs from the schedule's")
         out = _Timed(unit.o, t + unit.latency)
         self._flag_taps.append((unit.flags, out.time))
         return out

@@ -3,6 +3,10 @@
 Each entry builds a component from keyword parameters; the format arrives as an
 :class:`~raplas_hdl.fp.FPFormat`. Builders import their unit lazily, so emitting one unit
 never needs the others' modules.
+
+The option ``target`` (``generic`` or ``virtex4``, every unit with an FP multiplier) reaches
+the builder as its ``multiplier`` keyword: ``virtex4`` builds the significand multiplies
+from Virtex-4 ``DSP48`` primitives (:mod:`raplas_hdl.rtl.dsp48`).
 """
 
 from __future__ import annotations
@@ -13,7 +17,17 @@ from pathlib import Path
 
 from ..fp import FP24, FPFormat
 
-__all__ = ["Unit", "UNITS", "build_unit", "emit_all"]
+__all__ = ["Unit", "UNITS", "build_unit", "emit_all", "TARGET_OPTION"]
+
+#: The ``target`` option of the units with FP multipliers (``--target`` on the CLI).
+TARGET_OPTION = {"target": (str, "generic", "multiplier target: generic | virtex4 "
+                                            "(DSP48 primitives)")}
+
+#: Values of the ``target`` option (the ``multiplier`` of :class:`~.fp_mul.FPMul`).
+TARGETS = ("generic", "virtex4")
+
+#: Options whose builder keyword has another name.
+_KEYWORDS = {"target": "multiplier"}
 
 
 @dataclass(frozen=True)
@@ -27,34 +41,49 @@ class Unit:
     def build(self, fmt: FPFormat, **options):
         modname, _, attr = self.builder.partition(":")
         factory = getattr(importlib.import_module(modname), attr)
-        return factory(fmt, **options)
+        return factory(fmt, **{_KEYWORDS.get(k, k): v for k, v in options.items()})
 
 
 UNITS = {u.name: u for u in [
     Unit("fp-add", "fp_add", "pipelined FP adder/subtractor",
          "raplas_hdl.rtl.fp_add:FPAdd", {"stages": (int, 4, "pipeline stages")}),
     Unit("fp-mul", "fp_mul", "pipelined FP multiplier (one (M+1)x(M+1) multiply)",
-         "raplas_hdl.rtl.fp_mul:FPMul", {"stages": (int, 3, "pipeline stages")}),
+         "raplas_hdl.rtl.fp_mul:FPMul", {"stages": (int, 3, "pipeline stages"),
+                                         **TARGET_OPTION}),
     Unit("plane-sphere-tester", "plane_sphere_tester", "one plane-sphere tester",
-         "raplas_hdl.rtl.plane_sphere:PlaneSphereTester", {}),
+         "raplas_hdl.rtl.plane_sphere:PlaneSphereTester", {**TARGET_OPTION}),
     Unit("plane-sphere", "plane_sphere", "plane-sphere tester array with decoder",
          "raplas_hdl.rtl.plane_sphere:build_plane_sphere",
          {"rows": (int, 4, "bundle rows"), "cols": (int, 4, "bundle columns"),
-          "testers": (int, None, "testers in the array (default rows+cols)")}),
+          "testers": (int, None, "testers in the array (default rows+cols)"),
+          **TARGET_OPTION}),
     Unit("ray-triangle", "ray_triangle", "division-free Moller-Trumbore unit",
          "raplas_hdl.rtl.ray_triangle:RayTriangleUnit",
-         {"mode": (str, "paper", "paper | conservative")}),
+         {"mode": (str, "paper", "paper | conservative"), **TARGET_OPTION}),
     Unit("intersection-unit", "intersection_unit", "the whole intersection unit",
          "raplas_hdl.rtl.intersection:build_intersection_unit",
          {"rows": (int, 4, "bundle rows"), "cols": (int, 4, "bundle columns"),
           "testers": (int, None, "plane-sphere testers (default rows+cols)"),
           "tris_per_sphere": (int, 8, "triangles per bounding sphere"),
-          "mode": (str, "paper", "paper | conservative")}),
+          "mode": (str, "paper", "paper | conservative"), **TARGET_OPTION}),
+    Unit("board-top", "board_top", "the intersection unit behind a 32-bit Wishbone slave",
+         "raplas_hdl.rtl.board_top:build_board_top",
+         {"rows": (int, 4, "bundle rows"), "cols": (int, 4, "bundle columns"),
+          "testers": (int, None, "plane-sphere testers (default rows+cols)"),
+          "tris_per_sphere": (int, 8, "triangles per bounding sphere"),
+          "max_triangles": (int, 1024, "Triangle Memory depth"),
+          "max_spheres": (int, 256, "Sphere Memory depth"),
+          "fifo_depth": (int, 16, "pair FIFO depth"),
+          "mode": (str, "paper", "paper | conservative"), **TARGET_OPTION}),
 ]}
 
 
 def build_unit(name: str, fmt: FPFormat = FP24, **options):
-    """Build unit ``name``; options left at ``None`` take the unit's default."""
+    """Build unit ``name``; options left at ``None`` take the unit's default.
+
+    Returns ``(unit, component, options)``, ``options`` being the ones given (``None``
+    dropped).
+    """
     try:
         unit = UNITS[name]
     except KeyError:
@@ -63,6 +92,8 @@ def build_unit(name: str, fmt: FPFormat = FP24, **options):
     if unknown:
         raise ValueError(f"unit {name} takes no option(s) {', '.join(sorted(unknown))}")
     opts = {k: v for k, v in options.items() if v is not None}
+    if "target" in opts and opts["target"] not in TARGETS:
+        raise ValueError(f"target must be one of {', '.join(TARGETS)}, not {opts['target']!r}")
     return unit, unit.build(fmt, **opts), opts
 
 

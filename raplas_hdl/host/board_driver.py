@@ -1,0 +1,300 @@
+"""Host driver of the board-level top (:class:`raplas_hdl.rtl.board_top.BoardTop`).
+
+The driver speaks to an abstract 32-bit bus: any object with ``read(addr) -> int`` and
+``write(addr, value)``, ``addr`` being a *word* address of the register map
+(:data:`raplas_hdl.model.board_map.REGISTER_MAP`). Behind it may be the co-simulation's
+Wishbone master (``sim/tb_board.py``), a UART or PCIe bridge to a board, or a test double.
+A bus that cannot complete an access (Wishbone ``err``) raises an exception from
+``read``/``write``; the driver lets it through.
+
+It loads a scene and bundles through the memory window, starts runs, pops the result
+stream and reads the counters, and returns them in the form of
+:func:`raplas_hdl.model.intersection.run_bundle` (a :data:`RESULT_DTYPE` array and a
+counter dict, here with ``cycles`` too), so the two compare directly.
+
+No Amaranth, no cocotb.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..fp.format import FPFormat
+from ..model.board_map import (BOARD_ID, CONTROL_BITS, COUNTER_REGS, MAP_VERSION,
+                               REGISTERS, RES_INFO_BITS, RESULT_REGS, STATUS_BITS,
+                               cmd_start_word, config_from_words, config_words,
+                               decode_result_words)
+from ..model.intersection import RESULT_DTYPE
+from ..model.memory_image import (BundleMemory, SceneMemory, UnitConfig, bundle_writes,
+                                  run_list_writes, scene_writes)
+
+__all__ = ["BoardDriver", "BoardMismatch"]
+
+_VALID = 1 << RES_INFO_BITS["valid"]
+
+
+class BoardMismatch(ValueError):
+    """The board is not the build the driver expects (ID, map version or parameters)."""
+
+
+def _config_from_params(p: dict) -> UnitConfig:
+    return UnitConfig(fmt=FPFormat(p["exp_bits"], p["man_bits"], p["rounding"]),
+                      rows=p["rows"], cols=p["cols"], testers=p["testers"],
+                      tris_per_sphere=p["tris_per_sphere"], max_triangles=p["max_triangles"],
+                      max_spheres=p["max_spheres"], mode=p["mode"],
+                      margin_scale=p["margin_scale"], fifo_depth=p["fifo_depth"])
+
+
+def _same_geometry(a: BundleMemory, b: BundleMemory) -> bool:
+    return a is b or all(np.array_equal(getattr(a, f), getattr(b, f))
+                         for f in ("plane_n", "plane_p", "ray_o", "ray_d"))
+
+
+class BoardDriver:
+    """Runs scenes through a board top over a register bus.
+
+    Parameters
+    ----------
+    bus : object
+        ``read(addr) -> int`` and ``write(addr, value)`` on word addresses.
+    config : UnitConfig, optional
+        The build the caller expects; checked against the board's ID and configuration
+        registers (:class:`BoardMismatch` on a difference). Without it the driver takes
+        the board's own configuration.
+    poll_limit : int
+        Reads of a status or result register without progress after which the driver
+        gives up (``TimeoutError``).
+
+    Attributes
+    ----------
+    config : UnitConfig
+    reads, writes : int
+        Bus accesses made so far.
+    """
+
+    def __init__(self, bus, config: UnitConfig | None = None, *, poll_limit: int = 1_000_000):
+        if not (callable(getattr(bus, "read", None)) and callable(getattr(bus, "write", None))):
+            raise ValueError("bus must have read(addr) and write(addr, value) methods")
+        self.bus = bus
+        self.poll_limit = int(poll_limit)
+        self.reads = 0
+        self.writes = 0
+        self._mem_addr = None      # what MEM_ADDR holds (None: unknown)
+        self._n_spheres = None
+        board = self.identify()
+        if config is None:
+            config = _config_from_params(board["params"])
+        else:
+            self.check(config, board)
+        self.config = config
+
+    # -- registers ----------------------------------------------------------------------------
+    def read_reg(self, name: str) -> int:
+        self.reads += 1
+        return int(self.bus.read(REGISTERS[name])) & 0xFFFFFFFF
+
+    def write_reg(self, name: str, value: int) -> None:
+        self.writes += 1
+        self.bus.write(REGISTERS[name], int(value) & 0xFFFFFFFF)
+
+    def identify(self) -> dict:
+        """``{"id", "version": (major, minor), "params"}`` as the board reports them."""
+        ident = self.read_reg("ID")
+        version = self.read_reg("VERSION")
+        words = {name: self.read_reg(name) for name in config_words(UnitConfig().params())}
+        return {"id": ident, "version": (version >> 16, version & 0xFFFF),
+                "params": config_from_words(words)}
+
+    def check(self, config: UnitConfig, board: dict | None = None) -> None:
+        """Raise :class:`BoardMismatch` naming every difference from ``config``."""
+        board = self.identify() if board is None else board
+        if board["id"] != BOARD_ID:
+            raise BoardMismatch(f"ID register reads 0x{board['id']:08X}, not the board top's "
+                                f"0x{BOARD_ID:08X}: is this a raplas-hdl board top?")
+        if board["version"][0] != MAP_VERSION[0]:
+            raise BoardMismatch(f"register map version {board['version']} is not "
+                                f"{MAP_VERSION[0]}.x, which this driver speaks")
+        want = config.params()
+        got = board["params"]
+        diff = [f"{k}: board {got[k]!r}, expected {want[k]!r}" for k in want
+                if got.get(k) != (want[k] & 0xFFFFFFFF if k == "margin_scale" else want[k])]
+        if diff:
+            raise BoardMismatch("the board is another build: " + "; ".join(diff))
+
+    def status(self) -> dict:
+        """``STATUS`` as a dict of booleans (:data:`STATUS_BITS`)."""
+        word = self.read_reg("STATUS")
+        return {name: bool(word >> bit & 1) for name, bit in STATUS_BITS.items()}
+
+    # -- memories -----------------------------------------------------------------------------
+    def write_words(self, addrs, datas) -> None:
+        """Write ``datas[k]`` at unit address ``addrs[k]`` through the memory window.
+
+        ``MEM_ADDR`` is written only when the next address is not the one the window's
+        auto-increment already holds.
+        """
+        addrs = np.asarray(addrs, dtype=np.uint64).reshape(-1)
+        datas = np.asarray(datas, dtype=np.uint64).reshape(-1)
+        if addrs.shape != datas.shape:
+            raise ValueError("addrs and datas must have the same length")
+        for a, d in zip(addrs.tolist(), datas.tolist()):
+            if a != self._mem_addr:
+                self.write_reg("MEM_ADDR", a)
+            self.write_reg("MEM_DATA", d)
+            self._mem_addr = (a + 1) & 0xFFFFFFFF
+
+    def load_scene(self, scene: SceneMemory) -> None:
+        """Write Triangle Memory and Sphere Memory (no run may be going)."""
+        self.write_words(*scene_writes(self.config, scene))
+        self._n_spheres = scene.n_spheres
+
+    def load_bundle(self, bundle: BundleMemory, bank: int = 0, enable_only: bool = False):
+        """Write a bundle's planes and rays (or only the enable bits) into ``bank``."""
+        self.write_words(*bundle_writes(self.config, bundle, bank, enable_only=enable_only))
+
+    def load_run_list(self, sphere_ids, bank: int = 0) -> None:
+        self.write_words(*run_list_writes(self.config, sphere_ids, bank))
+
+    # -- runs ---------------------------------------------------------------------------------
+    def _poll(self, what: str, done) -> None:
+        for _ in range(self.poll_limit):
+            if done():
+                return
+        raise TimeoutError(f"{what}: no progress after {self.poll_limit} reads "
+                           f"(status {self.status()})")
+
+    def start(self, first: int, count: int, bank: int = 0, indirect: bool = False) -> None:
+        """Queue a run, waiting for the command slot to be free."""
+        word = cmd_start_word(count, bank, indirect)
+        self._poll("waiting for the command slot", lambda: not self.status()["cmd_full"])
+        self.write_reg("CMD_FIRST", first)
+        self.write_reg("CMD_START", word)
+
+    def pop(self) -> dict | None:
+        """Pop one result beat (its fields) or return None when none waits."""
+        info = self.read_reg("RES_INFO")
+        if not info & _VALID:
+            return None
+        words = [self.read_reg(name) for name in RESULT_REGS]
+        return decode_result_words(info, *words)
+
+    def collect(self) -> np.ndarray:
+        """Pop beats up to the one marked ``last``; returns them as :data:`RESULT_DTYPE`."""
+        beats = []
+        while True:
+            for _ in range(self.poll_limit):
+                beat = self.pop()
+                if beat is not None:
+                    break
+            else:
+                raise TimeoutError(f"no result beat after {self.poll_limit} reads "
+                                   f"({len(beats)} beats so far; status {self.status()})")
+            beats.append(beat)
+            if beat["last"]:
+                break
+        out = np.zeros(len(beats), RESULT_DTYPE)
+        for name in RESULT_DTYPE.names:
+            out[name] = [b[name] for b in beats]
+        return out
+
+    def read_counters(self) -> dict:
+        """``cycles`` and the counters of ``run_bundle``."""
+        return {name: self.read_reg(reg) for name, reg in COUNTER_REGS.items()}
+
+    def clear_counters(self) -> None:
+        self.write_reg("CONTROL", 1 << CONTROL_BITS["clear_counters"])
+
+    def check_errors(self) -> None:
+        """Raise ``RuntimeError`` if the pair FIFO overflowed or a command was refused."""
+        st = self.status()
+        bad = [name for name in ("fifo_overflow", "cmd_overrun") if st[name]]
+        if bad:
+            raise RuntimeError(f"board status flags set: {', '.join(bad)}")
+
+    def _sphere_ids(self, sphere_ids):
+        if sphere_ids is None:
+            if self._n_spheres is None:
+                raise ValueError("sphere_ids=None means every sphere of the scene: load the "
+                                 "scene first (load_scene)")
+            return np.arange(self._n_spheres, dtype=np.int64)
+        ids = np.asarray(sphere_ids, dtype=np.int64).reshape(-1)
+        if ids.size > self.config.max_spheres:
+            raise ValueError(f"a run names at most max_spheres={self.config.max_spheres} "
+                             "spheres")
+        if ids.size and (ids.min() < 0 or ids.max() >= self.config.max_spheres):
+            raise ValueError("sphere_ids names a sphere outside Sphere Memory "
+                             f"(max_spheres={self.config.max_spheres})")
+        return ids
+
+    def _plan(self, sphere_ids, bank):
+        """(writes, first, count, indirect) of a run on ``bank``."""
+        ids = self._sphere_ids(sphere_ids)
+        if ids.size == 0 or np.array_equal(ids, np.arange(ids[0], ids[0] + ids.size)):
+            return (np.zeros(0, np.uint32), np.zeros(0, np.uint32)), \
+                (int(ids[0]) if ids.size else 0), ids.size, False
+        return run_list_writes(self.config, ids, bank), 0, ids.size, True
+
+    def run_bundle(self, bundle: BundleMemory, sphere_ids=None, bank: int = 0):
+        """Load ``bundle`` into ``bank``, run ``sphere_ids`` (default all) against it.
+
+        Returns ``(results, counters)`` as :func:`raplas_hdl.model.intersection.run_bundle`
+        (counters of this run alone, plus ``cycles``).
+        """
+        return self.run_runs([(bundle, sphere_ids)], first_bank=bank)[0]
+
+    def run_runs(self, runs, scene: SceneMemory | None = None, *, prefetch: bool = True,
+                 first_bank: int = 0):
+        """Run ``runs`` (``[(BundleMemory, sphere_ids or None), ...]``) one after another.
+
+        A run whose bundle has the previous run's planes and rays reuses its bank and
+        rewrites only the enable bits (the host's early-out); otherwise the bundle goes
+        into the other bank, and with ``prefetch`` it is written while the previous run
+        is still going (the unit's double buffer). A contiguous ``sphere_ids`` starts a
+        range run, any other a run-list run. The counters are cleared before each run and
+        read after its last beat, so they are per run.
+
+        Parameters
+        ----------
+        runs : list of (BundleMemory, sphere_ids)
+        scene : SceneMemory, optional
+            Loaded first when given.
+
+        Returns
+        -------
+        list of (results, counters)
+        """
+        if scene is not None:
+            self.load_scene(scene)
+        runs = list(runs)
+        plans = []
+        bank, prev = first_bank ^ 1, None
+        for bundle, ids in runs:
+            bundle.check(self.config)
+            enable_only = prev is not None and _same_geometry(bundle, prev)
+            if not enable_only:
+                bank ^= 1
+            prev = bundle
+            list_writes, first, count, indirect = self._plan(ids, bank)
+            plans.append((bundle, bank, enable_only, list_writes, first, count, indirect))
+        loaded = [False] * len(plans)
+
+        def load(k):
+            bundle, bank, enable_only, list_writes, *_ = plans[k]
+            self.load_bundle(bundle, bank, enable_only=enable_only)
+            self.write_words(*list_writes)
+            loaded[k] = True
+
+        out = []
+        self.clear_counters()
+        for k, (_, bank, _, _, first, count, indirect) in enumerate(plans):
+            if not loaded[k]:
+                load(k)
+            self.start(first, count, bank, indirect)
+            if prefetch and k + 1 < len(plans) and plans[k + 1][1] != bank:
+                load(k + 1)
+            stream = self.collect()
+            counters = self.read_counters()
+            self.clear_counters()
+            out.append((stream, counters))
+        self.check_errors()
+        return out

@@ -1,0 +1,248 @@
+"""Register map of the board-level top (:class:`raplas_hdl.rtl.board_top.BoardTop`).
+
+One source for the RTL, the host driver (:mod:`raplas_hdl.host.board_driver`) and the
+documentation (``docs/board-top.md``, whose table a test compares with
+:data:`REGISTER_MAP`). No Amaranth.
+
+The top is a 32-bit Wishbone B4 classic slave with 32-bit granularity: ``wb_adr`` is a
+*word* address (byte address = 4 x ``wb_adr``), ``wb_sel`` is accepted and ignored (every
+access is a whole word). The registers:
+
+- **identification and configuration** (read only): :data:`BOARD_ID`, the map's version,
+  and the build parameters (format, lattice, testers, depths), so that a driver can check
+  it talks to the build it expects (:func:`config_words`, :func:`config_from_words`);
+- **memory window**: ``MEM_ADDR`` holds an address of the unit's write port (the map of
+  :mod:`raplas_hdl.model.memory_image`); each write to ``MEM_DATA`` writes that word into
+  the unit and adds 1 to ``MEM_ADDR``, so a record's consecutive fields need one
+  ``MEM_ADDR`` write;
+- **command**: ``CMD_FIRST`` then ``CMD_START`` (:func:`cmd_start_word`) queue a run in a
+  one-deep slot; a ``CMD_START`` write while the slot is full is refused (``wb_err``,
+  sticky ``cmd_overrun``), so a driver waits for ``STATUS.cmd_full`` = 0;
+- **status and control**: ``STATUS`` (:data:`STATUS_BITS`) and ``CONTROL``
+  (:data:`CONTROL_BITS`);
+- **result window**: a read of ``RES_INFO`` pops the head beat of the unit's result stream
+  into a latch and returns its flags with ``valid`` = 1, or returns 0 (nothing popped)
+  when no beat is waiting; ``RES_IDS``, ``RES_T``, ``RES_U``, ``RES_V``, ``RES_DET`` then
+  read the latched beat. The unit stalls while the host does not pop (its stream's
+  back-pressure), so nothing is dropped however slow the host is;
+- **counters**: the unit's nine 32-bit counters, one word each (wrap around, zeroed by
+  ``CONTROL.clear_counters``).
+
+Unmapped addresses answer ``wb_err``; writes to read-only registers are acknowledged and
+ignored; reads of write-only registers return 0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .memory_image import COUNTER_NAMES
+
+__all__ = ["Register", "REGISTER_MAP", "REGISTERS", "ADDR_BITS", "BOARD_ID", "MAP_VERSION",
+           "STATUS_BITS", "CONTROL_BITS", "RES_INFO_BITS", "RESULT_REGS", "COUNTER_REGS",
+           "ROUNDING_CODES", "MODE_CODES", "config_words", "config_from_words",
+           "cmd_start_word", "decode_cmd_start", "res_info_word", "res_ids_word",
+           "decode_result_words", "markdown_table", "parse_markdown_table"]
+
+#: Width of ``wb_adr`` (word address).
+ADDR_BITS = 8
+#: Value of the ``ID`` register: ASCII "RPLS".
+BOARD_ID = 0x52504C53
+#: Register-map version (major, minor), read as ``major << 16 | minor``.
+MAP_VERSION = (1, 0)
+
+ROUNDING_CODES = {"rtz": 0, "rne": 1, "chop": 2}
+MODE_CODES = {"paper": 0, "conservative": 1}
+
+#: Bits of ``STATUS``.
+STATUS_BITS = {"busy": 0, "result_valid": 1, "fifo_overflow": 2, "cmd_full": 3,
+               "cmd_overrun": 4}
+#: Bits of ``CONTROL`` (write 1 to act; writes of 0 do nothing).
+CONTROL_BITS = {"clear_counters": 0, "clear_overrun": 1}
+#: Bits of ``RES_INFO``.
+RES_INFO_BITS = {"valid": 0, "last": 1, "empty": 2, "hit": 3, "flags": 4}   # flags: 3 bits
+#: ``RES_IDS``: tri_id in bits 19:0, ray_id in bits 31:20.
+RES_TRI_BITS = 20
+RES_RAY_SHIFT = 20
+#: ``CMD_START``: count in bits 23:0, bank bit 24, indirect bit 25.
+CMD_COUNT_BITS = 24
+CMD_BANK_BIT = 24
+CMD_INDIRECT_BIT = 25
+
+
+@dataclass(frozen=True)
+class Register:
+    """One row of the register map."""
+
+    offset: int      # word address
+    name: str
+    access: str      # "R", "W", "RW", or "R*" (a read has a side effect)
+    bits: str        # "31:0", "25:0", ...
+    meaning: str
+
+
+_COUNTERS = ("cycles",) + COUNTER_NAMES
+_COUNTER_MEANING = {
+    "cycles": "counter: cycles while a run is outstanding",
+    "spheres": "counter: spheres tested",
+    "plane_tests": "counter: plane-sphere tests (rows + cols per sphere)",
+    "pairs_issued": "counter: pairs sent to the ray-triangle unit",
+    "pairs_skipped": "counter: pairs not issued (disabled rays)",
+    "hits": "counter: hits",
+    "overflow": "counter: issued pairs that raised overflow",
+    "underflow": "counter: issued pairs that raised underflow",
+    "invalid": "counter: issued pairs that raised invalid",
+}
+
+#: The register map, in address order.
+REGISTER_MAP: tuple[Register, ...] = (
+    Register(0x00, "ID", "R", "31:0", "0x52504C53 (ASCII RPLS)"),
+    Register(0x01, "VERSION", "R", "31:0", "register-map version: major 31:16, minor 15:0"),
+    Register(0x02, "CFG_FORMAT", "R", "24:0",
+             "exp_bits 7:0, man_bits 15:8, rounding 17:16 (0 rtz, 1 rne, 2 chop), "
+             "mode 24 (0 paper, 1 conservative)"),
+    Register(0x03, "CFG_LATTICE", "R", "23:0", "rows 7:0, cols 15:8, testers 23:16"),
+    Register(0x04, "CFG_DEPTHS", "R", "31:0", "tris_per_sphere 15:0, fifo_depth 31:16"),
+    Register(0x05, "CFG_MAX_TRIANGLES", "R", "31:0", "Triangle Memory depth"),
+    Register(0x06, "CFG_MAX_SPHERES", "R", "31:0", "Sphere Memory depth"),
+    Register(0x07, "CFG_MARGIN_SCALE", "R", "31:0", "conservative-margin scale"),
+    Register(0x08, "STATUS", "R", "4:0",
+             "busy 0 (a run is queued or going), result_valid 1 (a result beat waits), "
+             "fifo_overflow 2 (sticky, pair FIFO), cmd_full 3 (command slot taken), "
+             "cmd_overrun 4 (sticky, a CMD_START was refused)"),
+    Register(0x09, "CONTROL", "W", "1:0",
+             "write 1: clear_counters 0 (zero every counter), clear_overrun 1"),
+    Register(0x0A, "MEM_ADDR", "RW", "31:0",
+             "address on the unit's write port (memory_image map); +1 after each MEM_DATA"),
+    Register(0x0B, "MEM_DATA", "W", "31:0", "write this word at MEM_ADDR, then MEM_ADDR += 1"),
+    Register(0x0C, "CMD_FIRST", "RW", "31:0",
+             "first sphere ID, or run-list position when indirect"),
+    Register(0x0D, "CMD_START", "W", "25:0",
+             "count 23:0, bank 24, indirect 25; queues the run with CMD_FIRST "
+             "(wb_err and cmd_overrun if the slot is full)"),
+    Register(0x10, "RES_INFO", "R*", "6:0",
+             "pops a beat: valid 0, last 1, empty 2, hit 3, flags 6:4 "
+             "(overflow, underflow, invalid); 0 when no beat waits"),
+    Register(0x11, "RES_IDS", "R", "31:0", "popped beat: tri_id 19:0, ray_id 31:20"),
+    Register(0x12, "RES_T", "R", "31:0", "popped beat: t' (format bit pattern)"),
+    Register(0x13, "RES_U", "R", "31:0", "popped beat: u'"),
+    Register(0x14, "RES_V", "R", "31:0", "popped beat: v'"),
+    Register(0x15, "RES_DET", "R", "31:0", "popped beat: det"),
+) + tuple(Register(0x20 + k, f"CTR_{name.upper()}", "R", "31:0", _COUNTER_MEANING[name])
+          for k, name in enumerate(_COUNTERS))
+
+#: Name -> word address.
+REGISTERS = {r.name: r.offset for r in REGISTER_MAP}
+#: Result-window registers after ``RES_INFO``, in read order.
+RESULT_REGS = ("RES_IDS", "RES_T", "RES_U", "RES_V", "RES_DET")
+#: Counter name (``cycles`` and :data:`~raplas_hdl.model.memory_image.COUNTER_NAMES`) ->
+#: register name.
+COUNTER_REGS = {name: f"CTR_{name.upper()}" for name in _COUNTERS}
+
+
+def _check_map():
+    offsets = [r.offset for r in REGISTER_MAP]
+    assert offsets == sorted(set(offsets)), "register offsets must be unique and ascending"
+    assert max(offsets) < (1 << ADDR_BITS)
+
+
+_check_map()
+
+
+# -- configuration words ------------------------------------------------------------------
+def config_words(params: dict) -> dict:
+    """Values of the ``CFG_*`` registers for :meth:`UnitConfig.params` ``params``."""
+    return {
+        "CFG_FORMAT": (params["exp_bits"] | params["man_bits"] << 8
+                       | ROUNDING_CODES[params["rounding"]] << 16
+                       | MODE_CODES[params["mode"]] << 24),
+        "CFG_LATTICE": params["rows"] | params["cols"] << 8 | params["testers"] << 16,
+        "CFG_DEPTHS": params["tris_per_sphere"] | params["fifo_depth"] << 16,
+        "CFG_MAX_TRIANGLES": params["max_triangles"],
+        "CFG_MAX_SPHERES": params["max_spheres"],
+        "CFG_MARGIN_SCALE": params["margin_scale"] & 0xFFFFFFFF,
+    }
+
+
+def config_from_words(words: dict) -> dict:
+    """Inverse of :func:`config_words`: the parameters a board reports."""
+    fmt, lat, dep = words["CFG_FORMAT"], words["CFG_LATTICE"], words["CFG_DEPTHS"]
+    rounding = {v: k for k, v in ROUNDING_CODES.items()}.get((fmt >> 16) & 3, "?")
+    mode = {v: k for k, v in MODE_CODES.items()}.get((fmt >> 24) & 1, "?")
+    return {"exp_bits": fmt & 0xFF, "man_bits": (fmt >> 8) & 0xFF, "rounding": rounding,
+            "rows": lat & 0xFF, "cols": (lat >> 8) & 0xFF, "testers": (lat >> 16) & 0xFF,
+            "tris_per_sphere": dep & 0xFFFF, "max_triangles": words["CFG_MAX_TRIANGLES"],
+            "max_spheres": words["CFG_MAX_SPHERES"], "mode": mode,
+            "margin_scale": words["CFG_MARGIN_SCALE"], "fifo_depth": dep >> 16}
+
+
+# -- command and result words ---------------------------------------------------------------
+def cmd_start_word(count: int, bank: int, indirect: bool) -> int:
+    """The ``CMD_START`` word of a run of ``count`` spheres on ``bank``."""
+    if not 0 <= int(count) < (1 << CMD_COUNT_BITS):
+        raise ValueError(f"count must be 0 .. {(1 << CMD_COUNT_BITS) - 1}, not {count}")
+    if bank not in (0, 1):
+        raise ValueError(f"bank must be 0 or 1, not {bank!r}")
+    return int(count) | int(bank) << CMD_BANK_BIT | int(bool(indirect)) << CMD_INDIRECT_BIT
+
+
+def decode_cmd_start(word: int) -> tuple[int, int, int]:
+    """(count, bank, indirect) of a ``CMD_START`` word."""
+    return (word & ((1 << CMD_COUNT_BITS) - 1), (word >> CMD_BANK_BIT) & 1,
+            (word >> CMD_INDIRECT_BIT) & 1)
+
+
+def res_info_word(last, empty, hit, flags) -> int:
+    """``RES_INFO`` of a popped beat (``valid`` set)."""
+    b = RES_INFO_BITS
+    return (1 << b["valid"] | int(last) << b["last"] | int(empty) << b["empty"]
+            | int(hit) << b["hit"] | (int(flags) & 7) << b["flags"])
+
+
+def res_ids_word(ray_id, tri_id) -> int:
+    return int(ray_id) << RES_RAY_SHIFT | int(tri_id)
+
+
+def decode_result_words(info: int, ids: int, t: int, u: int, v: int, det: int) -> dict:
+    """Fields of one result beat (the names of ``RESULT_DTYPE``) from its six words."""
+    b = RES_INFO_BITS
+    return {"ray_id": ids >> RES_RAY_SHIFT, "tri_id": ids & ((1 << RES_TRI_BITS) - 1),
+            "hit": (info >> b["hit"]) & 1, "t": t, "u": u, "v": v, "det": det,
+            "flags": (info >> b["flags"]) & 7, "last": (info >> b["last"]) & 1,
+            "empty": (info >> b["empty"]) & 1}
+
+
+# -- documentation table --------------------------------------------------------------------
+_HEADER = ("Offset", "Byte offset", "Name", "R/W", "Bits", "Meaning")
+
+
+def markdown_table() -> str:
+    """The register table of ``docs/board-top.md`` (Markdown)."""
+    lines = ["| " + " | ".join(_HEADER) + " |", "|" + "|".join("---" for _ in _HEADER) + "|"]
+    for r in REGISTER_MAP:
+        lines.append(f"| 0x{r.offset:02X} | 0x{4 * r.offset:03X} | {r.name} | {r.access} | "
+                     f"{r.bits} | {r.meaning} |")
+    return "\n".join(lines) + "\n"
+
+
+def parse_markdown_table(text: str) -> tuple[Register, ...]:
+    """The registers of the first table in ``text`` whose header is the register table's."""
+    rows, inside = [], False
+    for line in text.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if not inside:
+            inside = tuple(cells) == _HEADER
+            continue
+        if not line.strip().startswith("|"):
+            break
+        if set(line.replace("|", "").strip()) <= set("-: "):
+            continue
+        if len(cells) != len(_HEADER):
+            raise ValueError(f"register table row with {len(cells)} cells: {line!r}")
+        off, boff = int(cells[0], 16), int(cells[1], 16)
+        if boff != 4 * off:
+            raise ValueError(f"byte offset {cells[1]} is not 4 x {cells[0]}")
+        rows.append(Register(off, cells[2], cells[3], cells[4], cells[5]))
+    if not rows:
+        raise ValueError("no register table found")
+    return tuple(rows)

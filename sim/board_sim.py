@@ -1,0 +1,159 @@
+"""Co-simulation of the board-level top: the host driver against ``board_top``'s Verilog.
+
+:func:`run_board` emits the top's Verilog for a
+:class:`~raplas_hdl.model.memory_image.UnitConfig` (cached in memory and under
+``build/sim/verilog/``), writes the scene and the runs into a stimulus file and runs
+:mod:`sim.tb_board`, in which :class:`raplas_hdl.host.board_driver.BoardDriver` drives the
+Wishbone port. It returns, per run, the result stream and the counters exactly as
+:func:`raplas_hdl.model.intersection.run_bundle` returns them (counters with ``cycles``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from raplas_hdl.fp.format import FPFormat
+from raplas_hdl.model.intersection import RESULT_DTYPE
+from raplas_hdl.model.memory_image import BundleMemory, SceneMemory, UnitConfig
+
+__all__ = ["board_verilog", "run_board", "encode_stimulus", "decode_stimulus", "TOPLEVEL"]
+
+TOPLEVEL = "board_top"
+_VERILOG_CACHE: dict = {}
+#: The Verilator model of the whole unit runs a few thousand cycles here, while compiling
+#: its C++ at -O2 is most of the test's time: -O0 builds in a fraction (the last -O wins).
+VERILATOR_ARGS = ("-CFLAGS", "-O0")
+_SCENE_FIELDS = ("v0", "e1", "e2", "n", "centres", "radii", "tri_lists", "tri_counts")
+_BUNDLE_FIELDS = ("plane_n", "plane_p", "ray_o", "ray_d", "enable")
+
+
+def _digest(config: UnitConfig) -> str:
+    from sim.unit_driver import _source_digest
+
+    import raplas_hdl
+
+    h = hashlib.sha256(_source_digest(config).encode())
+    h.update((Path(raplas_hdl.__file__).parent / "model" / "board_map.py").read_bytes())
+    return h.hexdigest()[:16]
+
+
+def board_verilog(config: UnitConfig) -> str:
+    """The board top's Verilog for ``config`` (module ``board_top``), cached.
+
+    Cached in memory and on disk, keyed by the parameters and the RTL sources; a file lock
+    makes concurrent callers (pytest-xdist workers) wait for one emission.
+    """
+    from sim.runner import BUILD_ROOT, _file_lock
+
+    if config in _VERILOG_CACHE:
+        return _VERILOG_CACHE[config]
+    path = BUILD_ROOT / "verilog" / f"{TOPLEVEL}-{_digest(config)}.v"
+    with _file_lock(path.with_suffix(".lock")):
+        if path.exists():
+            text = path.read_text()
+        else:
+            from raplas_hdl.rtl.board_top import BoardTop
+            from raplas_hdl.rtl.emit import emit_verilog
+
+            text, _ = emit_verilog(BoardTop(config), TOPLEVEL, config.params())
+            tmp = path.with_suffix(f".{os.getpid()}.tmp")
+            tmp.write_text(text)
+            os.replace(tmp, path)
+    _VERILOG_CACHE[config] = text
+    return text
+
+
+# -- stimulus ---------------------------------------------------------------------------------
+def encode_stimulus(scene: SceneMemory, runs) -> dict:
+    """Arrays (for ``np.savez``) holding the scene and every run's bundle and sphere IDs."""
+    stim = {f"scene_{f}": getattr(scene, f) for f in _SCENE_FIELDS}
+    for k, (bundle, ids) in enumerate(runs):
+        for f in _BUNDLE_FIELDS:
+            stim[f"run{k}_{f}"] = getattr(bundle, f)
+        stim[f"run{k}_all"] = np.array(int(ids is None))
+        stim[f"run{k}_ids"] = np.zeros(0, np.int64) if ids is None else \
+            np.asarray(ids, np.int64).reshape(-1)
+    stim["n_runs"] = np.array(len(runs))
+    return stim
+
+
+def decode_stimulus(meta: dict, stim: dict):
+    """``(config, scene, runs)`` from :func:`encode_stimulus` arrays and the run's meta."""
+    p = dict(meta["params"])
+    fmt = FPFormat(p.pop("exp_bits"), p.pop("man_bits"), p.pop("rounding"))
+    config = UnitConfig(fmt=fmt, **p)
+    scene = SceneMemory(*[stim[f"scene_{f}"] for f in _SCENE_FIELDS])
+    runs = []
+    for k in range(int(stim["n_runs"])):
+        bundle = BundleMemory(*[stim[f"run{k}_{f}"] for f in _BUNDLE_FIELDS])
+        ids = None if int(stim[f"run{k}_all"]) else stim[f"run{k}_ids"]
+        runs.append((bundle, ids))
+    return config, scene, runs
+
+
+def run_board(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
+              seed: int = 1, gap_density: float = 0.3, prefetch: bool = True,
+              build_key: str | None = None):
+    """Run ``runs`` (``[(BundleMemory, sphere_ids or None), ...]``) through the board top.
+
+    Parameters
+    ----------
+    simulator : {"icarus", "verilator"}
+    config : UnitConfig
+    scene : SceneMemory
+    runs : list of (BundleMemory, sphere_ids or None)
+    seed, gap_density : int, float
+        The bus master's random idle cycles (see :mod:`sim.tb_board`).
+    prefetch : bool
+        The driver writes the next bundle while a run goes (the double buffer).
+
+    Returns
+    -------
+    results : list of (results, counters)
+        As :func:`raplas_hdl.model.intersection.run_bundle` returns them (plus ``cycles``).
+    stats : dict
+        ``reads``, ``writes`` (the driver's bus accesses), ``sim_ns``, ``run_s``,
+        ``build_s`` (the simulator's figures from :func:`sim.runner.run_cocotb`).
+
+    Raises
+    ------
+    AssertionError
+        When a cocotb test fails (a bus error, a protocol check, a timeout).
+    """
+    from sim.runner import run_cocotb
+    from sim.unit_driver import ICARUS_ARGS
+
+    runs = list(runs)
+    if not runs:
+        raise ValueError("runs is empty")
+    scene.check(config)
+    text = board_verilog(config)
+    with tempfile.TemporaryDirectory(prefix="raplas-board-") as tmp:
+        stim_path, out_path, meta_path = (Path(tmp) / n for n in
+                                          ("stim.npz", "out.npz", "meta.json"))
+        np.savez(stim_path, **encode_stimulus(scene, runs))
+        meta_path.write_text(json.dumps({"params": config.params(), "seed": seed,
+                                         "gap_density": gap_density, "prefetch": prefetch}))
+        env = {"BOARD_STIM": str(stim_path), "BOARD_OUT": str(out_path),
+               "BOARD_META": str(meta_path)}
+        res = run_cocotb(simulator, text, TOPLEVEL, "sim.tb_board",
+                         build_key or f"board-{config.fmt.name}-{config.rows}x{config.cols}",
+                         env=env, build_args=ICARUS_ARGS if simulator == "icarus"
+                         else VERILATOR_ARGS,
+                         public_all=False)
+        out = dict(np.load(out_path, allow_pickle=False))
+    beats = out["beats"].astype(RESULT_DTYPE)
+    names = [str(n) for n in out["counter_names"]]
+    results = []
+    for k in range(len(runs)):
+        counters = {n: int(v) for n, v in zip(names, out["counters"][k])}
+        results.append((beats[out["run_of_beat"] == k], counters))
+    stats = {"reads": int(out["reads"]), "writes": int(out["writes"]),
+             "sim_ns": float(out["sim_ns"]), "run_s": res["run_s"], "build_s": res["build_s"]}
+    return results, stats
