@@ -6,7 +6,7 @@ STAMP   := $(VENV)/.installed
 JOBS    ?= 2
 PYTEST  := $(VPY) -m pytest -n $(JOBS)
 
-.PHONY: all setup sysdeps demo verilog test test-full bench synth lint clean distclean
+.PHONY: all setup sysdeps demo verilog test test-full bench campaign synth constraints lint clean distclean
 
 all: demo
 
@@ -40,6 +40,13 @@ test-full: setup
 
 bench: setup
 	$(VENV)/bin/raplas-hdl bench
+
+## The stress campaign (resumable: run it again after an interruption).
+campaign: setup
+	$(VENV)/bin/raplas-hdl stress campaign
+
+constraints: setup
+	$(VENV)/bin/raplas-hdl constraints --check
 
 synth: setup
 	$(VENV)/bin/raplas-hdl synth all

@@ -28,6 +28,9 @@ def add_parser(subparsers):
                    help="bundle columns for plane-sphere / intersection-unit (default 4)")
     p.add_argument("--mode", default=None,
                    help="ray-triangle mode for ray-triangle / intersection-unit (default paper)")
+    p.add_argument("--target", default=None, choices=("generic", "virtex4"),
+                   help="multiplier target of the units with FP multipliers: inferred "
+                        "multiplies (generic, the default) or DSP48 primitives (virtex4)")
     p.add_argument("-o", "--output", default=None,
                    help="markdown file to write (default: print to stdout)")
     p.add_argument("--json", default=None,
@@ -65,7 +68,7 @@ def run(args) -> int:
     formats = _formats(args.format, args.rounding)
     options = {}
     for name in units:
-        opts = {k: getattr(args, k) for k in ("rows", "cols", "mode")
+        opts = {k: getattr(args, k) for k in ("rows", "cols", "mode", "target")
                 if k in UNITS[name].options and getattr(args, k) is not None}
         if opts:
             options[name] = opts
