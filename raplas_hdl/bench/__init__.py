@@ -1,0 +1,18 @@
+"""``raplas-hdl bench``: run time against error, with hardware cost and the Pareto front.
+
+- :mod:`.sweep`: the sweep's points (format x rounding x mode x scene x bundle x backend) and
+  their measurement (render timings and throughput, error against float64 per pair and per
+  pixel, error against the exact reference R from the stress families);
+- :mod:`.cost`: the hardware cost of each format and rounding from Yosys (through
+  :mod:`raplas_hdl.synth`, cached), and the synthesis checks of the FP24 units;
+- :mod:`.pareto`: configurations aggregated over scenes, and their Pareto fronts;
+- :mod:`.report`: CSV, JSON, PNG plots and the markdown report.
+
+Nothing here imports Amaranth at module level (only :mod:`raplas_hdl.synth` elaborates
+units, when a synthesis is not cached).
+"""
+
+from .pareto import aggregate, pareto_front
+from .sweep import BenchSpec, full_spec, quick_spec, run_sweep
+
+__all__ = ["BenchSpec", "aggregate", "full_spec", "pareto_front", "quick_spec", "run_sweep"]

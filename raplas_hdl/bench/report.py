@@ -1,0 +1,472 @@
+"""Outputs of ``raplas-hdl bench``: ``results.csv``, ``results.json``, PNG plots and the markdown
+report (:func:`write_outputs`)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import platform
+from pathlib import Path
+
+from .pareto import COSTS, ERRORS, aggregate, fronts
+
+__all__ = ["STRESS_CAMPAIGN_JSON", "jsonable", "load_results", "write_csv", "write_json",
+           "plot", "render_markdown", "write_outputs", "machine"]
+
+#: Written by the stress campaign (another command); summarised here when present.
+STRESS_CAMPAIGN_JSON = Path(__file__).resolve().parents[2] / "docs" / "results" / \
+    "stress_campaign.json"
+
+
+def jsonable(x):
+    """Plain JSON values: non-finite floats become the strings ``"inf"``, ``"-inf"``,
+    ``"nan"``; tuples lists; NumPy scalars Python numbers."""
+    if isinstance(x, dict):
+        return {str(k): jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [jsonable(v) for v in x]
+    if hasattr(x, "item") and not isinstance(x, (str, bytes)):
+        x = x.item()
+    if isinstance(x, float) and not math.isfinite(x):
+        return str(x)
+    return x
+
+
+def _unjson(x):
+    if isinstance(x, dict):
+        return {k: _unjson(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_unjson(v) for v in x]
+    if x in ("inf", "-inf", "nan"):
+        return float(x)
+    return x
+
+
+def load_results(path) -> dict:
+    """Read a ``results.json`` back (the non-finite strings become floats again, the bundle
+    sizes of the spec tuples)."""
+    res = _unjson(json.loads(Path(path).read_text()))
+    res["spec"]["bundles"] = [tuple(b) for b in res["spec"]["bundles"]]
+    return res
+
+
+def machine() -> dict:
+    import numba
+    import numpy
+
+    return {"platform": platform.platform(), "processor": platform.processor() or
+            platform.machine(), "cpus": os.cpu_count(), "python": platform.python_version(),
+            "numpy": numpy.__version__, "numba": numba.__version__}
+
+
+def _columns(points):
+    cols = []
+    for p in points:
+        for k in p:
+            if k not in cols:
+                cols.append(k)
+    return cols
+
+
+def write_csv(points: list[dict], path) -> Path:
+    path = Path(path)
+    cols = _columns(points)
+    with path.open("w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=cols)
+        w.writeheader()
+        for p in points:
+            w.writerow({k: _cell(p.get(k)) for k in cols})
+    return path
+
+
+def _cell(v):
+    if isinstance(v, float):
+        return repr(v) if math.isfinite(v) else str(v)
+    return "" if v is None else v
+
+
+def write_json(results: dict, path) -> Path:
+    path = Path(path)
+    path.write_text(json.dumps(jsonable(results), indent=1, sort_keys=True) + "\n")
+    return path
+
+
+# -- plots ---------------------------------------------------------------------------------
+
+_MARK = {"FP16": "v", "FP20": "s", "FP24": "o", "FP32": "D"}
+_COL = {"rtz": "tab:blue", "rne": "tab:orange", "chop": "tab:green"}
+
+
+_SHORT = {"err_pixels": "pixels differing", "err_t": "median rel. error of t"}
+
+
+def _floor(v, lo):
+    return v if v > lo else lo
+
+
+def plot(results: dict, out_dir) -> list[Path]:
+    """``pareto_time.png``, ``pareto_hw.png`` (each: both errors against one cost, the front
+    marked) and ``error_by_format.png`` (per scene, error against the format)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out_dir = Path(out_dir)
+    rows = aggregate(results["points"])
+    fr = fronts(rows)
+    paths = []
+    floors = {"err_pixels": 1e-4, "err_t": 1e-9}
+    for cost, fname in (("time_s", "pareto_time.png"), ("hw_cost", "pareto_hw.png")):
+        fig, axes = plt.subplots(1, 2, figsize=(12, 4.8))
+        for ax, err in zip(axes, ERRORS):
+            lo = floors[err]
+            for r in rows:
+                if r.get(cost) is None or not math.isfinite(r[err]):
+                    continue
+                ax.scatter(r[cost], _floor(r[err], lo), marker=_MARK.get(r["format"], "x"),
+                           color=_COL.get(r["rounding"], "k"),
+                           facecolors="none" if r["mode"] == "conservative" else None, s=46)
+            idx = fr[(err, cost)]
+            if idx:
+                xs = [rows[i][cost] for i in idx]
+                ys = [_floor(rows[i][err], lo) for i in idx]
+                ax.step(xs, ys, where="post", color="crimson", lw=1.2, zorder=0)
+                ax.scatter(xs, ys, s=160, facecolors="none", edgecolors="crimson", lw=1.5,
+                           label="Pareto front")
+                for i in idx:
+                    ax.annotate(rows[i]["config"], (rows[i][cost], _floor(rows[i][err], lo)),
+                                fontsize=7, xytext=(4, 4), textcoords="offset points")
+            ax.set_yscale("log")
+            ax.set_xlabel(COSTS[cost])
+            ax.set_ylabel(_SHORT[err] + f" (0 drawn at {lo:g})")
+            ax.set_title(ERRORS[err], fontsize=9)
+            ax.grid(alpha=0.3)
+        handles = [plt.Line2D([], [], marker=m, ls="", color="gray", label=f)
+                   for f, m in _MARK.items() if any(r["format"] == f for r in rows)]
+        handles += [plt.Line2D([], [], marker="o", ls="", color=c, label=k)
+                    for k, c in _COL.items() if any(r["rounding"] == k for r in rows)]
+        handles += [plt.Line2D([], [], marker="o", ls="", mfc="none", color="gray",
+                               label="conservative (hollow)")]
+        handles += [plt.Line2D([], [], marker="o", ls="", mfc="none", ms=11, color="crimson",
+                               label="Pareto front")]
+        fig.legend(handles=handles, loc="upper center", ncol=len(handles), fontsize=8)
+        fig.tight_layout(rect=(0, 0, 1, 0.93))
+        p = out_dir / fname
+        fig.savefig(p, dpi=110)
+        plt.close(fig)
+        paths.append(p)
+
+    pts = [p for p in results["points"] if p["backend"] != "float64"
+           and p["grid"] in ("main", "meshes")]
+    r0 = results["spec"]["roundings"][0]
+    m0 = results["spec"]["modes"][0]
+    sel = [p for p in pts if p["rounding"] == r0 and p["mode"] == m0]
+    scenes = list(dict.fromkeys(p["scene"] for p in sel))
+    fmts = list(dict.fromkeys(p["format"] for p in sel))
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.5))
+    for key, ax, lo, label in (("t_rel_median", axes[0], 1e-9, "median relative error of t"),
+                               ("tri_differs", axes[1], 1e-4, "pixels whose triangle differs"),
+                               ("psnr", axes[2], None, "PSNR vs float64 (dB, inf drawn at 100)")):
+        for s in scenes:
+            ys = []
+            for f in fmts:
+                v = next((p[key] for p in sel if p["scene"] == s and p["format"] == f), math.nan)
+                v = float(v) if v is not None else math.nan
+                if key == "psnr":
+                    v = 100.0 if math.isinf(v) else v
+                elif lo is not None and math.isfinite(v):
+                    v = _floor(v, lo)
+                ys.append(v)
+            ax.plot(fmts, ys, marker="o", label=s)
+        if lo is not None:
+            ax.set_yscale("log")
+        ax.set_title(f"{label}\n({r0}, {m0} mode)", fontsize=9)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    p = out_dir / "error_by_format.png"
+    fig.savefig(p, dpi=110)
+    plt.close(fig)
+    paths.append(p)
+    return paths
+
+
+# -- markdown ------------------------------------------------------------------------------
+
+def _f(v, spec="{:.3g}"):
+    if v is None:
+        return "-"
+    if isinstance(v, str):
+        return v
+    if isinstance(v, float):
+        if math.isnan(v):
+            return "n/a"
+        if math.isinf(v):
+            return "inf"
+    return spec.format(v)
+
+
+def _pct(v):
+    return "-" if v is None else ("n/a" if isinstance(v, float) and math.isnan(v)
+                                  else f"{100 * v:.2f} %")
+
+
+def _table(head, rows):
+    lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
+    lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def _stress_campaign_section(path=STRESS_CAMPAIGN_JSON) -> list[str]:
+    lines = ["## Stress campaign", ""]
+    if not Path(path).exists():
+        return lines + [f"`{_rel(path)}` is not there yet: the stress campaign (issue 6, point "
+                        "2; its own command) writes it. The R metrics above come from the "
+                        "seeded stress families run by this benchmark (smaller).", ""]
+    try:
+        data = json.loads(Path(path).read_text())
+    except ValueError as exc:
+        return lines + [f"`{_rel(path)}` could not be read: {exc}", ""]
+    lines.append(f"Results of the stress campaign, from `{_rel(path)}` (written by the campaign "
+                 "command, read here):")
+    lines.append("")
+    if isinstance(data, dict):
+        for k in ("command", "generated", "date", "seed", "cases", "total_cases", "wall_seconds"):
+            if k in data:
+                lines.append(f"- {k}: `{data[k]}`")
+        summary = data.get("summary") or data.get("results") or data.get("pooled")
+        if isinstance(summary, list) and summary and isinstance(summary[0], dict):
+            keys = [k for k in summary[0] if not isinstance(summary[0][k], (dict, list))][:10]
+            lines += ["", _table(keys, [[_f(r.get(k)) for k in keys] for r in summary[:40]])]
+        elif isinstance(summary, dict):
+            lines += ["", "```", json.dumps(jsonable(summary), indent=1)[:3000], "```"]
+        else:
+            lines.append(f"- top-level keys: {', '.join(sorted(data))}")
+    elif isinstance(data, list) and data and isinstance(data[0], dict):
+        keys = [k for k in data[0] if not isinstance(data[0][k], (dict, list))][:10]
+        lines += [_table(keys, [[_f(r.get(k)) for k in keys] for r in data[:40]])]
+    lines.append("")
+    return lines
+
+
+def _rel(path, start=None):
+    root = Path(__file__).resolve().parents[2]
+    try:
+        return os.path.relpath(Path(path).resolve(), start or root)
+    except ValueError:
+        return str(path)
+
+
+def render_markdown(results: dict, plots: list, md_path, *, command: str,
+                    files: list) -> str:
+    """The markdown report (paths of the plots relative to ``md_path``)."""
+    spec = results["spec"]
+    pts = results["points"]
+    model = [p for p in pts if p["backend"] != "float64"]
+    rows = aggregate(pts)
+    fr = fronts(rows)
+    md_dir = Path(md_path).resolve().parent
+    mach = results.get("machine") or machine()
+    L = ["# Benchmark: run time against error", "",
+         "Generated by `raplas-hdl bench` (`raplas_hdl/bench/`). Do not edit by hand.", "",
+         f"- **Command**: `{results.get('command', command)}`"
+         + (f" (report regenerated from its JSON by `{command}`)"
+            if results.get("command", command) != command else ""),
+         f"- **Date**: {results['started']}; wall time {results['wall_seconds']:.0f} s "
+         f"({len(model)} model points, {len(pts) - len(model)} float64 reference renders)",
+         f"- **Machine**: {mach['platform']}, {mach['cpus']} CPUs ({mach['processor']}), "
+         f"Python {mach['python']}, NumPy {mach['numpy']}, numba {mach['numba']}; shared with "
+         "other jobs, so times carry noise of some 10-30 %",
+         f"- **Runs per point**: {spec['repeats']} (the fastest run's timings are kept); "
+         "a warm-up render per backend, mode and bundle size keeps numba's compile out of "
+         "the timings",
+         f"- **Images**: procedural scenes {spec['size'][0]}x{spec['size'][1]}, meshes "
+         f"{spec['mesh_size'][0]}x{spec['mesh_size'][1]}, soft shadows "
+         f"{spec['shadow'][0]}x{spec['shadow'][1]} per point (sizes chosen to keep the "
+         "campaign in about 25 minutes on 2 shared cores)",
+         f"- **Axes**: formats {', '.join(spec['formats'])}; roundings "
+         f"{', '.join(spec['roundings'])}; modes {', '.join(spec['modes'])}; scenes "
+         f"{', '.join(spec['scenes'] + results.get('meshes', []))}; bundles "
+         f"{', '.join(f'{r}x{c}' for r, c in spec['bundles'])} (main "
+         f"{spec['bundles'][0][0]}x{spec['bundles'][0][1]})",
+         f"- **Stress families for R**: {spec['per_family']} rays per family, seed "
+         f"{spec['seed']}", ""]
+    for n in results.get("notes", []):
+        L.append(f"> Note: {n}")
+    if results.get("notes"):
+        L.append("")
+    L += ["## What is measured", "",
+          "Grids: `main` = every format x rounding x mode on every procedural scene at the main "
+          "bundle size (the Pareto fronts use it); `meshes` = every format on the mesh "
+          "files at the first rounding and mode (the conservative mode's wide margins at "
+          "FP16/FP20 make a 70k-triangle mesh issue nearly the brute-force pairs: more memory "
+          "than this machine has); `bundles` = every format on the procedural scenes at "
+          "the other bundle sizes (first rounding and mode). Each scene is normalised (a "
+          "power-of-two scale, exact) into its format's domain: bound = min(2^P, 256) with P "
+          "the domain's exponent (FP16: 4, the others: 256); the float64 reference is "
+          "rendered at the same bound.", "",
+          "- **Error against float64, per pair**: every pair the model issues is evaluated "
+          "in float64 on the original geometry after the render; `t_rel` = |t - t64| / |t64| "
+          "over the *in-domain* pairs both hit (median, p99); `pair_hit_differs` counts "
+          "in-domain pairs whose hit bit differs. A pair is *out of the domain* when its "
+          "triangle is (a coordinate beyond 2^P or an edge below the minimum edge): the "
+          "sweep loads such triangles (the host's `render` would drop them) and counts "
+          "their pairs in `pairs_out_of_domain`.",
+          "- **Error against float64, per pixel**: PSNR of the 8-bit images; fraction of "
+          "pixels whose nearest triangle differs (`tri_differs`; `tri_differs_in_domain` "
+          "counts only pixels whose triangles, in both renders, are in the domain).",
+          "- **Error against R** (the exact reference): false hits, false misses and edge "
+          "leaks of the model on the seeded stress families of `raplas_hdl.host.stress`, once "
+          "per format, rounding and mode (in-domain pairs only), and the relative error of "
+          "t against R's.",
+          "- **Run time**: wall time per render stage (`t_*`), rays per second over the "
+          "render, pairs per second over the unit's stages (`primary unit` + `shadow unit`).",
+          "", "### What \"cost\" means", "",
+          "Two costs. **Run time**: the model backend's wall time for the render (summed over "
+          "the scenes of a configuration). **Hardware**: the Yosys resources "
+          "(`synth_xilinx -family xc4v`, through `raplas_hdl.synth`, cached under "
+          "`build/synth`) of the ray-triangle unit the format implies, *composed* as "
+          "18 fp-mul + 15 fp-add of that format and rounding (synthesising the whole unit per "
+          "format takes 3-6 minutes each; the comparators and delay lines are left out). The "
+          "scalar hardware cost is the fraction of one XC4VSX35 the unit takes, "
+          "max(DSP48/192, slices/15360): its binding resource (1/cost units fit). Slices are "
+          "Yosys-based estimates and no timing is implied.", ""]
+
+    L += ["## Pareto fronts", "",
+          "Configurations of the `main` grid, aggregated over its scenes; a configuration is "
+          "on the front when no other is at least as good in both error and cost. Read "
+          "them with two caveats: the model's *run time* hardly depends on the format (it "
+          "is software emulation; differences of a few percent are noise and pair counts), "
+          "so the hardware-cost fronts are the ones that rank formats; and the t error "
+          "counts only pairs that both the model and float64 hit, so the conservative "
+          "mode's extra hits (no false misses, many false hits: nearest triangles move to "
+          "coplanar neighbours and shadow rays are blocked more often) show in the pixel "
+          "error and PSNR, not in the t error.", ""]
+    for (err, cost), idx in fr.items():
+        L.append(f"**{ERRORS[err]}** against **{COSTS[cost]}**:")
+        L.append("")
+        L.append(_table(["configuration", "error", "cost", "DSP48", "slices~", "time (s)"],
+                        [[rows[i]["config"], _f(rows[i][err]), _f(rows[i][cost]),
+                          _f(rows[i]["hw_dsp48"]), _f(rows[i]["hw_slices"]),
+                          _f(rows[i]["time_s"])] for i in idx]))
+        L.append("")
+    for p in plots:
+        L.append(f"![{p.stem}]({os.path.relpath(p.resolve(), md_dir)})")
+        L.append("")
+
+    L += ["## Configurations (main grid, aggregated)", "",
+          _table(["config", "bundle", "scenes", "pixels differ", "in domain", "t_rel median",
+                  "t_rel p99 (max)", "min PSNR", "out-of-domain pairs", "time (s)",
+                  "pairs/s", "DSP48", "slices~", "hw cost", "R: FH", "R: FM", "R: leaks"],
+                 [[r["config"], r["bundle"], r["scenes"], _pct(r["err_pixels"]),
+                   _pct(r["err_pixels_in_domain"]), _f(r["err_t"]), _f(r["err_t_p99"]),
+                   _f(r["psnr_min"], "{:.1f}"), _pct(r["pairs_out_of_domain_frac"]),
+                   _f(r["time_s"], "{:.1f}"), _f(r["pairs_per_s"], "{:.3g}"),
+                   _f(r["hw_dsp48"]), _f(r["hw_slices"]), _f(r["hw_cost"]),
+                   _f(r["r_false_hits"]), _f(r["r_false_misses"]), _f(r["r_leaks"])]
+                  for r in sorted(rows, key=lambda r: (r["format"], r["rounding"], r["mode"]))]),
+          ""]
+
+    from .sweep import missing_metrics
+
+    holes = [(p, missing_metrics(p)) for p in pts if missing_metrics(p)]
+    L += ["## Points", "",
+          "Every model point (all metrics are in `results.csv` / `results.json`). "
+          + ("Every point has every metric." if not holes else
+             f"{len(holes)} points lack a value, because they have no in-domain hit pair or "
+             "no in-domain pixel (their triangles are all outside the format's domain): "
+             + "; ".join(f"{p['format']}/{p['rounding']} {p['mode']} {p['scene']} "
+                         f"{p['bundle']}: {', '.join(m)}" for p, m in holes) + "."), "",
+          _table(["grid", "format", "mode", "scene", "bundle", "time (s)", "unit (s)",
+                  "rays/s", "pairs/s", "t_rel med", "t_rel p99", "pixels differ",
+                  "PSNR", "ood pairs", "events o/u/i (operations)"],
+                 [[p["grid"], f"{p['format']}/{p['rounding']}", p["mode"], p["scene"],
+                   p["bundle"], _f(p["t_total"], "{:.2f}"),
+                   _f(p["t_primary_unit"] + p["t_shadow_unit"], "{:.2f}"),
+                   _f(p["rays_per_s"], "{:.3g}"), _f(p["pairs_per_s"], "{:.3g}"),
+                   _f(p["t_rel_median"]), _f(p["t_rel_p99"]), _pct(p["tri_differs"]),
+                   _f(p["psnr"], "{:.1f}"), _pct(p["pairs_out_of_domain_frac"]),
+                   f"{p['overflow']}/{p['underflow']}/{p['invalid']}"] for p in model]), ""]
+    refs = [p for p in pts if p["backend"] == "float64"]
+    L += ["### float64 reference renders", "",
+          _table(["scene", "bundle", "bound", "size", "time (s)", "rays/s", "pairs/s"],
+                 [[p["scene"], p["bundle"], _f(p["bound"], "{:g}"), p["size"],
+                   _f(p["t_total"], "{:.2f}"), _f(p["rays_per_s"], "{:.3g}"),
+                   _f(p["pairs_per_s"], "{:.3g}")] for p in refs]), ""]
+
+    L += ["## Against R: stress families", "",
+          f"{spec['per_family']} rays per family (seed {spec['seed']}), in-domain pairs only.",
+          "", _table(["format", "mode", "pairs", "in domain", "R hits", "false hits",
+                      "false misses", "edge rays", "leaks", "t_rel med", "t_rel p99"],
+                     [[k, m, v["r_pairs"], v["r_in_domain"], v["r_hits"], v["r_false_hits"],
+                       v["r_false_misses"], v["r_edge_rays"], v["r_leaks"],
+                       _f(v["r_t_rel_median"]), _f(v["r_t_rel_p99"])]
+                      for k, d in results["stress"].items() for m, v in d.items()]), ""]
+
+    costs = results.get("costs", {})
+    L += ["## Hardware cost per format", "",
+          "Ray-triangle unit composed as 18 x fp-mul + 15 x fp-add (Yosys, Virtex-4).", "",
+          _table(["format", "fp-mul DSP48/LUT/slices~", "fp-add LUT/slices~", "unit DSP48",
+                  "unit LUTs", "unit FFs", "unit slices~", "device fraction", "units fit",
+                  "source"],
+                 [[k, f"{c['fp_mul']['dsp48']}/{c['fp_mul']['luts']}/"
+                      f"{c['fp_mul']['slices_est']}",
+                   f"{c['fp_add']['luts']}/{c['fp_add']['slices_est']}", c["dsp48"], c["luts"],
+                   c["ffs"], c["slices_est"], _f(c["device_fraction"]), c["units_fit"],
+                   "; ".join(c["sources"])] if "error" not in c else [k] + ["-"] * 8 +
+                  [c["error"]] for k, c in costs.items()]), ""]
+    chk = results.get("synth_checks", {})
+    if chk:
+        L += ["### Synthesis checks (FP24)", "",
+              _table(["unit", "rounding", "DSP48", "LUTs", "FFs", "slices~", "path cells",
+                      "target", "source"],
+                     [[u, c["rounding"], c["dsp48"], c["luts"], c["ffs"], c["slices_est"],
+                       c["path_cells"], {"fp-mul": "exactly 1", "plane-sphere-tester":
+                                         "at most 3", "ray-triangle": "at most 18"}.get(u, ""),
+                       c["source"]] for u, c in chk.items()]), ""]
+        rt = chk.get("ray-triangle")
+        comp = costs.get(f"FP24/{rt['rounding']}") if rt else None
+        if rt and comp and "error" not in comp:
+            L += [f"The synthesised FP24/{rt['rounding']} ray-triangle unit takes {rt['dsp48']} "
+                  f"DSP48, {rt['luts']} LUTs and ~{rt['slices_est']} slices; the composition "
+                  f"gives {comp['dsp48']} DSP48, {comp['luts']} LUTs and ~{comp['slices_est']} "
+                  f"slices ({100 * (comp['slices_est'] / rt['slices_est'] - 1):+.0f} % slices).",
+                  ""]
+    if results.get("rtl"):
+        r = results["rtl"]
+        L += ["## RTL point", ""]
+        if "unavailable" in r:
+            L += [f"rtl backend unavailable: {r['unavailable']}", ""]
+        else:
+            L += [f"{r['scene']}, {r['size']}, {r['bundle']} bundles, no shadows, {r['format']} "
+                  f"{r['mode']}, {r['simulator']}: rtl {r['rtl_seconds']:.1f} s against model "
+                  f"{r['model_seconds']:.2f} s ({r['pairs_issued']} pairs); equal to the model "
+                  f"bit for bit: **{r['equal_to_model']}**.", ""]
+    L += _stress_campaign_section()
+    L += ["## Files", ""] + [f"- `{_rel(f)}`" for f in files] + [""]
+    return "\n".join(L)
+
+
+def write_outputs(results: dict, out_dir, md_path, *, command: str) -> list[Path]:
+    """Write ``results.csv``, ``results.json`` and the plots under ``out_dir`` and the
+    markdown report at ``md_path``. Returns the paths written."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    results.setdefault("machine", machine())
+    results.setdefault("command", command)
+    if results["command"] != command:
+        results["report_command"] = command
+    csv_p = write_csv(results["points"], out_dir / "results.csv")
+    plots = plot(results, out_dir)
+    results["aggregate"] = aggregate(results["points"])
+    results["fronts"] = {f"{e} vs {c}": [results["aggregate"][i]["config"] for i in idx]
+                         for (e, c), idx in fronts(results["aggregate"]).items()}
+    json_p = write_json(results, out_dir / "results.json")
+    md_path = Path(md_path)
+    md_path.parent.mkdir(parents=True, exist_ok=True)
+    files = [csv_p, json_p, *plots, md_path]
+    md_path.write_text(render_markdown(results, plots, md_path, command=command, files=files))
+    return files
