@@ -69,6 +69,8 @@ def test_summary_counts(reference):
     for word in ("rays", "bundles", "spheres", "plane tests", "pairs", "hits", "events",
                  "time", "PSNR inf"):
         assert word in text
+    # the event counters count operations (summed over the issued pairs), not pairs
+    assert "(operations)" in text and "(pairs)" not in text
     # the shadows darken some pixels, and the unshadowed ones are fully lit
     vis = reference.visibility[np.isfinite(reference.visibility)]
     assert vis.min() < 0.5 and vis.max() == 1.0

@@ -22,10 +22,14 @@ def composed(vec, fmt, mode):
     """The documented operation order, one NumPy-API operation at a time."""
     o, d, v0, e1, e2, n = (vec[k].astype(np.uint32) for k in NAMES)
     flags = np.zeros(len(o), np.uint8)
+    counts = np.zeros((len(o), 3), np.uint8)       # operations with each event
 
     def op(fn, a, b):
         r, f = fn(a, b, fmt, flags=True)
-        flags[:] |= f if f.ndim == 1 else np.bitwise_or.reduce(f, axis=1)
+        f2 = f.reshape(len(o), -1)
+        flags[:] |= np.bitwise_or.reduce(f2, axis=1)
+        for k, bit in enumerate((1, 2, 4)):
+            counts[:, k] += np.count_nonzero(f2 & bit, axis=1).astype(np.uint8)
         return r
 
     def dot(a, b):                      # (a0*b0 + a1*b1) + a2*b2
@@ -57,7 +61,8 @@ def composed(vec, fmt, mode):
         pos = le(nm["u"], up) & le(nm["v"], vp) & le(nm["w"], w) & le(nm["t"], tp)
         neg = le(up, m["u"]) & le(vp, m["v"]) & le(w, m["w"]) & le(tp, m["t"])
         hit = bad | (le(nm["det"], det) & pos) | (le(det, m["det"]) & neg)
-    return {"hit": hit, "t": tp, "u": up, "v": vp, "det": det, "flags": flags}
+    return {"hit": hit, "t": tp, "u": up, "v": vp, "det": det, "flags": flags,
+            "event_counts": counts}
 
 
 @pytest.mark.parametrize("fmt, mode", [
@@ -73,6 +78,55 @@ def test_model_is_the_documented_operation_order(fmt, mode):
         assert np.array_equal(got[key], exp[key]), key
     assert 0 < got["hit"].sum() < len(got["hit"])
     assert (got["flags"] != 0).any()
+    # some pairs raise an event in more than one operation
+    assert got["event_counts"].max() >= 2
+
+
+def event_pairs(fmt):
+    """Pairs with known operation event counts ``(overflow, underflow, invalid)``.
+
+    With ``O = V0 = 0`` and ``E1 = E2 = 0`` only ``det = N.D`` and the cross products
+    ``Q = D x T`` can raise events (``T = 0``):
+
+    - ``N = D = (b, b, b)``, ``b = 2**(emax // 2 + 2)``: the three products of det
+      overflow; with ``rtz`` and ``chop`` they saturate to the largest finite value and
+      both sums overflow again (5), with ``rne`` they are infinities that add without an
+      event (3);
+    - ``N = D = (s, s, s)``, ``s = 2**((emin - 2) // 2)``: the three products of det
+      underflow (flushed to zero); their sums are exact zeros: 3;
+    - ``D = (inf, inf, 1)``, ``N = (0, 0, 1)``: ``0 * inf`` twice in det, and ``inf * 0``
+      in 4 of the 6 products of ``D x T``; the NaNs they make raise nothing further: 6;
+    - an ordinary hit: nothing.
+
+    Returns the six operand arrays (``o, d, v0, e1, e2, n``) and the expected counts.
+    """
+    big = 2.0 ** (fmt.emax // 2 + 2)
+    small = 2.0 ** ((fmt.emin - 2) // 2)
+    inf = np.inf
+    rows = [  # o, d, v0, e1, e2, n
+        ([0, 0, 0], [big] * 3, [0, 0, 0], [0, 0, 0], [0, 0, 0], [big] * 3),
+        ([0, 0, 0], [small] * 3, [0, 0, 0], [0, 0, 0], [0, 0, 0], [small] * 3),
+        ([0, 0, 0], [inf, inf, 1], [0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 1]),
+        ([0.25, 0.25, 1], [0, 0, -1], [0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]),
+    ]
+    ops = [fpm.encode(np.array([r[k] for r in rows], float), fmt) for k in range(6)]
+    counts = np.array([[3 if fmt.rounding == "rne" else 5, 0, 0], [0, 3, 0], [0, 0, 6],
+                       [0, 0, 0]], np.uint8)
+    return ops, counts
+
+
+@pytest.mark.parametrize("fmt, mode", [(FP24, "paper"), (FP24.with_rounding("rne"),
+                                                          "conservative"),
+                                       (FPFormat(5, 10, "chop"), "paper")])
+def test_event_counts_of_constructed_pairs(fmt, mode):
+    ops, want = event_pairs(fmt)
+    got = intersect(*ops, fmt, mode=mode)
+    exp = composed(dict(zip(NAMES, ops)), fmt, mode)
+    assert np.array_equal(got["event_counts"], exp["event_counts"])
+    assert np.array_equal(got["event_counts"], want)
+    # the OR flags are the non-zero counts
+    ored = ((got["event_counts"] != 0) * np.array([1, 2, 4])).sum(axis=1)
+    assert np.array_equal(got["flags"], ored)
 
 
 def _case(fmt, o, d, v0, v1, v2):

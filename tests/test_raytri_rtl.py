@@ -1,10 +1,11 @@
 # amaranth: UnusedElaboratable=no
 """RayTriangleUnit in Amaranth's simulator against the golden model, every output bit.
 
-Each check streams vectors of all stress families plus special patterns through the
-unit with a gap-free burst first (one pair per clock, result after ``latency`` cycles)
-and then random gaps and back-pressure, and compares every field of every result, in
-order, with :func:`raplas_hdl.model.ray_triangle.intersect`.
+Each check streams vectors of all stress families plus special patterns, and pairs with
+known per-operation event counts, through the unit with a gap-free burst first (one pair
+per clock, result after ``latency`` cycles) and then random gaps and back-pressure, and
+compares every field of every result (the per-pair event counts included), in order,
+with :func:`raplas_hdl.model.ray_triangle.intersect`.
 """
 
 import random
@@ -17,7 +18,9 @@ from amaranth.sim import Simulator
 from raplas_hdl.fp import FP24, FPFormat
 from raplas_hdl.host.stress import vectors
 from raplas_hdl.model.ray_triangle import intersect
-from raplas_hdl.rtl.ray_triangle import RayTriangleUnit, input_layout, output_layout
+from raplas_hdl.rtl.ray_triangle import (EVENTS, RayTriangleUnit, input_layout,
+                                         output_layout)
+from test_raytri_model import event_pairs
 
 NAMES = ("o", "d", "v0", "e1", "e2", "n")
 
@@ -47,7 +50,9 @@ def expected(fmt, vec, ray_ids, tri_ids, mode, margin_scale=1.0):
     return {"ray_id": np.asarray(ray_ids, np.uint64), "tri_id": np.asarray(tri_ids, np.uint64),
             "hit": ref["hit"].astype(np.uint64), "t": ref["t"].astype(np.uint64),
             "u": ref["u"].astype(np.uint64), "v": ref["v"].astype(np.uint64),
-            "det": ref["det"].astype(np.uint64), "flags": ref["flags"].astype(np.uint64)}
+            "det": ref["det"].astype(np.uint64), "flags": ref["flags"].astype(np.uint64),
+            **{f"n_{ev}": ref["event_counts"][:, k].astype(np.uint64)
+               for k, ev in enumerate(EVENTS)}}
 
 
 def compare(got, exp):
@@ -108,6 +113,10 @@ def run_unit(dut, payloads, burst, idle, stall, seed):
 def check_unit(fmt, mode, count, seed, idle=0.3, stall=0.4, burst=30):
     dut = RayTriangleUnit(fmt, mode=mode)
     vec = vectors(fmt, count, seed)
+    # after the burst, pairs with known event counts (several operations per event)
+    ev, want = event_pairs(fmt)
+    vec = {k: np.concatenate([vec[k], ev[i]]) for i, k in enumerate(NAMES)}
+    count = len(vec["o"])
     rng = np.random.default_rng(seed)
     ray_ids = rng.integers(0, 1 << 16, count)
     tri_ids = rng.integers(0, 1 << 16, count)
@@ -120,6 +129,8 @@ def check_unit(fmt, mode, count, seed, idle=0.3, stall=0.4, burst=30):
     assert [b - a for a, b in zip(t_in[:burst], t_out[:burst])] == [dut.latency] * burst
     exp = expected(fmt, vec, ray_ids, tri_ids, mode)
     compare(unpack_outputs(fmt, got), exp)
+    counts = np.stack([exp[f"n_{e}"] for e in EVENTS], axis=1)[-len(want):]
+    assert np.array_equal(counts, want)
     return exp
 
 

@@ -10,7 +10,7 @@ from raplas_hdl.fp import FP24, FPFormat
 from raplas_hdl.model.memory_image import UnitConfig
 from raplas_hdl.rtl.intersection import IntersectionUnit, build_intersection_unit
 from unit_amaranth_tb import simulate_runs
-from unit_scenes import check_against_model, scene_and_runs
+from unit_scenes import assert_operation_events, check_against_model, scene_and_runs
 
 SMALL = UnitConfig(fmt=FPFormat(5, 6), rows=2, cols=3, testers=2, tris_per_sphere=3,
                    max_triangles=32, max_spheres=24, fifo_depth=4)
@@ -25,6 +25,7 @@ def test_unit_amaranth_matches_model():
     assert sum(r[1]["pairs_skipped"] for r in ref) > 0
     assert sum(r[1]["hits"] for r in ref) > 0
     assert any(len(r[0]) == 1 and r[0]["empty"][0] for r in ref)
+    assert_operation_events(ref)
     # the pair FIFO filled up under back-pressure, and never went over
     assert results[-1][1]["_max_fifo_level"] == SMALL.fifo_depth
 

@@ -20,13 +20,39 @@ def with_enable(bundle, enable):
     return BundleMemory(bundle.plane_n, bundle.plane_p, bundle.ray_o, bundle.ray_d, enable)
 
 
+def extreme_directions(config, bundle):
+    """The bundle with its planes but ray directions that make the ray-triangle
+    operations raise every event, several times per pair: every third ray scaled up by
+    ``2**emax`` (overflow), the next scaled down by ``2**(4 - emax)`` (underflow), the
+    next with x and y infinite (invalid: infinities cancelling or times zero)."""
+    f = config.fmt
+    d = fpm.decode(bundle.ray_d, f)
+    k = np.arange(config.n_rays) % 3
+    d[k == 0] *= 2.0 ** f.emax
+    d[k == 1] *= 2.0 ** (4 - f.emax)
+    d[k == 2, :2] = np.inf
+    return BundleMemory(bundle.plane_n, bundle.plane_p, bundle.ray_o, fpm.encode(d, f),
+                        bundle.enable)
+
+
+def assert_operation_events(ref):
+    """The model's runs raise every event, and count operations, not pairs: each event
+    counter is above the number of pairs whose ORed flags have the event."""
+    for bit, name in ((1, "overflow"), (2, "underflow"), (4, "invalid")):
+        ops = sum(ctr[name] for _, ctr in ref)
+        pairs = sum(int(np.count_nonzero(out["flags"][out["empty"] == 0] & bit))
+                    for out, _ in ref)
+        assert 0 < pairs < ops, f"{name}: {ops} operations in {pairs} pairs"
+
+
 def scene_and_runs(config, n_tris, seed=0, size=1.2, extent=4.0):
     """A scene and a list of runs that covers every feature of the unit.
 
     Runs: all spheres (range); another bundle (the other bank) with a sphere list with
     repeats; the same bundle with more rays disabled (enable bits rewritten only); an
     empty list; a range whose rays are all disabled (an empty run that skips pairs); and
-    the first bundle again.
+    the first bundle's planes again, with extreme ray directions (arithmetic events,
+    :func:`extreme_directions`).
     """
     rng = np.random.default_rng(seed)
     scene = random_scene(config, n_tris, seed=seed, size=size, extent=extent, empty_spheres=2)
@@ -38,7 +64,7 @@ def scene_and_runs(config, n_tris, seed=0, size=1.2, extent=4.0):
     off = with_enable(c, np.zeros(config.n_rays, bool))
     ids = rng.integers(0, s, max(4, s // 2))
     runs = [(a, None), (b, ids), (b2, np.arange(s // 3, s)), (c, np.zeros(0, np.int64)),
-            (off, np.arange(0, s)), (a, np.arange(1, s // 2))]
+            (off, np.arange(0, s)), (extreme_directions(config, a), np.arange(1, s // 2))]
     return scene, runs
 
 

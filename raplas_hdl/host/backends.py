@@ -380,7 +380,8 @@ class ModelBackend(Backend):
         once: the per-pair arithmetic does not depend on the other pairs, so the results
         are the same bits (a test compares them with ``run_bundle``).
         """
-        from ..model.intersection import RESULT_DTYPE, empty_counters, enumerate_pairs
+        from ..model.intersection import (RESULT_DTYPE, empty_counters, enumerate_pairs,
+                                          event_counters)
         from ..model.plane_sphere import sphere_masks
         from ..model.ray_triangle import intersect
 
@@ -432,9 +433,7 @@ class ModelBackend(Backend):
             beats["flags"] = fl
             beats["last"][-1] = 1
             c["hits"] = int(beats["hit"].sum())
-            c["overflow"] = int(np.count_nonzero(fl & 1))
-            c["underflow"] = int(np.count_nonzero(fl & 2))
-            c["invalid"] = int(np.count_nonzero(fl & 4))
+            c.update(event_counters(res["event_counts"][sl]))
             out.append(self._convert(beats, c))
             pos += n
         return out

@@ -87,6 +87,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import multiprocessing
 import os
 import platform
 import time
@@ -556,7 +557,11 @@ def run_campaign(params: CampaignParams, out_dir="build/campaign", jobs=None,
                 if bar:
                     bar.update(1)
         else:
-            with ProcessPoolExecutor(max_workers=jobs, initializer=_worker_init) as pool:
+            # spawn, not fork: a fork after numba has started its thread pool (any earlier
+            # parallel kernel in this process) gives children that crash (BrokenProcessPool)
+            ctx = multiprocessing.get_context("spawn")
+            with ProcessPoolExecutor(max_workers=jobs, initializer=_worker_init,
+                                     mp_context=ctx) as pool:
                 futures = {pool.submit(run_shard, s, out): s for s in todo}
                 try:
                     for fut in as_completed(futures):

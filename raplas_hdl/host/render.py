@@ -21,7 +21,9 @@ Stages (each timed in :attr:`RenderResult.timings`):
 
 The summary counts rays, bundles, spheres, plane tests (host hierarchy and unit), pairs
 issued against brute force (every ray against every triangle), pairs skipped by
-early-out, hits, the unit's arithmetic events, and the hierarchy's skips per level.
+early-out, hits, the unit's arithmetic events (the ray-triangle operations that raised
+overflow, underflow, invalid, summed over the issued pairs), and the hierarchy's skips per
+level.
 """
 
 from __future__ import annotations
@@ -482,7 +484,7 @@ def format_summary(result: RenderResult, comparison: dict | None = None) -> str:
         f"sphere runs"),
         f"  hits      {st['hits']:>12,}  pixels hit {st['pixels_hit']:,}",
         (f"  events    overflow {st['events']['overflow']:,}, underflow "
-        f"{st['events']['underflow']:,}, invalid {st['events']['invalid']:,} (pairs)"),
+        f"{st['events']['underflow']:,}, invalid {st['events']['invalid']:,} (operations)"),
     ]
     if "points_behind_light" in st:
         lines.append(f"  shading points without a shadow bundle: behind the light "

@@ -89,9 +89,9 @@ _COUNTER_MEANING = {
     "pairs_issued": "counter: pairs sent to the ray-triangle unit",
     "pairs_skipped": "counter: pairs not issued (disabled rays)",
     "hits": "counter: hits",
-    "overflow": "counter: issued pairs that raised overflow",
-    "underflow": "counter: issued pairs that raised underflow",
-    "invalid": "counter: issued pairs that raised invalid",
+    "overflow": "counter: operations that raised overflow, over the issued pairs",
+    "underflow": "counter: operations that raised underflow, over the issued pairs",
+    "invalid": "counter: operations that raised invalid, over the issued pairs",
 }
 
 #: The register map, in address order.

@@ -25,7 +25,8 @@ import numpy as np
 
 from .memory_image import COUNTER_NAMES, BundleMemory, SceneMemory, UnitConfig
 
-__all__ = ["RESULT_DTYPE", "run_bundle", "enumerate_pairs", "empty_counters"]
+__all__ = ["RESULT_DTYPE", "run_bundle", "enumerate_pairs", "empty_counters",
+           "event_counters"]
 
 #: One beat of the unit's result stream.
 RESULT_DTYPE = np.dtype([("ray_id", "u4"), ("tri_id", "u4"), ("hit", "u1"), ("t", "u4"),
@@ -120,8 +121,9 @@ def run_bundle(config: UnitConfig, scene: SceneMemory, bundle: BundleMemory,
     counters : dict
         ``spheres``, ``plane_tests`` (``rows + cols`` per sphere), ``pairs_issued``,
         ``pairs_skipped`` (pairs of disabled rays), ``hits``, and ``overflow``,
-        ``underflow``, ``invalid``: the number of issued pairs whose ray-triangle
-        operations raised that event (the unit ORs the events of a pair's operations).
+        ``underflow``, ``invalid``: the number of ray-triangle operations that raised that
+        event, summed over the issued pairs (the result stream's ``flags`` is the OR of a
+        pair's events; these count its operations).
 
     Raises
     ------
@@ -168,7 +170,14 @@ def run_bundle(config: UnitConfig, scene: SceneMemory, bundle: BundleMemory,
     out["flags"] = flags
     out["last"][-1] = 1
     counters["hits"] = int(out["hit"].sum())
-    counters["overflow"] = int(np.count_nonzero(flags & 1))
-    counters["underflow"] = int(np.count_nonzero(flags & 2))
-    counters["invalid"] = int(np.count_nonzero(flags & 4))
+    counters.update(event_counters(res["event_counts"]))
     return out, counters
+
+
+def event_counters(event_counts) -> dict:
+    """The ``overflow``, ``underflow``, ``invalid`` counters from the ray-triangle model's
+    per-pair ``event_counts`` (n, 3): operations with each event, summed over the pairs."""
+    from .ray_triangle import EVENTS
+
+    totals = np.asarray(event_counts, dtype=np.int64).reshape(-1, 3).sum(axis=0)
+    return {name: int(v) for name, v in zip(EVENTS, totals)}

@@ -36,9 +36,11 @@ a *callee's* source changes (the FP kernels are compiled into the loop). So at i
 module compares a hash of the kernel sources with the one recorded beside its cache and
 drops its own cache entries when they differ.
 
-Outputs: ``hit``, ``t = t'``, ``u = u'``, ``v = v'``, ``det`` (bit patterns) and ``flags``,
+Outputs: ``hit``, ``t = t'``, ``u = u'``, ``v = v'``, ``det`` (bit patterns), ``flags``,
 the OR of the event flags of the pair's operations (33 in paper mode, 34 in
-conservative mode). The caller carries the ray and triangle IDs.
+conservative mode), and ``event_counts``, the number of the pair's operations that raised
+each event (overflow, underflow, invalid; 0 to 34 each). ``flags`` bit ``k`` is set exactly
+when count ``k`` is non-zero. The caller carries the ray and triangle IDs.
 """
 
 from __future__ import annotations
@@ -46,21 +48,32 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..fp.format import FLAG_OVERFLOW, FPFormat
+from ..fp.format import FLAG_INVALID, FLAG_OVERFLOW, FLAG_UNDERFLOW, FPFormat
 from ..fp.kernels import add_k, le_k, lt_k, mul_k, neg_k, rmode_code, sub_k
 from ..fp.numba_cache import drop_stale_cache
 from .conservative import MARGIN_NAMES, margin_constants, margins
 
-__all__ = ["intersect", "MODES", "N_OPS"]
+__all__ = ["intersect", "MODES", "N_OPS", "EVENTS"]
 
 MODES = ("paper", "conservative")
 #: Arithmetic operations per pair, by mode.
 N_OPS = {"paper": 33, "conservative": 34}
 
-_OVF = np.uint8(FLAG_OVERFLOW)
+#: The events counted per pair, in the columns of ``event_counts``.
+EVENTS = ("overflow", "underflow", "invalid")
+# _tally packs the flag bits by these values
+assert (FLAG_OVERFLOW, FLAG_UNDERFLOW, FLAG_INVALID) == (1, 2, 4)
 
 
 drop_stale_cache(__file__)
+
+
+@njit(cache=True)
+def _tally(f):
+    """An operation's event flags as packed counts: one byte per event (overflow in bits
+    0-7, underflow 8-15, invalid 16-23), so that sums of up to 255 operations add lanewise."""
+    f = np.int64(f)
+    return (f & 1) | ((f & 2) << 7) | ((f & 4) << 14)
 
 
 @njit(cache=True)
@@ -70,7 +83,7 @@ def _dot(a0, a1, a2, b0, b1, b2, e, m, r):
     p2, f2 = mul_k(a2, b2, e, m, r)
     s01, f3 = add_k(p0, p1, e, m, r)
     s, f4 = add_k(s01, p2, e, m, r)
-    return s, f0 | f1 | f2 | f3 | f4
+    return s, _tally(f0) + _tally(f1) + _tally(f2) + _tally(f3) + _tally(f4)
 
 
 @njit(cache=True)
@@ -79,7 +92,7 @@ def _cross_term(a, b, c, d, e, m, r):
     p, f0 = mul_k(a, b, e, m, r)
     q, f1 = mul_k(c, d, e, m, r)
     x, f2 = sub_k(p, q, e, m, r)
-    return x, f0 | f1 | f2
+    return x, _tally(f0) + _tally(f1) + _tally(f2)
 
 
 @njit(cache=True)
@@ -90,23 +103,30 @@ def _is_nan(a, e, m):
 
 
 @njit(cache=True)
-def _loop(o, d, v0, e1, e2, nn, e, m, r, conservative, marg, hit, t_o, u_o, v_o, det_o, fl_o):
+def _loop(o, d, v0, e1, e2, nn, e, m, r, conservative, marg, hit, t_o, u_o, v_o, det_o, fl_o,
+          cnt_o):
     sign = np.uint32(1) << (e + m)
     zero = np.uint32(0)
     for i in range(o.shape[0]):
         tx, f0 = sub_k(v0[i, 0], o[i, 0], e, m, r)
         ty, f1 = sub_k(v0[i, 1], o[i, 1], e, m, r)
         tz, f2 = sub_k(v0[i, 2], o[i, 2], e, m, r)
-        det, f3 = _dot(nn[i, 0], nn[i, 1], nn[i, 2], d[i, 0], d[i, 1], d[i, 2], e, m, r)
-        tp, f4 = _dot(nn[i, 0], nn[i, 1], nn[i, 2], tx, ty, tz, e, m, r)
-        qx, f5 = _cross_term(d[i, 1], tz, d[i, 2], ty, e, m, r)
-        qy, f6 = _cross_term(d[i, 2], tx, d[i, 0], tz, e, m, r)
-        qz, f7 = _cross_term(d[i, 0], ty, d[i, 1], tx, e, m, r)
-        qe2, f8 = _dot(qx, qy, qz, e2[i, 0], e2[i, 1], e2[i, 2], e, m, r)
+        det, c3 = _dot(nn[i, 0], nn[i, 1], nn[i, 2], d[i, 0], d[i, 1], d[i, 2], e, m, r)
+        tp, c4 = _dot(nn[i, 0], nn[i, 1], nn[i, 2], tx, ty, tz, e, m, r)
+        qx, c5 = _cross_term(d[i, 1], tz, d[i, 2], ty, e, m, r)
+        qy, c6 = _cross_term(d[i, 2], tx, d[i, 0], tz, e, m, r)
+        qz, c7 = _cross_term(d[i, 0], ty, d[i, 1], tx, e, m, r)
+        qe2, c8 = _dot(qx, qy, qz, e2[i, 0], e2[i, 1], e2[i, 2], e, m, r)
         up = neg_k(qe2, e, m)
-        vp, f9 = _dot(qx, qy, qz, e1[i, 0], e1[i, 1], e1[i, 2], e, m, r)
+        vp, c9 = _dot(qx, qy, qz, e1[i, 0], e1[i, 1], e1[i, 2], e, m, r)
         s, f10 = add_k(up, vp, e, m, r)
-        fl = f0 | f1 | f2 | f3 | f4 | f5 | f6 | f7 | f8 | f9 | f10
+        cnt = (_tally(f0) + _tally(f1) + _tally(f2) + c3 + c4 + c5 + c6 + c7 + c8 + c9
+               + _tally(f10))
+        if conservative:
+            w, f11 = sub_k(det, s, e, m, r)
+            cnt += _tally(f11)
+        n_ovf, n_unf, n_inv = cnt & 0xFF, (cnt >> 8) & 0xFF, (cnt >> 16) & 0xFF
+        fl = np.uint8(min(n_ovf, 1) | (min(n_unf, 1) << 1) | (min(n_inv, 1) << 2))
         if not conservative:
             if lt_k(zero, det, e, m):
                 h = (le_k(zero, up, e, m) and le_k(zero, vp, e, m) and le_k(s, det, e, m)
@@ -117,11 +137,9 @@ def _loop(o, d, v0, e1, e2, nn, e, m, r, conservative, marg, hit, t_o, u_o, v_o,
             else:
                 h = False
         else:
-            w, f11 = sub_k(det, s, e, m, r)
-            fl = fl | f11
             m_det, m_t, m_u, m_v, m_w = marg[i, 0], marg[i, 1], marg[i, 2], marg[i, 3], marg[i, 4]
             bad = (_is_nan(det, e, m) or _is_nan(tp, e, m) or _is_nan(up, e, m)
-                   or _is_nan(vp, e, m) or _is_nan(w, e, m) or (fl & _OVF) != 0)
+                   or _is_nan(vp, e, m) or _is_nan(w, e, m) or n_ovf != 0)
             pos = (le_k(m_u ^ sign, up, e, m) and le_k(m_v ^ sign, vp, e, m)
                    and le_k(m_w ^ sign, w, e, m) and le_k(m_t ^ sign, tp, e, m))
             neg = (le_k(up, m_u, e, m) and le_k(vp, m_v, e, m) and le_k(w, m_w, e, m)
@@ -134,6 +152,9 @@ def _loop(o, d, v0, e1, e2, nn, e, m, r, conservative, marg, hit, t_o, u_o, v_o,
         v_o[i] = vp
         det_o[i] = det
         fl_o[i] = fl
+        cnt_o[i, 0] = n_ovf
+        cnt_o[i, 1] = n_unf
+        cnt_o[i, 2] = n_inv
 
 
 def _vec(x, fmt, name):
@@ -168,8 +189,10 @@ def intersect(o, d, v0, e1, e2, n, fmt: FPFormat, mode: str = "paper",
     Returns
     -------
     dict
-        ``hit`` (bool), ``t``, ``u``, ``v``, ``det`` (uint32: t', u', v', det) and
-        ``flags`` (uint8, OR of the event flags of the pair's operations).
+        ``hit`` (bool), ``t``, ``u``, ``v``, ``det`` (uint32: t', u', v', det),
+        ``flags`` (uint8, OR of the event flags of the pair's operations) and
+        ``event_counts`` (uint8, shape (n, 3): the pair's operations that raised overflow,
+        underflow and invalid, columns in the order of :data:`EVENTS`).
 
     Raises
     ------
@@ -195,7 +218,8 @@ def intersect(o, d, v0, e1, e2, n, fmt: FPFormat, mode: str = "paper",
     hit = np.empty(count, dtype=np.bool_)
     outs = [np.empty(count, dtype=np.uint32) for _ in range(4)]
     fl = np.empty(count, dtype=np.uint8)
+    counts = np.empty((count, 3), dtype=np.uint8)
     _loop(*arrs, fmt.exp_bits, fmt.man_bits, rmode_code(fmt), conservative, marg, hit, *outs,
-          fl)
+          fl, counts)
     return {"hit": hit, "t": outs[0], "u": outs[1], "v": outs[2], "det": outs[3],
-            "flags": fl}
+            "flags": fl, "event_counts": counts}

@@ -40,7 +40,9 @@ reaches further back than the nearest FIFO's level):
 Counters (32 bits, wrap around, zeroed by ``clear``): ``cycles`` (cycles while a run is
 outstanding), ``spheres`` and ``plane_tests`` (counted at the array input), ``pairs_issued``
 (at the ray-triangle input), ``pairs_skipped`` (disabled rays), ``hits``, and ``overflow``,
-``underflow``, ``invalid``: issued pairs whose operations raised the event.
+``underflow``, ``invalid``: the operations that raised the event, summed over the issued
+pairs (the ray-triangle unit counts them per pair, up to 34, beside the ORed ``flags``
+of the result stream).
 """
 
 from __future__ import annotations
@@ -517,8 +519,9 @@ class IntersectionUnit(wiring.Component):
             with m.Else():
                 m.d.comb += [out_fifo.w_en.eq(held_v), beat.eq(held)]
                 m.d.sync += [held.eq(fresh), held_v.eq(1)]
-                m.d.comb += [inc["hits"].eq(r.hit), inc["overflow"].eq(r.flags[0]),
-                             inc["underflow"].eq(r.flags[1]), inc["invalid"].eq(r.flags[2])]
+                m.d.comb += [inc["hits"].eq(r.hit), inc["overflow"].eq(r.n_overflow),
+                             inc["underflow"].eq(r.n_underflow),
+                             inc["invalid"].eq(r.n_invalid)]
         m.d.comb += [self.o.valid.eq(out_fifo.r_rdy), self.o.payload.eq(out_fifo.r_data),
                      out_fifo.r_en.eq(self.o.ready)]
 

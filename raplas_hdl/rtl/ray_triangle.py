@@ -15,8 +15,10 @@ mode, which adds ``w = det - s``. With adder latency ``La`` and multiplier laten
 6. ``4La+2Lm``: ``u' = neg(Q.E2)`` (a sign flip), ``v' = Q.E1``; ``s = u' + v'`` starts.
 7. ``5La+2Lm``: ``s`` ready. Conservative mode: ``w = det - s`` ready at ``6La+2Lm``.
 8. decision cycle ``D`` (``5La+2Lm`` or ``6La+2Lm``): the contract comparisons and the
-   hit decision (combinational), the event flags ORed along the pipeline, the IDs from
-   their delay line: all registered into the output register at ``D+1``.
+   hit decision (combinational), the per-event operation counts (summed along the
+   pipeline as the operations finish: one adder per event per finishing time) and their
+   OR, the event flags; the IDs from their delay line: all registered into the output
+   register at ``D+1``.
 9. the output register is written into the output FIFO; ``o`` shows the FIFO's head.
 
 ``latency`` (``D + 2``: 28 for the defaults in paper mode, 32 in conservative mode; the
@@ -35,7 +37,7 @@ Results leave in the order the pairs came in.
 
 from __future__ import annotations
 
-from amaranth.hdl import Const, Module, Mux, Signal, signed
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.fifo import SyncFIFO
 from amaranth.lib.wiring import In, Out
@@ -46,9 +48,15 @@ from .fp_add import FPAdd
 from .fp_mul import FPMul, check_multiplier, fp_mul_latency
 from .pipeline import delay
 
-__all__ = ["RayTriangleUnit", "vec3_layout", "input_layout", "output_layout", "MODES"]
+__all__ = ["RayTriangleUnit", "vec3_layout", "input_layout", "output_layout", "MODES",
+           "EVENTS", "EVENT_COUNT_BITS"]
 
 MODES = ("paper", "conservative")
+#: The events counted per pair (``n_overflow``, ``n_underflow``, ``n_invalid``).
+EVENTS = ("overflow", "underflow", "invalid")
+#: Width of each per-pair event count (up to 34 operations per pair).
+EVENT_COUNT_BITS = 6
+EVENT_COUNT_MAX = (1 << EVENT_COUNT_BITS) - 1
 
 
 def vec3_layout(width: int) -> data.StructLayout:
@@ -64,10 +72,15 @@ def input_layout(fmt: FPFormat, ray_id_bits: int = 16, tri_id_bits: int = 16):
 
 
 def output_layout(fmt: FPFormat, ray_id_bits: int = 16, tri_id_bits: int = 16):
-    """Payload of the unit's output stream (fields from the low bits up)."""
+    """Payload of the unit's output stream (fields from the low bits up).
+
+    ``flags`` is the OR of the event flags of the pair's operations; ``n_overflow``,
+    ``n_underflow``, ``n_invalid`` count the operations that raised each event."""
     w = fmt.width
+    n = EVENT_COUNT_BITS
     return data.StructLayout({"ray_id": ray_id_bits, "tri_id": tri_id_bits, "hit": 1,
-                              "t": w, "u": w, "v": w, "det": w, "flags": 3})
+                              "t": w, "u": w, "v": w, "det": w, "flags": 3,
+                              "n_overflow": n, "n_underflow": n, "n_invalid": n})
 
 
 class _Timed:
@@ -105,7 +118,9 @@ class RayTriangleUnit(wiring.Component):
         Pairs: ``ray_id``, ``tri_id``, ``o``, ``d``, ``v0``, ``e1``, ``e2``, ``n``.
     o : Out(stream.Signature(output_layout(...)))
         Results: ``ray_id``, ``tri_id``, ``hit``, ``t``, ``u``, ``v``, ``det`` (t', u', v',
-        det as bit patterns) and ``flags`` (OR of the event flags of the pair's operations).
+        det as bit patterns), ``flags`` (OR of the event flags of the pair's operations) and
+        ``n_overflow``, ``n_underflow``, ``n_invalid`` (how many of the pair's operations
+        raised each event, :data:`EVENT_COUNT_BITS` bits each).
 
     Raises
     ------
@@ -332,17 +347,27 @@ class RayTriangleUnit(wiring.Component):
             w = self._op(m, "add", det, s, sub=True)             # 34: w = det - s
         assert max(tv.time for tv in (det, tp, up, vp, s)) <= dec
 
-        # event flags: ORed along the pipeline as they appear
-        acc, acc_t = Const(0, 3), 0
+        # event counts: per event, the number of the pair's operations that raised it,
+        # summed along the pipeline as the operations finish (each running sum only as
+        # wide as the operations finished so far need); the OR flags follow from them
+        counts, acc_t, done = None, 0, 0
         for time in sorted({tm for _, tm in self._flag_taps}):
             here = [fl for fl, tm in self._flag_taps if tm == time]
-            new = Signal(3, name=f"flags_at_{time}")
-            m.d.comb += new.eq(delay(m, acc, time - acc_t, name=f"fl{time}")
-                               if acc_t != time else acc)
-            for fl in here:
-                new = new | fl
-            acc, acc_t = new, time
-        flags = delay(m, acc, dec - acc_t, name="fldec")
+            done += len(here)
+            new_counts = []
+            for b, ev in enumerate(EVENTS):
+                prev = (Const(0, 1) if counts is None
+                        else delay(m, counts[b], time - acc_t, name=f"n{ev[:3]}{time}"))
+                c = Signal(range(done + 1), name=f"n_{ev}_at_{time}")
+                m.d.comb += c.eq(sum((fl[b] for fl in here), prev))
+                new_counts.append(c)
+            counts, acc_t = new_counts, time
+        if done > EVENT_COUNT_MAX:
+            raise AssertionError(f"{done} operations do not fit the event counts")
+        counts = [delay(m, c, dec - acc_t, name=f"n{ev[:3]}dec")
+                  for c, ev in zip(counts, EVENTS)]
+        flags = Signal(3, name="flags")
+        m.d.comb += flags.eq(Cat(*(c != 0 for c in counts)))
 
         # the decision, combinational at cycle `dec`
         zero = Const(0, f.width)
@@ -379,7 +404,8 @@ class RayTriangleUnit(wiring.Component):
         m.d.sync += [
             res.ray_id.eq(ids_d), res.tri_id.eq(tid_d), res.hit.eq(hit),
             res.t.eq(tp_d), res.u.eq(up_d), res.v.eq(vp_d), res.det.eq(det_d),
-            res.flags.eq(flags), res_valid.eq(valid_d),
+            res.flags.eq(flags), res.n_overflow.eq(counts[0]),
+            res.n_underflow.eq(counts[1]), res.n_invalid.eq(counts[2]), res_valid.eq(valid_d),
         ]
         m.d.comb += [fifo.w_data.eq(res.as_value()), fifo.w_en.eq(res_valid)]
         return m
