@@ -99,13 +99,14 @@ def main(argv=None) -> int:
         entry["wall_seconds"] = wall
         if name != "float64" and "float64" in results:
             entry["vs_float64"] = compare(res, results["float64"])
+            save_png(difference_image(res, results["float64"]),
+                     out.parent / f"render_bench_{scene.name}_"
+                     f"{'' if name == 'model' else name + '_'}diff.png", linear=False)
         if name == "rtl" and "model" in results:
             entry["equal_to_model"] = bool(
                 (res.tri_id == results["model"].tri_id).all()
                 and (res.image == results["model"].image).all()
                 and (res.visibility == results["model"].visibility).all())
-            save_png(difference_image(res, results["float64"]),
-                     out.parent / f"render_bench_{scene.name}_diff.png", linear=False)
         report["backends"][backend.describe()] = entry
         save_png(res.image, out.parent / f"render_bench_{scene.name}_{name}.png")
         print(format_summary(res, entry.get("vs_float64")), flush=True)
