@@ -216,7 +216,7 @@ def test_plane_sphere_array_virtex4_under_icarus(tmp_path):
     require_simulator("icarus")
     from raplas_hdl.rtl.emit import emit_verilog
     from test_planesphere_rtl import (ID_BITS, check_beats, expected_beats, make_cases,
-                                      pack_sphere, unpack_beat)
+                                      unpack_beat, write_stimulus)
 
     rows, cols, fmt = 2, 3, FP24.with_rounding("rne")
     dut = PlaneSphereArray(fmt, rows=rows, cols=cols, testers=2, sphere_id_bits=ID_BITS,
@@ -227,11 +227,7 @@ def test_plane_sphere_array_virtex4_under_icarus(tmp_path):
     assert text.count("DSP48 ") == 2 * 3
     cases = make_cases(rows, cols, fmt, n_spheres=60, seed=77)
     stim, result = tmp_path / "in.npz", tmp_path / "out.npz"
-    np.savez(stim,
-             planes=np.array([[f"{w:x}" for w in c["planes"]] for c in cases]),
-             spheres=np.array([[f"{pack_sphere(fmt, c['ids'][s], c['c'][s], c['r'][s]):x}"
-                                for s in range(len(c["ids"]))] for c in cases]),
-             idle=0.3, stall=0.3, seed=7)
+    write_stimulus(stim, cases, fmt)
     run_cocotb("icarus", text + dsp48_sim_model(), "plane_sphere", "sim.tb_plane_sphere",
                f"plane_sphere-{rows}x{cols}-t2-{fmt.name}-virtex4",
                env={"RAPLAS_PS_IN": stim, "RAPLAS_PS_OUT": result})

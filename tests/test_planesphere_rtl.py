@@ -309,6 +309,16 @@ def _verilog(rows, cols, testers, fmt):
     return dut, text
 
 
+def write_stimulus(path, cases, fmt, idle=0.3, stall=0.3, seed=7):
+    """The stimulus file of ``sim/tb_plane_sphere.py``: planes and spheres as hex words, and
+    the testbench's random idle and stall rates."""
+    np.savez(path,
+             planes=np.array([[f"{w:x}" for w in c["planes"]] for c in cases]),
+             spheres=np.array([[f"{pack_sphere(fmt, c['ids'][s], c['c'][s], c['r'][s]):x}"
+                                for s in range(len(c["ids"]))] for c in cases]),
+             idle=idle, stall=stall, seed=seed)
+
+
 def check_cocotb(name, config, simulator, tmp_path):
     from sim.runner import run_cocotb
 
@@ -316,11 +326,7 @@ def check_cocotb(name, config, simulator, tmp_path):
     dut, text = _verilog(rows, cols, testers, fmt)
     cases = make_cases(rows, cols, fmt, n_spheres=60, seed=100 + zlib.crc32(name.encode()) % 1000)
     stim, result = tmp_path / "in.npz", tmp_path / "out.npz"
-    np.savez(stim,
-             planes=np.array([[f"{w:x}" for w in c["planes"]] for c in cases]),
-             spheres=np.array([[f"{pack_sphere(fmt, c['ids'][s], c['c'][s], c['r'][s]):x}"
-                                for s in range(len(c["ids"]))] for c in cases]),
-             idle=0.3, stall=0.3, seed=7)
+    write_stimulus(stim, cases, fmt)
     run_cocotb(simulator, text, "plane_sphere", "sim.tb_plane_sphere",
                f"plane_sphere-{rows}x{cols}-t{dut.testers}-{fmt.name}",
                env={"RAPLAS_PS_IN": stim, "RAPLAS_PS_OUT": result}, 
