@@ -4,7 +4,7 @@ VENV    ?= .venv
 VPY     := $(VENV)/bin/python
 STAMP   := $(VENV)/.installed
 JOBS    ?= 2
-PYTEST  := $(VPY) -m pytest -n $(JOBS)
+PYTEST  := $(VPY) -m pytest -n $(JOBS) --durations=10
 
 .PHONY: all setup sysdeps demo verilog test test-full bench campaign synth constraints lint clean distclean
 
@@ -30,7 +30,7 @@ demo: setup
 verilog: setup
 	$(VPY) -c 'from raplas_hdl.rtl.units import emit_all; [print(p) for p in emit_all("build/verilog")]'
 
-## The tests (about 20 minutes on 2 cores; both simulators).
+## The tests (about 13-15 minutes on 2 cores from a fresh clone; both simulators).
 test: setup
 	$(PYTEST) -m "not full" tests
 
