@@ -164,8 +164,12 @@ def unit_verilog(config: UnitConfig) -> str:
     else:
         from raplas_hdl.rtl.emit import emit_verilog
         from raplas_hdl.rtl.intersection import IntersectionUnit
+        from raplas_hdl.rtl.ram import ram_verilog
 
-        text, _ = emit_verilog(IntersectionUnit(config), "intersection_unit", config.params())
+        # behavioural RAMs without initial values: converts in seconds at any depth
+        text, _ = emit_verilog(IntersectionUnit(config, ram="verilog"), "intersection_unit",
+                               {**config.params(), "ram": "verilog"})
+        text += ram_verilog()
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
         tmp.write_text(text)

@@ -50,10 +50,10 @@ from __future__ import annotations
 from amaranth.hdl import Cat, Module, Mux, Signal
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.fifo import SyncFIFOBuffered
-from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from ..model.memory_image import COUNTER_NAMES, REGIONS, UnitConfig
+from .ram import SyncRAM
 
 __all__ = ["IntersectionUnit", "build_intersection_unit", "port_layouts", "COUNTER_PORTS"]
 
@@ -102,6 +102,12 @@ class IntersectionUnit(wiring.Component):
         plane-sphere array and the ray-triangle unit (``virtex4``: Virtex-4 ``DSP48``
         primitives, one cycle more per multiplier). An implementation choice only: the
         results, and so the golden model, do not depend on it.
+    ram : {"memory", "verilog"}
+        The memories as Amaranth ``Memory`` (default; Amaranth's simulator runs it) or as
+        instances of a behavioural Verilog RAM without initial values
+        (:mod:`raplas_hdl.rtl.ram`; append :func:`~raplas_hdl.rtl.ram.ram_verilog` to the
+        emitted text). The latter converts in seconds at any depth: a mesh of 70k
+        triangles takes Amaranth and Yosys some 20 minutes to convert the other way.
 
     Members
     -------
@@ -133,10 +139,14 @@ class IntersectionUnit(wiring.Component):
     """
 
     def __init__(self, config: UnitConfig | None = None, *, multiplier: str = "generic",
-                 **params):
+                 ram: str = "memory", **params):
         from .fp_mul import check_multiplier
+        from .ram import RAM_IMPLS
 
         self._multiplier = check_multiplier(multiplier)
+        if ram not in RAM_IMPLS:
+            raise ValueError(f"ram must be one of {', '.join(RAM_IMPLS)}, not {ram!r}")
+        self._ram = ram
         if config is None:
             config = UnitConfig(**params)
         elif params:
@@ -197,9 +207,11 @@ class IntersectionUnit(wiring.Component):
         m.submodules.psa, m.submodules.rtu = psa, rtu = self._subunits()
 
         # -- memories -----------------------------------------------------------------
+        rams = []
+
         def memory(name, shape, depth, gran=None):
-            mem = Memory(shape=shape, depth=depth, init=[])
-            m.submodules[name] = mem
+            mem = SyncRAM(shape, depth, impl=self._ram, name=name)
+            rams.append(mem)
             return mem, mem.write_port(granularity=gran)
 
         tri_mem, tri_wp = memory("tri_mem", 12 * w, cfg.max_triangles, w)
@@ -535,6 +547,8 @@ class IntersectionUnit(wiring.Component):
                      finished.eq(self.o.valid & self.o.ready & self.o.payload.last)]
         m.d.sync += outstanding.eq(outstanding + started - finished)
         m.d.comb += [self.busy.eq(outstanding != 0), inc["cycles"].eq(self.busy)]
+        for mem in rams:       # every port is taken by now
+            mem.add_to(m)
         return m
 
 

@@ -1,0 +1,140 @@
+"""Simple dual-port RAM: one write port (with byte-lane style granularity), synchronous reads.
+
+:class:`SyncRAM` has the ports of an Amaranth :class:`~amaranth.lib.memory.Memory` as the
+intersection unit uses it (``write_port(granularity=...)``, ``read_port()`` with ``addr``,
+``en`` and ``data``; reads are not transparent: a read and a write of the same address in one
+clock return the old word) and two implementations:
+
+``"memory"``
+    An Amaranth ``Memory``: simulates in Amaranth's simulator. Converting it to Verilog
+    writes every word's initial value, which for deep memories (a 70k-triangle mesh needs
+    131,072 x 288 bits) takes Amaranth and Yosys tens of minutes.
+``"verilog"``
+    An instance of the behavioural Verilog module :data:`RAM_MODULE` (no initial values; the
+    host writes every word it reads). It converts in no time, simulates under Icarus and
+    Verilator, and is the usual block-RAM inference template. Amaranth's simulator cannot
+    run it; append :func:`ram_verilog` to the emitted text.
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import ClockSignal, Instance, Module, Signal
+from amaranth.lib.memory import Memory
+
+__all__ = ["SyncRAM", "RAM_IMPLS", "RAM_MODULE", "ram_verilog"]
+
+#: Implementations of :class:`SyncRAM`.
+RAM_IMPLS = ("memory", "verilog")
+
+#: Name of the behavioural RAM module the ``"verilog"`` implementation instantiates.
+RAM_MODULE = "raplas_sdp_ram"
+
+_RAM_TEXT = """
+// Simple dual-port RAM for raplas-hdl (one write port with GRAN-bit lanes, NREAD
+// synchronous non-transparent read ports). No initial values: the host writes what it reads.
+module raplas_sdp_ram #(parameter WIDTH = 8, DEPTH = 16, ABITS = 4, GRAN = 8, LANES = 1,
+                        NREAD = 1) (
+    input  wire                     clk,
+    input  wire [ABITS-1:0]         waddr,
+    input  wire [WIDTH-1:0]         wdata,
+    input  wire [LANES-1:0]         wen,
+    input  wire [NREAD*ABITS-1:0]   raddr,
+    input  wire [NREAD-1:0]         ren,
+    output reg  [NREAD*WIDTH-1:0]   rdata);
+  reg [WIDTH-1:0] mem [0:DEPTH-1];
+  integer i, r;
+  always @(posedge clk) begin
+    for (r = 0; r < NREAD; r = r + 1)
+      if (ren[r]) rdata[r*WIDTH +: WIDTH] <= mem[raddr[r*ABITS +: ABITS]];
+    for (i = 0; i < LANES; i = i + 1)
+      if (wen[i] && waddr < DEPTH) mem[waddr][i*GRAN +: GRAN] <= wdata[i*GRAN +: GRAN];
+  end
+endmodule
+"""
+
+
+def ram_verilog() -> str:
+    """The Verilog text of :data:`RAM_MODULE` (append it once to a design that uses it)."""
+    return _RAM_TEXT
+
+
+class _Port:
+    def __init__(self, abits, width, lanes, name, read=False):
+        self.addr = Signal(abits, name=f"{name}_addr")
+        self.data = Signal(width, name=f"{name}_data")
+        # a read port is enabled unless driven (as an Amaranth read port)
+        self.en = Signal(lanes, name=f"{name}_en", init=1 if read else 0)
+
+
+class SyncRAM:
+    """A RAM of ``depth`` words of ``width`` bits; see the module docstring.
+
+    Parameters
+    ----------
+    width, depth : int
+    impl : {"memory", "verilog"}
+    name : str
+        Prefix of its signals and of the instance.
+
+    Raises
+    ------
+    ValueError
+        On a bad ``impl``, width or depth.
+    """
+
+    def __init__(self, width: int, depth: int, impl: str = "memory", name: str = "ram"):
+        if impl not in RAM_IMPLS:
+            raise ValueError(f"ram must be one of {', '.join(RAM_IMPLS)}, not {impl!r}")
+        if width < 1 or depth < 1:
+            raise ValueError(f"a RAM needs a positive width and depth, not {width} x {depth}")
+        self.width, self.depth, self.impl, self.name = int(width), int(depth), impl, name
+        self.abits = max(1, (self.depth - 1).bit_length())
+        self._wp = None
+        self._gran = None
+        self._rps = []
+
+    def write_port(self, granularity: int | None = None) -> _Port:
+        """The write port (``addr``, ``data``, ``en`` with one bit per ``granularity`` lane)."""
+        if self._wp is not None:
+            raise ValueError("SyncRAM has one write port")
+        gran = self.width if granularity is None else int(granularity)
+        if gran < 1 or self.width % gran:
+            raise ValueError(f"granularity {gran} does not divide the width {self.width}")
+        self._gran = gran
+        self._wp = _Port(self.abits, self.width, self.width // gran, f"{self.name}_w")
+        return self._wp
+
+    def read_port(self) -> _Port:
+        """A synchronous read port: ``data`` is the word at ``addr`` of the last clock with
+        ``en`` set (the word before a write of the same clock)."""
+        rp = _Port(self.abits, self.width, 1, f"{self.name}_r{len(self._rps)}", read=True)
+        self._rps.append(rp)
+        return rp
+
+    def add_to(self, m: Module, name: str | None = None) -> None:
+        """Build the RAM into ``m`` (after every port has been taken)."""
+        if self._wp is None or not self._rps:
+            raise ValueError("a SyncRAM needs its write port and a read port before add_to")
+        name = name or self.name
+        wp, lanes = self._wp, self.width // self._gran
+        if self.impl == "memory":
+            mem = Memory(shape=self.width, depth=self.depth, init=[])
+            m.submodules[name] = mem
+            mwp = mem.write_port(granularity=None if lanes == 1 else self._gran)
+            m.d.comb += [mwp.addr.eq(wp.addr), mwp.data.eq(wp.data), mwp.en.eq(wp.en)]
+            for rp in self._rps:
+                mrp = mem.read_port()
+                m.d.comb += [mrp.addr.eq(rp.addr), mrp.en.eq(rp.en), rp.data.eq(mrp.data)]
+            return
+        from amaranth.hdl import Cat
+        n = len(self._rps)
+        rdata = Signal(n * self.width, name=f"{name}_rdata")
+        m.submodules[name] = Instance(
+            RAM_MODULE,
+            p_WIDTH=self.width, p_DEPTH=self.depth, p_ABITS=self.abits, p_GRAN=self._gran,
+            p_LANES=lanes, p_NREAD=n,
+            i_clk=ClockSignal("sync"), i_waddr=wp.addr, i_wdata=wp.data, i_wen=wp.en,
+            i_raddr=Cat(*[rp.addr for rp in self._rps]),
+            i_ren=Cat(*[rp.en for rp in self._rps]), o_rdata=rdata)
+        for k, rp in enumerate(self._rps):
+            m.d.comb += rp.data.eq(rdata[k * self.width:(k + 1) * self.width])
