@@ -18,7 +18,7 @@ clock return the old word) and two implementations:
 
 from __future__ import annotations
 
-from amaranth.hdl import ClockSignal, Instance, Module, Signal
+from amaranth.hdl import Cat, ClockSignal, Instance, Module, Signal
 from amaranth.lib.memory import Memory
 
 __all__ = ["SyncRAM", "RAM_IMPLS", "RAM_MODULE", "ram_verilog"]
@@ -126,7 +126,6 @@ class SyncRAM:
                 mrp = mem.read_port()
                 m.d.comb += [mrp.addr.eq(rp.addr), mrp.en.eq(rp.en), rp.data.eq(mrp.data)]
             return
-        from amaranth.hdl import Cat
         n = len(self._rps)
         rdata = Signal(n * self.width, name=f"{name}_rdata")
         m.submodules[name] = Instance(
