@@ -140,14 +140,21 @@ def ucf_text(ports, *, freq_mhz: float = 100.0, in_delay=None, out_delay=None,
     out += [f"NET {n} IOSTANDARD = {iostandard};" for n in nets(ports)]
     out += ["", "# -- pin locations: board specific. Commented lines are placeholders: fill",
             "# -- them in, or regenerate with `raplas-hdl constraints --pins PINS.json`."]
+    out += _pin_lines(ports, pins,
+                      lambda name, k, key, pin: f'NET {net(name, k)} LOC = "{pin}";')
+    return "\n".join(out) + "\n"
+
+
+def _pin_lines(ports, pins, line):
+    """One pin-location line per port bit: ``line(name, bit, key, pin)``, commented out with
+    the pin ``<pin>`` when ``pins`` has no entry for ``key`` (``name`` or ``name[bit]``)."""
+    out = []
     for p in ports:
         for name, k in _bits(p):
             key = name if k is None else f"{name}[{k}]"
-            if key in pins:
-                out.append(f'NET {net(name, k)} LOC = "{pins[key]}";')
-            else:
-                out.append(f'# NET {net(name, k)} LOC = "<pin>";')
-    return "\n".join(out) + "\n"
+            out.append(line(name, k, key, pins[key]) if key in pins
+                       else "# " + line(name, k, key, "<pin>"))
+    return out
 
 
 def xdc_text(ports, *, freq_mhz: float = 100.0, in_delay=None, out_delay=None,
@@ -175,13 +182,8 @@ def xdc_text(ports, *, freq_mhz: float = 100.0, in_delay=None, out_delay=None,
             f"set_property IOSTANDARD {iostandard} [get_ports {{{names(ports)}}}]", "",
             "# -- pin locations: board specific. Commented lines are placeholders: fill",
             "# -- them in, or regenerate with `raplas-hdl constraints --pins PINS.json`."]
-    for p in ports:
-        for name, k in _bits(p):
-            key = name if k is None else f"{name}[{k}]"
-            if key in pins:
-                out.append(f"set_property PACKAGE_PIN {pins[key]} [get_ports {{{key}}}]")
-            else:
-                out.append(f"# set_property PACKAGE_PIN <pin> [get_ports {{{key}}}]")
+    out += _pin_lines(ports, pins, lambda name, k, key, pin:
+                      f"set_property PACKAGE_PIN {pin} [get_ports {{{key}}}]")
     return "\n".join(out) + "\n"
 
 
