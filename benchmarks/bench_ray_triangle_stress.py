@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 
 from raplas_hdl.fp import FP24, FP32
-from raplas_hdl.host import stress
+from raplas_hdl.verify import stress
 
 FORMATS = [FP24.with_rounding(r) for r in ("rtz", "rne", "chop")] + \
           [FP32.with_rounding(r) for r in ("rtz", "rne", "chop")]

@@ -15,7 +15,7 @@ import pytest
 
 from raplas_hdl.fp import FP24, FP32
 from raplas_hdl.fp import model as fpm
-from raplas_hdl.host import stress
+from raplas_hdl.verify import stress
 from raplas_hdl.host.exact import exact_intersect_bits
 from raplas_hdl.model import conservative as cons
 from raplas_hdl.model.ray_triangle import intersect

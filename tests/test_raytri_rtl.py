@@ -16,7 +16,7 @@ from amaranth.hdl import Fragment, Shape
 from amaranth.sim import Simulator
 
 from raplas_hdl.fp import FP24, FPFormat
-from raplas_hdl.host.stress import vectors
+from raplas_hdl.verify.stress import vectors
 from raplas_hdl.model.ray_triangle import intersect
 from raplas_hdl.rtl.ray_triangle import (EVENTS, RayTriangleUnit, input_layout,
                                          output_layout)

@@ -6,7 +6,7 @@ import pytest
 
 from raplas_hdl.cli import main
 from raplas_hdl.fp import FP24
-from raplas_hdl.host import stress
+from raplas_hdl.verify import stress
 
 
 def test_stress_cli_writes_the_table(tmp_path, capsys):

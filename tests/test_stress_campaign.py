@@ -10,8 +10,8 @@ import json
 import pytest
 
 from raplas_hdl.cli import main
-from raplas_hdl.host import campaign
-from raplas_hdl.host.campaign import CampaignParams, Shard
+from raplas_hdl.verify import campaign
+from raplas_hdl.verify.campaign import CampaignParams, Shard
 
 #: Two formats (different geometry scales), two roundings of one, every family, both
 #: sphere kinds: 2 shards per group.

@@ -14,7 +14,7 @@ import pytest
 
 from raplas_hdl.fp import FP24
 from raplas_hdl.model.memory_image import UnitConfig
-from sim.unit_driver import run_runs
+from raplas_hdl.sim.unit_driver import run_runs
 from unit_scenes import assert_operation_events, check_against_model, scene_and_runs
 
 CFG = UnitConfig(fmt=FP24, rows=4, cols=4, testers=4, tris_per_sphere=4, max_triangles=256,
@@ -28,7 +28,7 @@ def scene_runs():
 
 @pytest.mark.parametrize("overlap", [False, True], ids=["sequential", "overlap"])
 # Verilator builds the unit in about 35 s because only the top's ports are public
-# (see sim/runner.py, mark_ports_public); with every signal public it took over 40 min.
+# (see raplas_hdl/sim/runner.py, mark_ports_public); with every signal public it took over 40 min.
 @pytest.mark.parametrize("simulator", ["icarus", "verilator"])
 def test_unit_cocotb_matches_model(simulator, overlap, scene_runs):
     scene, runs = scene_runs

@@ -319,7 +319,7 @@ def render_markdown(results: dict, plots: list, md_path, *, command: str,
           "pixels whose nearest triangle differs (`tri_differs`; `tri_differs_in_domain` "
           "counts only pixels whose triangles, in both renders, are in the domain).",
           "- **Error against R** (the exact reference): false hits, false misses and edge "
-          "leaks of the model on the seeded stress families of `raplas_hdl.host.stress`, once "
+          "leaks of the model on the seeded stress families of `raplas_hdl.verify.stress`, once "
           "per format, rounding and mode (in-domain pairs only), and the relative error of "
           "t against R's.",
           "- **Run time**: wall time per render stage (`t_*`), rays per second over the "

@@ -33,7 +33,7 @@ second over the whole render, pairs per second over the unit's stages), and erro
   in-domain pairs both hit, and the in-domain pairs whose hit bit differs;
 - against float64, per pixel: PSNR of the 8-bit images, fraction of pixels whose nearest
   triangle differs (all pixels, and pixels whose triangles are all in the domain);
-- against R (:mod:`raplas_hdl.host.stress`): false hits, false misses, edge leaks and the
+- against R (:mod:`raplas_hdl.verify.stress`): false hits, false misses, edge leaks and the
   relative error of t on the seeded stress families, computed once per format, rounding and
   mode (R is exact and slow) and attached to every point of that configuration.
 """
@@ -331,7 +331,7 @@ def stress_metrics(fmt: FPFormat, modes, per_family: int, seed: int) -> dict:
         ``r_t_rel_p99`` (in-domain pairs both hit), ``r_seconds``.
     """
     from ..fp.model import decode
-    from ..host import stress
+    from ..verify import stress
     from ..model.ray_triangle import intersect
 
     t0 = time.perf_counter()

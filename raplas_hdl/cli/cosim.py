@@ -100,8 +100,8 @@ def run(args) -> int:
     import numpy as np
 
     from raplas_hdl.fp import FPFormat
-    from sim.runner import SimulatorNotFound
-    from sim.tb_fp import fp_cosim, fp_expected
+    from raplas_hdl.sim.runner import SimulatorNotFound
+    from raplas_hdl.sim.tb_fp import fp_cosim, fp_expected
 
     fmt = FPFormat(args.exp_bits, args.man_bits, args.rounding)
     if args.vectors:

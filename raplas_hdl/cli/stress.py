@@ -2,7 +2,7 @@
 unit (golden model) against the exact reference R, as a table per format and mode.
 
 ``raplas-hdl stress campaign``: the same families and the plane-culling proof at scale,
-sharded over the machine's cores, resumable (:mod:`raplas_hdl.host.campaign`)."""
+sharded over the machine's cores, resumable (:mod:`raplas_hdl.verify.campaign`)."""
 
 from __future__ import annotations
 
@@ -90,7 +90,7 @@ def run_campaign(args) -> int:
     import sys
     import time
 
-    from ..host import campaign
+    from ..verify import campaign
 
     params = campaign.CampaignParams(
         formats=_split(args.campaign_formats), roundings=_split(args.roundings),
@@ -141,7 +141,7 @@ def run(args) -> int:
     if args.target == "campaign":
         return run_campaign(args)
     from ..fp import parse_format
-    from ..host import stress
+    from ..verify import stress
 
     formats = [parse_format(f) for f in (args.formats or ["FP24/rtz"])]
     families = stress.FAMILIES if args.families is None else tuple(

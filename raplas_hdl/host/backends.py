@@ -454,17 +454,16 @@ class RtlBackend(ModelBackend):
     """
 
     name = "rtl"
-    DRIVER = "sim.unit_driver"
+    DRIVER = "raplas_hdl.sim.unit_driver"
 
     def __init__(self, fmt: FPFormat = FP24, mode: str = "conservative", testers=None,
                  margin_scale: int = 1, sim: str = "icarus"):
         super().__init__(fmt, mode, testers, margin_scale)
         try:
-            from sim.runner import SimulatorNotFound, require_simulator
+            from raplas_hdl.sim.runner import SimulatorNotFound, require_simulator
         except ImportError as exc:
             raise BackendUnavailable(
-                "the rtl backend needs the repository's sim/ package (run from a source "
-                f"checkout): {exc}") from exc
+                f"the rtl backend needs the raplas_hdl.sim package: {exc}") from exc
         try:
             require_simulator(sim)
         except SimulatorNotFound as exc:

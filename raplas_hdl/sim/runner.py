@@ -32,7 +32,7 @@ __all__ = ["SIMULATORS", "SimulatorNotFound", "available_simulators", "require_s
            "REPO_ROOT", "BUILD_ROOT"]
 
 SIMULATORS = ("icarus", "verilator")
-REPO_ROOT = Path(__file__).resolve().parent.parent
+REPO_ROOT = Path(__file__).resolve().parents[2]
 BUILD_ROOT = REPO_ROOT / "build" / "sim"
 
 #: Verilator options shared by the cocotb build and the plain C++ harness of the benchmark.
@@ -314,7 +314,7 @@ def run_cocotb(simulator: str, verilog_text: str, toplevel: str, test_module: st
     toplevel : str
         Top module name.
     test_module : str
-        Dotted name of the cocotb test module (for example ``"sim.tb_fp"``).
+        Dotted name of the cocotb test module (for example ``"raplas_hdl.sim.tb_fp"``).
     build_key : str
         Readable prefix of the build directory (for example ``"fp_add-e7m16-rtz-s4"``).
     env : dict, optional
@@ -401,7 +401,7 @@ def run_cocotb(simulator: str, verilog_text: str, toplevel: str, test_module: st
 
 def build_plain_verilator(verilog_text: str, toplevel: str, build_key: str,
                           timeout_s: float | None = None) -> Path:
-    """Build ``verilog_text`` with Verilator and ``sim/verilator_main.cpp`` (no cocotb).
+    """Build ``verilog_text`` with Verilator and ``raplas_hdl/sim/verilator_main.cpp`` (no cocotb).
 
     Same optimisation flags as the cocotb build (:func:`verilator_flags`, no tracing), so it
     measures what cocotb and the VPI cost. The top must have ``clk``, ``rst``, ``done`` and

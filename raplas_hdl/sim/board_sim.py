@@ -3,7 +3,7 @@
 :func:`run_board` emits the top's Verilog for a
 :class:`~raplas_hdl.model.memory_image.UnitConfig` (cached in memory and under
 ``build/sim/verilog/``), writes the scene and the runs into a stimulus file and runs
-:mod:`sim.tb_board`, in which :class:`raplas_hdl.host.board_driver.BoardDriver` drives the
+:mod:`raplas_hdl.sim.tb_board`, in which :class:`raplas_hdl.host.board_driver.BoardDriver` drives the
 Wishbone port. It returns, per run, the result stream and the counters exactly as
 :func:`raplas_hdl.model.intersection.run_bundle` returns them (counters with ``cycles``).
 """
@@ -34,7 +34,7 @@ _BUNDLE_FIELDS = ("plane_n", "plane_p", "ray_o", "ray_d", "enable")
 
 
 def _digest(config: UnitConfig) -> str:
-    from sim.unit_driver import _source_digest
+    from raplas_hdl.sim.unit_driver import _source_digest
 
     import raplas_hdl
 
@@ -49,7 +49,7 @@ def board_verilog(config: UnitConfig) -> str:
     Cached in memory and on disk, keyed by the parameters and the RTL sources; a file lock
     makes concurrent callers (pytest-xdist workers) wait for one emission.
     """
-    from sim.runner import BUILD_ROOT, _file_lock
+    from raplas_hdl.sim.runner import BUILD_ROOT, _file_lock
 
     if config in _VERILOG_CACHE:
         return _VERILOG_CACHE[config]
@@ -109,7 +109,7 @@ def run_board(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
     scene : SceneMemory
     runs : list of (BundleMemory, sphere_ids or None)
     seed, gap_density : int, float
-        The bus master's random idle cycles (see :mod:`sim.tb_board`).
+        The bus master's random idle cycles (see :mod:`raplas_hdl.sim.tb_board`).
     prefetch : bool
         The driver writes the next bundle while a run goes (the double buffer).
 
@@ -119,15 +119,15 @@ def run_board(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
         As :func:`raplas_hdl.model.intersection.run_bundle` returns them (plus ``cycles``).
     stats : dict
         ``reads``, ``writes`` (the driver's bus accesses), ``sim_ns``, ``run_s``,
-        ``build_s`` (the simulator's figures from :func:`sim.runner.run_cocotb`).
+        ``build_s`` (the simulator's figures from :func:`raplas_hdl.sim.runner.run_cocotb`).
 
     Raises
     ------
     AssertionError
         When a cocotb test fails (a bus error, a protocol check, a timeout).
     """
-    from sim.runner import run_cocotb
-    from sim.unit_driver import ICARUS_ARGS
+    from raplas_hdl.sim.runner import run_cocotb
+    from raplas_hdl.sim.unit_driver import ICARUS_ARGS
 
     runs = list(runs)
     if not runs:
@@ -142,7 +142,7 @@ def run_board(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
                                          "gap_density": gap_density, "prefetch": prefetch}))
         env = {"BOARD_STIM": str(stim_path), "BOARD_OUT": str(out_path),
                "BOARD_META": str(meta_path)}
-        res = run_cocotb(simulator, text, TOPLEVEL, "sim.tb_board",
+        res = run_cocotb(simulator, text, TOPLEVEL, "raplas_hdl.sim.tb_board",
                          build_key or f"board-{config.fmt.name}-{config.rows}x{config.cols}",
                          env=env, build_args=ICARUS_ARGS if simulator == "icarus"
                          else VERILATOR_ARGS,

@@ -37,8 +37,8 @@ from ..fp.format import FPFormat
 from ..fp.model import decode, encode
 from ..model.conservative import domain
 from ..model.ray_triangle import intersect
-from .exact import exact_intersect_bits
-from .triangles import make_triangles
+from ..host.exact import exact_intersect_bits
+from ..host.triangles import make_triangles
 
 __all__ = ["FAMILIES", "StressCases", "generate", "reference", "evaluate", "pooled",
            "bisect_scale", "vectors"]

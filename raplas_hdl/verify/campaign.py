@@ -4,7 +4,7 @@ Two tasks, over every format and rounding asked for (default FP16, FP20, FP24, F
 ``rtz``, ``rne`` and ``chop``):
 
 ``raytri``
-    The ray-triangle stress families of :mod:`raplas_hdl.host.stress` judged by the exact
+    The ray-triangle stress families of :mod:`raplas_hdl.verify.stress` judged by the exact
     reference R (:mod:`raplas_hdl.host.exact`), each pair evaluated in both modes of the
     unit (``paper`` and ``conservative``, margin scale 1). R does not depend on the mode,
     so one shard computes it once and evaluates both modes.
@@ -57,7 +57,7 @@ Top level:
                     (no valid triangle record), ``unguaranteed`` (outside the domain),
                     ``r_hits``, ``unit_hits``, ``false_hits``, ``false_misses``,
                     ``edge_rays``, ``leaks`` (all in domain, as
-                    :func:`raplas_hdl.host.stress.evaluate`), ``t_rel_median``,
+                    :func:`raplas_hdl.verify.stress.evaluate`), ``t_rel_median``,
                     ``t_rel_p99``, ``t_rel_max`` (relative error of ``t`` over in-domain pairs
                     both hit; median and p99 are the upper edge of a histogram bin of width
                     ``2**(1/16)``, so within 4.4 % above the empirical quantile; max exact),
@@ -329,7 +329,7 @@ def random_bundle(rng):
     """A random bundle: 1..8 rows and columns, ``|O|`` from 1e-3 to 0.95 ``O_MAX``, screen at
     1e-2..10, axes 45..90 degrees apart, half extents 1e-3..1 of the distance (as the
     test of the culling proof)."""
-    from .bundles import RayBundle
+    from ..host.bundles import RayBundle
     rows, cols = (int(x) for x in rng.integers(1, 9, 2))
     o_norm = 10 ** rng.uniform(-3, math.log10(O_MAX * 0.95))
     origin = rng.normal(size=3)
@@ -409,8 +409,8 @@ def culling_shard(shard: Shard) -> dict:
     (``_CULL_COUNTS``)."""
     from ..fp import model as fpm
     from ..model import plane_sphere as ps_model
-    from .bundles import encode_bundles
-    from .culling import CullingBudget, bundle_slacks, encode_spheres
+    from ..host.bundles import encode_bundles
+    from ..host.culling import CullingBudget, bundle_slacks, encode_spheres
 
     fmt = parse_format(shard.fmt)
     rng = np.random.default_rng(shard.derived_seed())

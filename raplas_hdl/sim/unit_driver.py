@@ -3,7 +3,7 @@
 :func:`run_runs` is what the host's ``rtl`` backend calls: it emits the unit's Verilog for a
 :class:`~raplas_hdl.model.memory_image.UnitConfig` (one simulator build per configuration,
 reused), writes the scene and the runs into a stimulus file, runs
-:mod:`sim.tb_intersection` and returns, per run, the result stream (the structured array
+:mod:`raplas_hdl.sim.tb_intersection` and returns, per run, the result stream (the structured array
 of :data:`raplas_hdl.model.intersection.RESULT_DTYPE`) and the counters, exactly as
 :func:`raplas_hdl.model.intersection.run_bundle` returns them.
 
@@ -154,7 +154,7 @@ def unit_verilog(config: UnitConfig) -> str:
     cached in memory and on disk under ``build/sim/verilog/``, keyed by the parameters and
     the contents of the RTL sources.
     """
-    from sim.runner import BUILD_ROOT
+    from raplas_hdl.sim.runner import BUILD_ROOT
 
     if config in _VERILOG_CACHE:
         return _VERILOG_CACHE[config]
@@ -284,7 +284,7 @@ def run_runs(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
     AssertionError
         When the testbench fails (FIFO overflow flag, a protocol error, a timeout).
     """
-    from sim.runner import run_cocotb
+    from raplas_hdl.sim.runner import run_cocotb
 
     runs = list(runs)
     if not runs:
@@ -311,7 +311,7 @@ def run_runs(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
         env = {"UNIT_STIM": str(stim_path), "UNIT_OUT": str(out_path),
                "UNIT_META": str(Path(tmp) / "meta.json")}
         with _verilator_pch_fix(simulator):
-            run_cocotb(simulator, text, "intersection_unit", "sim.tb_intersection",
+            run_cocotb(simulator, text, "intersection_unit", "raplas_hdl.sim.tb_intersection",
                        build_key or f"unit-{config.fmt.name}-{config.rows}x{config.cols}",
                        env=env, build_args=ICARUS_ARGS if simulator == "icarus" else (),
                        # the testbench touches only the top's ports; with every signal

@@ -1,10 +1,10 @@
 """cocotb testbenches for streaming pipelines (the FP units first) around the batch harness.
 
-The top level is the harness of :mod:`sim.harness` (so one build serves both tests). The
+The top level is the harness of :mod:`raplas_hdl.sim.harness` (so one build serves both tests). The
 pytest side passes everything through environment variables and files:
 
 ``RAPLAS_SPEC``
-    The :class:`sim.harness.HarnessSpec` as JSON.
+    The :class:`raplas_hdl.sim.harness.HarnessSpec` as JSON.
 ``RAPLAS_TB_IN`` (per-cycle test)
     An ``.npz`` with one array per input data port, and scalars ``idle`` (probability of a
     gap in ``valid``), ``stall`` (probability that ``en``/``o_ready`` is low) and ``seed``.
@@ -29,10 +29,7 @@ import numpy as np
 from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, ReadOnly, RisingEdge, Timer
 
-try:
-    from sim.harness import HarnessSpec
-except ImportError:  # run from inside sim/
-    from harness import HarnessSpec
+from raplas_hdl.sim.harness import HarnessSpec
 
 CLOCK_NS = 10
 
@@ -267,7 +264,7 @@ def fp_cosim(op: str, fmt, a, b, sub=None, *, simulator: str, stages: int | None
         ``expected`` and ``expected_flags``, ``vectors_per_s``, ``cycles``, ``run_s``,
         ``build_s``, ``latency``.
     """
-    from sim.harness import run_batch, run_percycle
+    from raplas_hdl.sim.harness import run_batch, run_percycle
 
     a = np.asarray(a, dtype=np.uint32)
     b = np.asarray(b, dtype=np.uint32)

@@ -1,7 +1,7 @@
 """cocotb testbench of the intersection unit (Verilog module ``intersection_unit``).
 
-Started by :func:`sim.unit_driver.run_runs`, which passes, in environment variables,
-``UNIT_STIM`` (an ``.npz`` from :func:`sim.unit_driver.encode_runs`: scene writes and, per
+Started by :func:`raplas_hdl.sim.unit_driver.run_runs`, which passes, in environment variables,
+``UNIT_STIM`` (an ``.npz`` from :func:`raplas_hdl.sim.unit_driver.encode_runs`: scene writes and, per
 run, its memory writes and its command), ``UNIT_META`` (JSON: struct field offsets, seed,
 ready density, FIFO depth) and ``UNIT_OUT`` (where the results go).
 

@@ -1,8 +1,8 @@
 """cocotb testbench of the board-level top (Verilog module ``board_top``).
 
-Started by :func:`sim.board_sim.run_board`, which passes, in environment variables,
+Started by :func:`raplas_hdl.sim.board_sim.run_board`, which passes, in environment variables,
 ``BOARD_STIM`` (an ``.npz``: the scene's and the runs' memories, see
-:func:`sim.board_sim.encode_stimulus`), ``BOARD_META`` (JSON: the unit's parameters, seed,
+:func:`raplas_hdl.sim.board_sim.encode_stimulus`), ``BOARD_META`` (JSON: the unit's parameters, seed,
 bus gap density) and ``BOARD_OUT`` (where the results go).
 
 The host side is the real driver, :class:`raplas_hdl.host.board_driver.BoardDriver`, run
@@ -122,7 +122,7 @@ async def _start(dut, meta):
 
 
 def _load(meta):
-    from sim.board_sim import decode_stimulus
+    from raplas_hdl.sim.board_sim import decode_stimulus
 
     stim = dict(np.load(os.environ["BOARD_STIM"], allow_pickle=False))
     return decode_stimulus(meta, stim)
