@@ -162,29 +162,49 @@ PRESETS = {"FP16": FP16, "FP20": FP20, "FP24": FP24, "FP32": FP32}
 
 
 def parse_format(text: str, rounding: str | None = None) -> FPFormat:
-    """Parse ``FP24``, ``fp24/rne``, ``e7m16`` or ``e7m16-chop`` into a format.
+    """Parse a format name into a format.
+
+    Accepted spellings (case-insensitive): a preset ``FP16``, ``FP20``, ``FP24``, ``FP32``
+    or field widths ``eXmY`` (``X`` exponent, ``Y`` fraction bits), optionally followed by
+    ``/`` or ``-`` and a rounding: ``FP24``, ``FP24/rtz``, ``fp24-rne``, ``e7m16``,
+    ``e7m16-rne``, ``E7M16/chop`` (what ``str(fmt)`` gives) and ``fmt.name``. A rounding
+    in the text and ``rounding`` must agree; with neither the rounding is ``rtz``.
 
     Raises
     ------
     ValueError
-        When the text names no format or the format is out of range.
+        One line naming the text and what is wrong with it: not a format, an unknown
+        preset or rounding, field widths out of range, or two roundings that disagree.
     """
     import re
 
+    if not isinstance(text, str):
+        raise ValueError(f"format must be a string such as FP24 or e7m16-rne, not {text!r}")
     t = text.strip()
-    rnd = rounding
-    m = re.fullmatch(r"(?i)(fp\d+|e\d+m\d+)(?:[/-](rtz|rne|chop))?", t)
+    if rounding is not None and rounding not in ROUNDINGS:
+        raise ValueError(f"rounding must be one of {', '.join(ROUNDINGS)}, not {rounding!r}")
+    m = re.fullmatch(r"(?i)(fp\d+|e\d+m\d+)(?:[/-]([a-z0-9_]*))?", t)
     if not m:
-        raise ValueError(f"format {text!r} is not FP16, FP20, FP24, FP32 or eXmY[-rounding]")
+        raise ValueError(f"format {text!r} is not FP16, FP20, FP24, FP32 or eXmY, with an "
+                         f"optional rounding (for example FP24/rtz or e7m16-rne)")
     head, tail = m.group(1), m.group(2)
+    rnd = rounding
     if tail is not None:
-        if rnd is not None and rnd != tail.lower():
+        tail = tail.lower()
+        if tail not in ROUNDINGS:
+            raise ValueError(f"format {text!r}: rounding {tail!r} is not one of "
+                             f"{', '.join(ROUNDINGS)}")
+        if rnd is not None and rnd != tail:
             raise ValueError(f"format {text!r} names rounding {tail!r} but rounding={rnd!r}")
-        rnd = tail.lower()
+        rnd = tail
     rnd = rnd or "rtz"
     if head.upper() in PRESETS:
         return PRESETS[head.upper()].with_rounding(rnd)
     if head.upper().startswith("FP"):
-        raise ValueError(f"format {text!r}: known presets are {', '.join(PRESETS)}")
+        raise ValueError(f"format {text!r}: known presets are {', '.join(PRESETS)} "
+                         "(or give the field widths as eXmY)")
     e, mb = re.fullmatch(r"(?i)e(\d+)m(\d+)", head).groups()
-    return FPFormat(int(e), int(mb), rnd)
+    try:
+        return FPFormat(int(e), int(mb), rnd)
+    except ValueError as exc:
+        raise ValueError(f"format {text!r}: {exc}") from None
