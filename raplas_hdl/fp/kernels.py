@@ -1,6 +1,6 @@
 """Scalar numba kernels of the FP contract (``shared/spec/fp-format.md``), bit for bit.
 
-Every kernel is an ``@njit(cache=True, inline="always")`` function of plain integers,
+Every kernel is an ``@njit(cache=True)`` function of plain integers,
 generic in the format: ``e`` (exponent bits), ``m`` (fraction bits) and ``rmode`` (:data:`RTZ`,
 :data:`RNE` or :data:`CHOP`, see :func:`rmode_code`) are runtime integers. They are
 meant to be called from other numba code (the unit models compose dozens of them per
@@ -68,7 +68,7 @@ def rmode_code(fmt) -> int:
             from None
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _pack(s, ex, q, e, m, rmode):
     """Pack sign ``s``, biased exponent ``ex`` and significand ``q`` (hidden one included),
     applying overflow (rule 2) and flush-to-zero (rule 3)."""
@@ -83,12 +83,12 @@ def _pack(s, ex, q, e, m, rmode):
     return np.uint32((s << sh) | (ex << m) | (q & ((np.int64(1) << m) - 1))), _NOF
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _nan(e, m):
     return np.uint32((((np.int64(1) << e) - 1) << m) | (np.int64(1) << (m - 1)))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _bitlen(v):
     """Bit length of ``0 <= v < 2**63`` without branches (a binary search by selects)."""
     n = np.int64(0)
@@ -99,7 +99,7 @@ def _bitlen(v):
     return n + v
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _add_special(sa, xa, fa, sb, xb, fb, e, m):
     """``a + b`` when an operand is zero, infinite or NaN (rules 4 and 5)."""
     emf = (np.int64(1) << e) - 1
@@ -121,7 +121,7 @@ def _add_special(sa, xa, fa, sb, xb, fb, e, m):
     return np.uint32((sa << sh) | (xa << m) | fa), _NOF
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def add_int_k(a, b, e, m, rmode):
     """``a + b`` by integer arithmetic, any format; returns ``(bits, flags)``.
 
@@ -179,7 +179,7 @@ def add_int_k(a, b, e, m, rmode):
     return _pack(s, ex, q, e, m, rmode)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def neg_k(a, e, m):
     """``-a``: flips the sign of a non-NaN ``a``; a NaN gives the canonical NaN."""
     a = np.int64(a)
@@ -189,13 +189,13 @@ def neg_k(a, e, m):
     return np.uint32(a ^ (np.int64(1) << (e + m)))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def sub_k(a, b, e, m, rmode):
     """``a - b = a + neg(b)``; returns ``(bits, flags)``."""
     return add_k(a, np.int64(neg_k(b, e, m)), e, m, rmode)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def mul_int_k(a, b, e, m, rmode):
     """``a * b`` by integer arithmetic, any format; returns ``(bits, flags)``.
 
@@ -243,13 +243,13 @@ def mul_int_k(a, b, e, m, rmode):
 # loops). The integer kernels above are the reference path for every other format and
 # the tests hold both paths to the oracle.
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def fast_path_ok(e, m):
     """True when :func:`add_k`/:func:`mul_k` use the float64 path for format ``(e, m)``."""
     return e <= 8 and m <= 25
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _to_f64(a, e, m):
     """Exact float64 of a pattern (denormal patterns as signed zeros), branch-free."""
     emf = (np.int64(1) << e) - 1
@@ -263,7 +263,7 @@ def _to_f64(a, e, m):
     return np.int64(bits).view(np.float64)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _round_f64(v, err, nan_in, e, m, rmode):
     """Round ``v + err`` (``err``: a float64 much smaller than one float64 ulp of ``v``
     or 0, of any sign) into the format by ``rmode``; NaN results become the canonical
@@ -308,13 +308,13 @@ def _round_f64(v, err, nan_in, e, m, rmode):
     return np.uint32(r), fl
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _is_nan_pat(a, e, m):
     emf = (np.int64(1) << e) - 1
     return ((a >> m) & emf) == emf and (a & ((np.int64(1) << m) - 1)) != 0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def mul_f64_k(a, b, e, m, rmode):
     """``a * b`` by float64 (E <= 8, M <= 25 only); returns ``(bits, flags)``."""
     a = np.int64(a)
@@ -324,7 +324,7 @@ def mul_f64_k(a, b, e, m, rmode):
     return _round_f64(p, 0.0, nan_in, e, m, RTZ if rmode == CHOP else rmode)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def add_f64_k(a, b, e, m, rmode):
     """``a + b`` by float64 and TwoSum (E <= 8, M <= 25 only); ``chop`` truncates the
     smaller operand to the larger one's last place first, as the contract says."""
@@ -352,7 +352,7 @@ def add_f64_k(a, b, e, m, rmode):
     return _round_f64(ss, err, nan_in, e, m, rmode)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def add_k(a, b, e, m, rmode):
     """``a + b`` in the format ``(e, m)`` with rounding ``rmode``; returns ``(bits, flags)``.
 
@@ -364,7 +364,7 @@ def add_k(a, b, e, m, rmode):
     return add_int_k(a, b, e, m, rmode)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def mul_k(a, b, e, m, rmode):
     """``a * b`` in the format ``(e, m)`` with rounding ``rmode``; returns ``(bits, flags)``.
 
@@ -376,7 +376,7 @@ def mul_k(a, b, e, m, rmode):
     return mul_int_k(a, b, e, m, rmode)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _key(a, e, m):
     """Order key of a non-NaN pattern: signed magnitude, denormal patterns and -0 as 0."""
     a = np.int64(a)
@@ -389,14 +389,14 @@ def _key(a, e, m):
     return mag
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _is_nan(a, e, m):
     a = np.int64(a)
     emf = (np.int64(1) << e) - 1
     return ((a >> m) & emf) == emf and (a & ((np.int64(1) << m) - 1)) != 0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def le_k(a, b, e, m):
     """``a <= b`` (ordered: any NaN gives False; -0 == +0; denormal patterns are zero)."""
     if _is_nan(a, e, m) or _is_nan(b, e, m):
@@ -404,7 +404,7 @@ def le_k(a, b, e, m):
     return _key(a, e, m) <= _key(b, e, m)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def lt_k(a, b, e, m):
     """``a < b`` (ordered: any NaN gives False; -0 == +0; denormal patterns are zero)."""
     if _is_nan(a, e, m) or _is_nan(b, e, m):
@@ -412,7 +412,7 @@ def lt_k(a, b, e, m):
     return _key(a, e, m) < _key(b, e, m)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def abs_le_k(a, b, e, m):
     """``|a| <= |b|`` (any NaN gives False; denormal patterns are zero)."""
     if _is_nan(a, e, m) or _is_nan(b, e, m):
@@ -422,7 +422,7 @@ def abs_le_k(a, b, e, m):
     return abs(ka) <= abs(kb)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def encode_k(xbits, e, m, mode):
     """Round a float64, given as its ``int64`` bit pattern, into the format.
 
@@ -481,7 +481,7 @@ def encode_k(xbits, e, m, mode):
     return np.uint32((s << sh) | ((ux + bias) << m) | (q & ((np.int64(1) << m) - 1))), _NOF
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def decode_k(a, e, m):
     """The float64 bit pattern (``int64``) of a format pattern; exact (denormals decode as
     signed zeros, every NaN as a quiet NaN)."""

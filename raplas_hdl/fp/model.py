@@ -26,6 +26,8 @@ from numba import get_num_threads, njit, prange
 from .format import FLAG_INVALID, FLAG_NAMES, FLAG_OVERFLOW, FLAG_UNDERFLOW, FPFormat
 from .kernels import (CHOP, DOWN, RNE, RTZ, UP, abs_le_k, add_int_k, add_k, decode_k,
                       encode_k, le_k, lt_k, mul_int_k, mul_k, neg_k, rmode_code)
+from .fast import common_add as _common_add
+from .fast import common_mul as _common_mul
 from .numba_cache import drop_stale_cache
 
 drop_stale_cache(__file__)
@@ -174,82 +176,6 @@ _BLOCK = 4096             # elements per pass-1/pass-2 block (stays in L1/L2)
 _FAST_MIN = 1 << 15       # smaller arrays take the generic loops (no compile per format)
 _PAR_MIN = 1 << 16        # smaller arrays run in the calling thread
 _SENT = np.uint32(0xFFFFFFFF)
-_F64_MAGIC = np.int64(0x4330000000000000)       # float64 2^52: bit length by conversion
-_F64_TWO52 = 4503599627370496.0
-
-
-@njit(inline="always")
-def _bitlen_f(v):
-    """Bit length of ``0 < v < 2**52``, branch-free and vectorisable: ``v + 2^52`` as a
-    float64 minus ``2^52`` is ``v`` exactly; its exponent field is the bit length."""
-    f = np.int64(v | _F64_MAGIC).view(np.float64) - _F64_TWO52
-    return (np.float64(f).view(np.int64) >> 52) - 1022
-
-
-@njit(inline="always")
-def _common_mul(a, b, E, M, R):
-    """Pass 1 of ``a * b``: the result pattern, or -1 (all ones: the sentinel once cut to
-    32 bits) when the element is not the common case (an operand not normal, overflow or
-    underflow)."""
-    H = np.int64(1) << M
-    MM = H - 1
-    SH = E + M
-    MAG = (np.int64(1) << SH) - 1
-    EM = ((np.int64(1) << E) - 1) << M               # exponent field of inf/NaN, in place
-    BIAS1 = ((np.int64(1) << (E - 1))) << M          # (bias + 1) in place
-    ma = a & MAG
-    mb = b & MAG
-    p = ((a & MM) | H) * ((b & MM) | H)              # exact, in [2^2M, 2^(2M+2))
-    t = p >> (2 * M + 1)                             # 1 when the product is >= 2
-    sh = M + t
-    if R == _RNE:                                    # + (half - 1 + lsb), then truncate
-        p = p + (((np.int64(1) << (M - 1)) << t) - 1) + ((p >> sh) & 1)
-    q = p >> sh                                      # hidden one at bit M (or a carry)
-    # Exponent and fraction in place: a carry of the rounding adds into the exponent.
-    mag = (ma & EM) + (mb & EM) + (t << M) + q - BIAS1
-    sg = (a ^ b) & (np.int64(1) << SH)
-    ok = (mag - H) | (EM - 1 - mag) | (ma - H) | (EM - 1 - ma) | (mb - H) | (EM - 1 - mb)
-    return sg | mag | (ok >> 63)
-
-
-@njit(inline="always")
-def _common_add(a, b, E, M, R):
-    """Pass 1 of ``a + b``: the result pattern, or -1 (all ones: the sentinel once cut to
-    32 bits) when the element is not the common case (an operand not normal, exact zero,
-    overflow or underflow)."""
-    H = np.int64(1) << M
-    MM = H - 1
-    SH = E + M
-    SB = np.int64(1) << SH
-    MAG = SB - 1
-    EM = ((np.int64(1) << E) - 1) << M
-    ma = a & MAG
-    mb = b & MAG
-    swap = mb > ma
-    hi = mb if swap else ma
-    lo = ma if swap else mb
-    sg = (b if swap else a) & SB                     # the larger magnitude's sign
-    d = min((hi >> M) - (lo >> M), M + 4)            # (B << 3) >> (M + 4) is already 0
-    ax = ((hi & MM) | H) << 3                        # guard, round, sticky bits
-    bx = ((lo & MM) | H) << 3
-    bal = bx >> d
-    if R == _CHOP:
-        bal = bal & ~np.int64(7)                     # shifted-out bits are dropped
-    else:
-        bal = bal | np.int64((bal << d) != bx)       # sticky
-    s3 = (ax - bal) if ((a ^ b) & SB) != 0 else (ax + bal)
-    z = s3 - 1                                       # negative for an exact zero sum
-    lsh = M + 4 - _bitlen_f(s3 | np.int64(s3 == 0))  # -1 (carry) .. M+3 (cancellation)
-    r1 = np.int64(lsh < 0)
-    s3 = ((s3 << (lsh + r1)) >> r1) | (s3 & r1)      # bit M+3 leads; a carry keeps sticky
-    if R == _RNE:
-        s3 = s3 + 3 + ((s3 >> 3) & 1)                # ties to even
-    q = s3 >> 3
-    mag = (hi & EM) - ((lsh + 1) << M) + q           # a rounding carry adds into exponent
-    ok = (mag - H) | (EM - 1 - mag) | (lo - H) | (EM - 1 - hi) | z
-    return sg | mag | (ok >> 63)
-
-
 _FAST_KERNELS = {}
 
 

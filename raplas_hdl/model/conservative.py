@@ -97,12 +97,13 @@ from dataclasses import dataclass
 from fractions import Fraction
 
 import numpy as np
+from numba import njit
 
 from ..fp.format import FPFormat
 
 __all__ = ["Domain", "domain", "MarginConstants", "margin_constants", "margin_exponents",
            "margins", "MARGIN_NAMES", "SAFETY", "GUARD_EXP", "C_DET", "C_T", "C_UV", "C_W",
-           "MIN_MAN_BITS"]
+           "MIN_MAN_BITS", "margin_table", "margin_k"]
 
 #: Names of the five margins, in the order the tuples of this module use.
 MARGIN_NAMES = ("det", "t", "u", "v", "w")
@@ -278,3 +279,34 @@ def margins(o, d, v0, e1, e2, n, fmt: FPFormat, margin_scale: float = 1.0,
         bits = np.where(field >= fmt.exp_max_field, fmt.inf, bits)
         out[name] = bits.astype(np.uint32)
     return out
+
+
+def margin_table(constants: MarginConstants) -> np.ndarray:
+    """The constants as the compiled kernels take them: ``int64`` (3, 5), rows ``k_field``,
+    ``k_frac`` and ``floor``, columns in :data:`MARGIN_NAMES` order."""
+    return np.array([[constants.k_field[k] for k in MARGIN_NAMES],
+                     [constants.k_frac[k] for k in MARGIN_NAMES],
+                     [constants.floor[k] for k in MARGIN_NAMES]], dtype=np.int64)
+
+
+@njit(cache=True)
+def _margin_bits(mc, k, y, e, m):
+    emf = (np.int64(1) << e) - 1
+    field = mc[0, k] + max(y, mc[2, k])
+    if field >= emf:
+        return np.uint32(emf << m)
+    return np.uint32((max(field, np.int64(1)) << m) | mc[1, k])
+
+
+@njit(cache=True)
+def margin_k(fo, fd, fv, fe1, fe2, fn, mc, e, m):
+    """The five margins of one pair (``det, t, u, v, w`` bit patterns), the scalar form of
+    :func:`margins`: ``fX`` is the largest exponent field of vector ``X``'s components,
+    ``mc`` the :func:`margin_table`."""
+    b1 = (np.int64(1) << (e - 1)) - 2               # bias - 1: L = field - bias + 1
+    lo, ld, lv = fo - b1, fd - b1, fv - b1
+    le1, le2, ln = fe1 - b1, fe2 - b1, fn - b1
+    lvo = max(lv, lo)
+    return (_margin_bits(mc, 0, ln + ld, e, m), _margin_bits(mc, 1, ln + lvo, e, m),
+            _margin_bits(mc, 2, ld + lvo + le2, e, m), _margin_bits(mc, 3, ld + lvo + le1, e, m),
+            _margin_bits(mc, 4, ld + max(ln, max(le1, le2) + lvo), e, m))

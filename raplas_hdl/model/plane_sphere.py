@@ -24,11 +24,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from raplas_hdl.fp import FPFormat
+from raplas_hdl.fp.fast import fast_add, fast_mul
 from raplas_hdl.fp.kernels import add_k, lt_k, mul_k, rmode_code
 from raplas_hdl.fp.numba_cache import drop_stale_cache
+from raplas_hdl.model.parallel import run_chunks
 
 drop_stale_cache(__file__)
 
@@ -37,7 +39,8 @@ __all__ = ["tester_flags", "plane_distances", "sphere_masks", "schedule", "n_pas
 
 
 @njit(cache=True)
-def _test(nx, ny, nz, p, cx, cy, cz, r, e, m, rmode):
+def plane_exact(nx, ny, nz, p, cx, cy, cz, r, e, m, rmode):
+    """One tester operation through the reference kernels: ``(d, keep, flags)``."""
     mx, f0 = mul_k(nx, cx, e, m, rmode)
     my, f1 = mul_k(ny, cy, e, m, rmode)
     mz, f2 = mul_k(nz, cz, e, m, rmode)
@@ -50,31 +53,56 @@ def _test(nx, ny, nz, p, cx, cy, cz, r, e, m, rmode):
 
 
 @njit(cache=True)
-def _pairs_serial(n, p, c, r, e, m, rmode, d_out, keep_out, fl_out):
-    for s in range(c.shape[0]):
-        for k in range(n.shape[0]):
-            d, keep, fl = _test(n[k, 0], n[k, 1], n[k, 2], p[k], c[s, 0], c[s, 1], c[s, 2],
-                                r[s], e, m, rmode)
-            d_out[s, k] = d
-            keep_out[s, k] = keep
-            fl_out[s, k] = fl
+def plane_fast(nx, ny, nz, p, cx, cy, cz, r, E, M, R):
+    """:func:`plane_exact` when its six operations take the flag-free fast path of
+    :mod:`raplas_hdl.fp.fast`: ``d``, or -1 when the caller must run :func:`plane_exact`.
+    Callers pass ``E, M, R`` as compile-time constants."""
+    mx = fast_mul(np.int64(nx), np.int64(cx), E, M, R)
+    my = fast_mul(np.int64(ny), np.int64(cy), E, M, R)
+    mz = fast_mul(np.int64(nz), np.int64(cz), E, M, R)
+    s1 = fast_add(mx, my, E, M, R)
+    s2 = fast_add(mz, np.int64(p), E, M, R)
+    d = fast_add(s1, s2, E, M, R)
+    return d | ((mx | my | mz | s1 | s2) >> 63)
 
 
-#: Below this many (sphere, plane) pairs the serial kernel is faster than a parallel one.
-_PARALLEL_MIN = 1 << 16
+@njit(cache=True)
+def plane_keep(nx, ny, nz, p, cx, cy, cz, r, E, M, R):
+    """The tester's keep flag, ``NOT(|d| > r')``: the fast path, else the reference."""
+    d = plane_fast(nx, ny, nz, p, cx, cy, cz, r, E, M, R)
+    if d >= 0:
+        return not lt_k(r, d & ((np.int64(1) << (E + M)) - 1), E, M)
+    return plane_exact(nx, ny, nz, p, cx, cy, cz, r, E, M, R)[1]
 
 
-@njit(parallel=True, cache=True)
-def _all_pairs(n, p, c, r, e, m, rmode, d_out, keep_out, fl_out):
-    n_s = c.shape[0]
-    n_p = n.shape[0]
-    for s in prange(n_s):
-        for k in range(n_p):
-            d, keep, fl = _test(n[k, 0], n[k, 1], n[k, 2], p[k], c[s, 0], c[s, 1], c[s, 2],
-                                r[s], e, m, rmode)
-            d_out[s, k] = d
-            keep_out[s, k] = keep
-            fl_out[s, k] = fl
+_FLAT = {}
+
+
+def _flat_kernel(fmt: FPFormat):
+    """Every (sphere, plane) pair of spheres ``lo .. hi-1``, for one format and rounding
+    (compile-time constants, cached on disk per format by numba)."""
+    E, M, R = fmt.exp_bits, fmt.man_bits, rmode_code(fmt)
+    if (E, M, R) in _FLAT:
+        return _FLAT[(E, M, R)]
+
+    @njit(nogil=True, cache=True)
+    def loop(n, p, c, r, lo, hi, d_out, keep_out, fl_out):
+        sign = np.int64(1) << (E + M)
+        for s in range(lo, hi):
+            for k in range(n.shape[0]):
+                d = plane_fast(n[k, 0], n[k, 1], n[k, 2], p[k], c[s, 0], c[s, 1], c[s, 2],
+                               r[s], E, M, R)
+                if d >= 0:
+                    d_out[s, k] = d
+                    keep_out[s, k] = not lt_k(r[s], d & (sign - 1), E, M)
+                    fl_out[s, k] = 0
+                else:
+                    d_out[s, k], keep_out[s, k], fl_out[s, k] = plane_exact(
+                        n[k, 0], n[k, 1], n[k, 2], p[k], c[s, 0], c[s, 1], c[s, 2], r[s],
+                        E, M, R)
+
+    _FLAT[(E, M, R)] = loop
+    return loop
 
 
 def _as_bits(x, shape_tail, name, fmt):
@@ -104,8 +132,9 @@ def _run(planes_n, planes_p, centres, radii, fmt: FPFormat):
     d = np.empty(shape, np.uint32)
     keep = np.empty(shape, np.bool_)
     fl = np.empty(shape, np.uint8)
-    kernel = _all_pairs if d.size >= _PARALLEL_MIN else _pairs_serial
-    kernel(n, p, c, r, fmt.exp_bits, fmt.man_bits, rmode_code(fmt), d, keep, fl)
+    loop = _flat_kernel(fmt)
+    run_chunks(c.shape[0], lambda lo, hi: loop(n, p, c, r, lo, hi, d, keep, fl),
+               min_chunk=max(1, 8192 // max(1, n.shape[0])))
     return d, keep, fl
 
 

@@ -49,9 +49,11 @@ import numpy as np
 from numba import njit
 
 from ..fp.format import FLAG_INVALID, FLAG_OVERFLOW, FLAG_UNDERFLOW, FPFormat
+from ..fp.fast import fast_add, fast_mul
 from ..fp.kernels import add_k, le_k, lt_k, mul_k, neg_k, rmode_code, sub_k
 from ..fp.numba_cache import drop_stale_cache
-from .conservative import MARGIN_NAMES, margin_constants, margins
+from .conservative import margin_constants, margin_k, margin_table
+from .parallel import run_chunks
 
 __all__ = ["intersect", "MODES", "N_OPS", "EVENTS"]
 
@@ -103,58 +105,160 @@ def _is_nan(a, e, m):
 
 
 @njit(cache=True)
-def _loop(o, d, v0, e1, e2, nn, e, m, r, conservative, marg, hit, t_o, u_o, v_o, det_o, fl_o,
-          cnt_o):
-    sign = np.uint32(1) << (e + m)
+def _field3(x, i, m, emf):
+    """Largest biased exponent field of the three components of row ``i``."""
+    return max(max((np.int64(x[i, 0]) >> m) & emf, (np.int64(x[i, 1]) >> m) & emf),
+               (np.int64(x[i, 2]) >> m) & emf)
+
+
+@njit(cache=True)
+def _margins(o, oi, d, di, v0, e1, e2, nn, ti, e, m, mc):
+    emf = (np.int64(1) << e) - 1
+    return margin_k(_field3(o, oi, m, emf), _field3(d, di, m, emf), _field3(v0, ti, m, emf),
+                    _field3(e1, ti, m, emf), _field3(e2, ti, m, emf), _field3(nn, ti, m, emf),
+                    mc, e, m)
+
+
+@njit(cache=True)
+def _decide(det, tp, up, vp, s, w, bad, cons, margins, e, m):
+    """The hit decision of either mode from the pair's results (module docstring)."""
     zero = np.uint32(0)
-    for i in range(o.shape[0]):
-        tx, f0 = sub_k(v0[i, 0], o[i, 0], e, m, r)
-        ty, f1 = sub_k(v0[i, 1], o[i, 1], e, m, r)
-        tz, f2 = sub_k(v0[i, 2], o[i, 2], e, m, r)
-        det, c3 = _dot(nn[i, 0], nn[i, 1], nn[i, 2], d[i, 0], d[i, 1], d[i, 2], e, m, r)
-        tp, c4 = _dot(nn[i, 0], nn[i, 1], nn[i, 2], tx, ty, tz, e, m, r)
-        qx, c5 = _cross_term(d[i, 1], tz, d[i, 2], ty, e, m, r)
-        qy, c6 = _cross_term(d[i, 2], tx, d[i, 0], tz, e, m, r)
-        qz, c7 = _cross_term(d[i, 0], ty, d[i, 1], tx, e, m, r)
-        qe2, c8 = _dot(qx, qy, qz, e2[i, 0], e2[i, 1], e2[i, 2], e, m, r)
-        up = neg_k(qe2, e, m)
-        vp, c9 = _dot(qx, qy, qz, e1[i, 0], e1[i, 1], e1[i, 2], e, m, r)
-        s, f10 = add_k(up, vp, e, m, r)
-        cnt = (_tally(f0) + _tally(f1) + _tally(f2) + c3 + c4 + c5 + c6 + c7 + c8 + c9
-               + _tally(f10))
-        if conservative:
-            w, f11 = sub_k(det, s, e, m, r)
-            cnt += _tally(f11)
-        n_ovf, n_unf, n_inv = cnt & 0xFF, (cnt >> 8) & 0xFF, (cnt >> 16) & 0xFF
-        fl = np.uint8(min(n_ovf, 1) | (min(n_unf, 1) << 1) | (min(n_inv, 1) << 2))
-        if not conservative:
-            if lt_k(zero, det, e, m):
-                h = (le_k(zero, up, e, m) and le_k(zero, vp, e, m) and le_k(s, det, e, m)
-                     and le_k(zero, tp, e, m))
-            elif lt_k(det, zero, e, m):
-                h = (le_k(up, zero, e, m) and le_k(vp, zero, e, m) and le_k(det, s, e, m)
-                     and le_k(tp, zero, e, m))
-            else:
-                h = False
-        else:
-            m_det, m_t, m_u, m_v, m_w = marg[i, 0], marg[i, 1], marg[i, 2], marg[i, 3], marg[i, 4]
-            bad = (_is_nan(det, e, m) or _is_nan(tp, e, m) or _is_nan(up, e, m)
-                   or _is_nan(vp, e, m) or _is_nan(w, e, m) or n_ovf != 0)
-            pos = (le_k(m_u ^ sign, up, e, m) and le_k(m_v ^ sign, vp, e, m)
-                   and le_k(m_w ^ sign, w, e, m) and le_k(m_t ^ sign, tp, e, m))
-            neg = (le_k(up, m_u, e, m) and le_k(vp, m_v, e, m) and le_k(w, m_w, e, m)
-                   and le_k(tp, m_t, e, m))
-            h = (bad or (le_k(m_det ^ sign, det, e, m) and pos)
-                 or (le_k(det, m_det, e, m) and neg))
-        hit[i] = h
-        t_o[i] = tp
-        u_o[i] = up
-        v_o[i] = vp
-        det_o[i] = det
-        fl_o[i] = fl
-        cnt_o[i, 0] = n_ovf
-        cnt_o[i, 1] = n_unf
-        cnt_o[i, 2] = n_inv
+    if not cons:
+        if lt_k(zero, det, e, m):
+            return (le_k(zero, up, e, m) and le_k(zero, vp, e, m) and le_k(s, det, e, m)
+                    and le_k(zero, tp, e, m))
+        if lt_k(det, zero, e, m):
+            return (le_k(up, zero, e, m) and le_k(vp, zero, e, m) and le_k(det, s, e, m)
+                    and le_k(tp, zero, e, m))
+        return False
+    sign = np.uint32(1) << (e + m)
+    m_det, m_t, m_u, m_v, m_w = margins
+    pos = (le_k(m_u ^ sign, up, e, m) and le_k(m_v ^ sign, vp, e, m)
+           and le_k(m_w ^ sign, w, e, m) and le_k(m_t ^ sign, tp, e, m))
+    neg = (le_k(up, m_u, e, m) and le_k(vp, m_v, e, m) and le_k(w, m_w, e, m)
+           and le_k(tp, m_t, e, m))
+    return bad or (le_k(m_det ^ sign, det, e, m) and pos) or (le_k(det, m_det, e, m) and neg)
+
+
+@njit(cache=True)
+def pair_exact(o, oi, d, di, v0, e1, e2, nn, ti, e, m, r, cons, mc):
+    """One pair through the reference kernels (any operands).
+
+    The ray is row ``oi`` of ``o`` and row ``di`` of ``d``; the triangle is row ``ti`` of
+    ``v0, e1, e2, nn``; ``cons`` selects the conservative mode, whose margin constants are
+    ``mc`` (:func:`~raplas_hdl.model.conservative.margin_table`). Returns ``(hit, t', u',
+    v', det, counts)``, ``counts`` the packed event counts (overflow in bits 0-7,
+    underflow 8-15, invalid 16-23).
+    """
+    tx, f0 = sub_k(v0[ti, 0], o[oi, 0], e, m, r)
+    ty, f1 = sub_k(v0[ti, 1], o[oi, 1], e, m, r)
+    tz, f2 = sub_k(v0[ti, 2], o[oi, 2], e, m, r)
+    det, c3 = _dot(nn[ti, 0], nn[ti, 1], nn[ti, 2], d[di, 0], d[di, 1], d[di, 2], e, m, r)
+    tp, c4 = _dot(nn[ti, 0], nn[ti, 1], nn[ti, 2], tx, ty, tz, e, m, r)
+    qx, c5 = _cross_term(d[di, 1], tz, d[di, 2], ty, e, m, r)
+    qy, c6 = _cross_term(d[di, 2], tx, d[di, 0], tz, e, m, r)
+    qz, c7 = _cross_term(d[di, 0], ty, d[di, 1], tx, e, m, r)
+    qe2, c8 = _dot(qx, qy, qz, e2[ti, 0], e2[ti, 1], e2[ti, 2], e, m, r)
+    up = neg_k(qe2, e, m)
+    vp, c9 = _dot(qx, qy, qz, e1[ti, 0], e1[ti, 1], e1[ti, 2], e, m, r)
+    s, f10 = add_k(up, vp, e, m, r)
+    cnt = (_tally(f0) + _tally(f1) + _tally(f2) + c3 + c4 + c5 + c6 + c7 + c8 + c9
+           + _tally(f10))
+    w = np.uint32(0)
+    bad = False
+    margins = (w, w, w, w, w)
+    if cons:
+        w, f11 = sub_k(det, s, e, m, r)
+        cnt += _tally(f11)
+        bad = (_is_nan(det, e, m) or _is_nan(tp, e, m) or _is_nan(up, e, m)
+               or _is_nan(vp, e, m) or _is_nan(w, e, m) or (cnt & 0xFF) != 0)
+        margins = _margins(o, oi, d, di, v0, e1, e2, nn, ti, e, m, mc)
+    h = _decide(det, tp, up, vp, s, w, bad, cons, margins, e, m)
+    return h, tp, up, vp, det, cnt
+
+
+@njit(cache=True)
+def _fdot(a0, a1, a2, b0, b1, b2, E, M, R):
+    p0 = fast_mul(np.int64(a0), np.int64(b0), E, M, R)
+    p1 = fast_mul(np.int64(a1), np.int64(b1), E, M, R)
+    p2 = fast_mul(np.int64(a2), np.int64(b2), E, M, R)
+    s = fast_add(p0, p1, E, M, R)
+    return fast_add(s, p2, E, M, R), p0 | p1 | p2 | s
+
+
+@njit(cache=True)
+def _fcross(a, b, c, dd, E, M, R):
+    """``a*b - c*dd``."""
+    p = fast_mul(np.int64(a), np.int64(b), E, M, R)
+    q = fast_mul(np.int64(c), np.int64(dd), E, M, R)
+    return fast_add(p, q ^ (np.int64(1) << (E + M)), E, M, R), p | q
+
+
+@njit(cache=True)
+def pair_fast(o, oi, d, di, v0, e1, e2, nn, ti, E, M, R, cons, mc):
+    """:func:`pair_exact` when every operation of the pair is flag-free and takes the fast
+    path of :mod:`raplas_hdl.fp.fast` (almost every pair); returns ``(ok, hit, t', u', v',
+    det)``, and ``ok`` False when the caller must run :func:`pair_exact` instead. Callers
+    pass ``E, M, R`` as compile-time constants."""
+    sb = np.int64(1) << (E + M)
+    tx = fast_add(np.int64(v0[ti, 0]), np.int64(o[oi, 0]) ^ sb, E, M, R)
+    ty = fast_add(np.int64(v0[ti, 1]), np.int64(o[oi, 1]) ^ sb, E, M, R)
+    tz = fast_add(np.int64(v0[ti, 2]), np.int64(o[oi, 2]) ^ sb, E, M, R)
+    det, b1 = _fdot(nn[ti, 0], nn[ti, 1], nn[ti, 2], d[di, 0], d[di, 1], d[di, 2], E, M, R)
+    tp, b2 = _fdot(nn[ti, 0], nn[ti, 1], nn[ti, 2], tx, ty, tz, E, M, R)
+    qx, b3 = _fcross(d[di, 1], tz, d[di, 2], ty, E, M, R)
+    qy, b4 = _fcross(d[di, 2], tx, d[di, 0], tz, E, M, R)
+    qz, b5 = _fcross(d[di, 0], ty, d[di, 1], tx, E, M, R)
+    qe2, b6 = _fdot(qx, qy, qz, e2[ti, 0], e2[ti, 1], e2[ti, 2], E, M, R)
+    vp, b7 = _fdot(qx, qy, qz, e1[ti, 0], e1[ti, 1], e1[ti, 2], E, M, R)
+    up = qe2 ^ sb
+    s = fast_add(up, vp, E, M, R)
+    w = np.int64(0)
+    if cons:
+        w = fast_add(det, s ^ sb, E, M, R)
+    if (tx | ty | tz | det | tp | qx | qy | qz | qe2 | vp | s | w
+            | b1 | b2 | b3 | b4 | b5 | b6 | b7) < 0:
+        z = np.uint32(0)
+        return False, False, z, z, z, z
+    margins = (np.uint32(0), np.uint32(0), np.uint32(0), np.uint32(0), np.uint32(0))
+    if cons:
+        margins = _margins(o, oi, d, di, v0, e1, e2, nn, ti, E, M, mc)
+    h = _decide(np.uint32(det), np.uint32(tp), np.uint32(up), np.uint32(vp), np.uint32(s),
+                np.uint32(w), False, cons, margins, E, M)
+    return True, h, np.uint32(tp), np.uint32(up), np.uint32(vp), np.uint32(det)
+
+
+_FLAT = {}
+
+
+def _flat_kernel(fmt: FPFormat, mode: str):
+    """The per-pair loop of :func:`intersect` for one format, rounding and mode: the format
+    is a compile-time constant (cached on disk per format by numba)."""
+    E, M, R, CONS = fmt.exp_bits, fmt.man_bits, rmode_code(fmt), mode == "conservative"
+    key = (E, M, R, CONS)
+    if key in _FLAT:
+        return _FLAT[key]
+
+    @njit(nogil=True, cache=True)
+    def loop(o, d, v0, e1, e2, nn, mc, lo, hi, hit, t_o, u_o, v_o, det_o, cnt_o):
+        for i in range(lo, hi):
+            ok, h, tp, up, vp, det = pair_fast(o, i, d, i, v0, e1, e2, nn, i, E, M, R, CONS,
+                                               mc)
+            cnt = np.int64(0)
+            if not ok:
+                h, tp, up, vp, det, cnt = pair_exact(o, i, d, i, v0, e1, e2, nn, i, E, M, R,
+                                                     CONS, mc)
+            hit[i] = h
+            t_o[i] = tp
+            u_o[i] = up
+            v_o[i] = vp
+            det_o[i] = det
+            cnt_o[i, 0] = cnt & 0xFF
+            cnt_o[i, 1] = (cnt >> 8) & 0xFF
+            cnt_o[i, 2] = (cnt >> 16) & 0xFF
+
+    _FLAT[key] = loop
+    return loop
 
 
 def _vec(x, fmt, name):
@@ -210,16 +314,14 @@ def intersect(o, d, v0, e1, e2, n, fmt: FPFormat, mode: str = "paper",
     if any(a.shape[0] != count for a in arrs):
         raise ValueError("o, d, v0, e1, e2 and n must have the same number of rows")
     conservative = mode == "conservative"
-    if conservative:
-        mg = margins(*arrs, fmt, constants=margin_constants(fmt, margin_scale))
-        marg = np.ascontiguousarray(np.stack([mg[k] for k in MARGIN_NAMES], axis=1))
-    else:
-        marg = np.zeros((count, 5), dtype=np.uint32)
+    mc = (margin_table(margin_constants(fmt, margin_scale)) if conservative
+          else np.zeros((3, 5), np.int64))
     hit = np.empty(count, dtype=np.bool_)
     outs = [np.empty(count, dtype=np.uint32) for _ in range(4)]
-    fl = np.empty(count, dtype=np.uint8)
     counts = np.empty((count, 3), dtype=np.uint8)
-    _loop(*arrs, fmt.exp_bits, fmt.man_bits, rmode_code(fmt), conservative, marg, hit, *outs,
-          fl, counts)
+    loop = _flat_kernel(fmt, mode)
+    run_chunks(count, lambda lo, hi: loop(*arrs, mc, lo, hi, hit, *outs, counts))
+    fl = ((counts[:, 0] != 0) * FLAG_OVERFLOW | (counts[:, 1] != 0) * FLAG_UNDERFLOW
+          | (counts[:, 2] != 0) * FLAG_INVALID).astype(np.uint8)
     return {"hit": hit, "t": outs[0], "u": outs[1], "v": outs[2], "det": outs[3],
             "flags": fl, "event_counts": counts}
