@@ -27,6 +27,7 @@ from raplas_hdl.fp import model as fpm
 from raplas_hdl.host.bundles import RayBundle
 from raplas_hdl.host.culling import CullingBudget, encode_spheres
 from raplas_hdl.model.plane_sphere import sphere_masks
+from raplas_hdl.model.records import PLANE, PS_RESULT, SPHERE
 from raplas_hdl.rtl.plane_sphere import PlaneSphereArray, PlaneSphereTester, build_plane_sphere
 
 ID_BITS = 16
@@ -105,37 +106,44 @@ def make_cases(rows, cols, fmt, n_bundles=2, n_spheres=40, seed=0):
         n, p = bundle.encode_planes(fmt)
         ids, c, r = _spheres(rng, bundle, fmt, n_spheres, b * n_spheres)
         row_mask, col_mask = sphere_masks(n, p, c, r, rows, cols, fmt)
-        cases.append({"planes": bundle.pack_planes(fmt), "ids": ids, "c": c, "r": r,
+        planes = PLANE.bind(fmt).pack({"nx": n[:, 0], "ny": n[:, 1], "nz": n[:, 2], "p": p})
+        cases.append({"planes": planes, "ids": ids, "c": c, "r": r,
                       "row_mask": row_mask, "col_mask": col_mask})
     return cases
 
 
-def pack_sphere(fmt, sid, c, r):
-    w = fmt.width
-    return (int(sid) | int(c[0]) << ID_BITS | int(c[1]) << ID_BITS + w
-            | int(c[2]) << ID_BITS + 2 * w | int(r) << ID_BITS + 3 * w)
+def sphere_payloads(fmt, case):
+    """The case's spheres as input payloads (Python ints) of the record SPHERE."""
+    return SPHERE.bind(fmt, id_bits=ID_BITS).pack({"id": case["ids"], "c": case["c"],
+                                                   "r": case["r"]})
+
+
+def mask_bits(mask):
+    """(n, k) bool -> (n,) integers, bit j = column j."""
+    mask = np.asarray(mask, bool)
+    return (mask.astype(np.uint64) << np.arange(mask.shape[1], dtype=np.uint64)).sum(axis=1)
+
+
+def result_layout(rows, cols):
+    return PS_RESULT.bind(id_bits=ID_BITS, rows=rows, cols=cols)
 
 
 def expected_beats(cases, rows, cols):
-    beats = []
-    for case in cases:
-        for s, sid in enumerate(case["ids"]):
-            rm = sum(1 << k for k in range(rows) if case["row_mask"][s, k])
-            cm = sum(1 << k for k in range(cols) if case["col_mask"][s, k])
-            beats.append((int(sid), rm, cm))
-    return beats
-
-
-def unpack_beat(v, rows, cols):
-    return (v & ((1 << ID_BITS) - 1), (v >> ID_BITS) & ((1 << rows) - 1),
-            (v >> (ID_BITS + rows)) & ((1 << cols) - 1))
+    """The model's results, in order, as a structured array of the record PS_RESULT."""
+    out = result_layout(rows, cols).zeros(sum(len(c["ids"]) for c in cases))
+    out["id"] = np.concatenate([c["ids"] for c in cases])
+    out["row_mask"] = np.concatenate([mask_bits(c["row_mask"]) for c in cases])
+    out["col_mask"] = np.concatenate([mask_bits(c["col_mask"]) for c in cases])
+    return out
 
 
 def check_beats(got, want):
+    """``got``, ``want``: structured arrays of the record PS_RESULT (:func:`expected_beats`)."""
     assert len(got) == len(want), f"{len(got)} results for {len(want)} spheres"
-    bad = [(k, g, w) for k, (g, w) in enumerate(zip(got, want)) if g != w]
-    assert not bad, (f"{len(bad)} of {len(want)} results differ; first (index, got (id, "
-                     f"row, col), model): {bad[:3]}")
+    bad = np.nonzero(got != want)[0]
+    assert not bad.size, (f"{bad.size} of {len(want)} results differ; first (index, got (id, "
+                          f"row, col), model): "
+                          f"{[(int(k), got[k].item(), want[k].item()) for k in bad[:3]]}")
 
 
 # -- Amaranth simulation -------------------------------------------------------------------
@@ -160,8 +168,7 @@ def run_amaranth(dut, cases, idle=0.3, stall=0.3, seed=1):
             in_ready = ctx.get(dut.i.ready)
             info["comb_path"] += other != in_ready
             if ctx.get(dut.o.valid) and ready:
-                pl = ctx.get(dut.o.payload)
-                out.append((int(pl.id), int(pl.row_mask), int(pl.col_mask)))
+                out.append(ctx.get(dut.o.payload.as_value()))
                 info["beat"].append(info["cycles"])
             idle_now = ctx.get(dut.idle)
             await ctx.tick()
@@ -170,6 +177,7 @@ def run_amaranth(dut, cases, idle=0.3, stall=0.3, seed=1):
 
         total = sum(len(c["ids"]) for c in cases)
         for case in cases:
+            spheres = sphere_payloads(fmt, case)
             while not (await tick())[1]:
                 pass
             for a, word in enumerate(case["planes"]):
@@ -183,8 +191,7 @@ def run_amaranth(dut, cases, idle=0.3, stall=0.3, seed=1):
             accepts = []
             while s < len(case["ids"]):
                 if not valid and rng.random() >= c_idle:
-                    ctx.set(dut.i.payload.as_value(),
-                            pack_sphere(fmt, case["ids"][s], case["c"][s], case["r"][s]))
+                    ctx.set(dut.i.payload.as_value(), spheres[s])
                     valid = True
                 ctx.set(dut.i.valid, valid)
                 now = info["cycles"]
@@ -214,7 +221,7 @@ def check_amaranth(rows, cols, testers, fmt, seed):
     cases = make_cases(rows, cols, fmt, n_bundles=3, n_spheres=40, seed=seed)
     cases[2].update(idle=0.0, stall=0.0)     # the last bundle at full rate
     got, info = run_amaranth(dut, cases)
-    check_beats(got, expected_beats(cases, rows, cols))
+    check_beats(result_layout(rows, cols).unpack(got), expected_beats(cases, rows, cols))
     assert info["comb_path"] == 0, "o.ready changes i.ready in the same cycle"
     assert info["idle_at_end"], "the array is not idle after the last result"
     acc = info["accept"][2]
@@ -245,9 +252,9 @@ def test_tester_alone():
     assert tester.latency == 12
     case = make_cases(2, 2, fmt, n_bundles=1, n_spheres=40, seed=9)[0]
     word = case["planes"][1]
-    w = fmt.width
-    n = np.array([[(word >> k * w) & fmt.mask for k in range(3)]], np.uint32)
-    p = np.array([(word >> 3 * w) & fmt.mask], np.uint32)
+    plane = PLANE.bind(fmt).unpack(word)
+    n = np.array([[plane["nx"], plane["ny"], plane["nz"]]], np.uint32)
+    p = np.array([plane["p"]], np.uint32)
     want, _ = sphere_masks(n, p, case["c"], case["r"], 1, 0, fmt)
     got = []
 
@@ -259,8 +266,8 @@ def test_tester_alone():
         ctx.set(tester.pw_en, 0)
         for s in range(len(case["r"]) + tester.latency):
             if s < len(case["r"]):
-                ctx.set(tester.c.as_value(), int(case["c"][s, 0]) | int(case["c"][s, 1]) << w
-                        | int(case["c"][s, 2]) << 2 * w)
+                for k, axis in enumerate("xyz"):
+                    ctx.set(tester.c[axis], int(case["c"][s, k]))
                 ctx.set(tester.r, int(case["r"][s]))
             ctx.set(tester.i_valid, s < len(case["r"]))
             if ctx.get(tester.o_valid):
@@ -314,8 +321,7 @@ def write_stimulus(path, cases, fmt, idle=0.3, stall=0.3, seed=7):
     the testbench's random idle and stall rates."""
     np.savez(path,
              planes=np.array([[f"{w:x}" for w in c["planes"]] for c in cases]),
-             spheres=np.array([[f"{pack_sphere(fmt, c['ids'][s], c['c'][s], c['r'][s]):x}"
-                                for s in range(len(c["ids"]))] for c in cases]),
+             spheres=np.array([[f"{v:x}" for v in sphere_payloads(fmt, c)] for c in cases]),
              idle=idle, stall=stall, seed=seed)
 
 
@@ -332,7 +338,7 @@ def check_cocotb(name, config, simulator, tmp_path):
                env={"RAPLAS_PS_IN": stim, "RAPLAS_PS_OUT": result}, 
                build_args=VERILATOR_ARGS if simulator == "verilator" else (),
                public_all=False)  # the testbench uses the ports only: a much faster build
-    got = [unpack_beat(int(v, 16), rows, cols) for v in np.load(result)["results"]]
+    got = result_layout(rows, cols).unpack([int(v, 16) for v in np.load(result)["results"]])
     check_beats(got, expected_beats(cases, rows, cols))
 
 

@@ -39,6 +39,7 @@ def _sources_digest():
     for rel in ("raplas_hdl/rtl/ray_triangle.py", "raplas_hdl/rtl/fp_add.py",
                 "raplas_hdl/rtl/fp_mul.py", "raplas_hdl/rtl/fp_common.py",
                 "raplas_hdl/rtl/pipeline.py", "raplas_hdl/rtl/emit.py",
+                "raplas_hdl/rtl/records.py", "raplas_hdl/model/records.py",
                 "raplas_hdl/model/conservative.py", "raplas_hdl/fp/format.py"):
         path = REPO_ROOT / rel
         if path.exists():

@@ -12,37 +12,29 @@ import random
 
 import numpy as np
 import pytest
-from amaranth.hdl import Fragment, Shape
+from amaranth.hdl import Fragment
 from amaranth.sim import Simulator
 
 from raplas_hdl.fp import FP24, FPFormat
-from raplas_hdl.verify.stress import vectors
 from raplas_hdl.model.ray_triangle import intersect
-from raplas_hdl.rtl.ray_triangle import (EVENTS, RayTriangleUnit, input_layout,
-                                         output_layout)
+from raplas_hdl.model.records import PAIR, RT_RESULT
+from raplas_hdl.rtl.ray_triangle import EVENTS, RayTriangleUnit
+from raplas_hdl.verify.stress import vectors
 from test_raytri_model import event_pairs
 
 NAMES = ("o", "d", "v0", "e1", "e2", "n")
 
 
 def pack_inputs(fmt, vec, ray_ids, tri_ids, ray_id_bits=16, tri_id_bits=16):
-    layout = input_layout(fmt, ray_id_bits, tri_id_bits)
-    out = []
-    for i in range(len(ray_ids)):
-        fields = {"ray_id": int(ray_ids[i]), "tri_id": int(tri_ids[i])}
-        for k in NAMES:
-            fields[k] = dict(zip("xyz", (int(x) for x in vec[k][i])))
-        out.append(layout.const(fields).as_value().value)
-    return out
+    """Input payloads (Python ints) of the record PAIR."""
+    layout = PAIR.bind(fmt, ray_id_bits=ray_id_bits, tri_id_bits=tri_id_bits)
+    return layout.pack({"ray_id": ray_ids, "tri_id": tri_ids, **{k: vec[k] for k in NAMES}})
 
 
 def unpack_outputs(fmt, values, ray_id_bits=16, tri_id_bits=16):
-    layout = output_layout(fmt, ray_id_bits, tri_id_bits)
-    cols = {name: [] for name, _ in layout}
-    for v in values:
-        for name, fld in layout:
-            cols[name].append((v >> fld.offset) & ((1 << Shape.cast(fld.shape).width) - 1))
-    return {k: np.array(c, dtype=np.uint64) for k, c in cols.items()}
+    """Output payloads -> {field: uint64 array} of the record RT_RESULT."""
+    out = RT_RESULT.bind(fmt, ray_id_bits=ray_id_bits, tri_id_bits=tri_id_bits).unpack(values)
+    return {k: out[k].astype(np.uint64) for k in RT_RESULT.names}
 
 
 def expected(fmt, vec, ray_ids, tri_ids, mode, margin_scale=1.0):

@@ -12,8 +12,7 @@ from __future__ import annotations
 import numpy as np
 from amaranth.sim import Simulator
 
-from raplas_hdl.model.intersection import RESULT_DTYPE
-from raplas_hdl.model.memory_image import COUNTER_NAMES
+from raplas_hdl.model.records import CMD, COUNTERS, RESULT
 from raplas_hdl.sim.unit_driver import encode_runs
 
 
@@ -26,7 +25,9 @@ def simulate_runs(unit, scene, runs, *, seed=0, ready_density=0.7, overlap=False
     rng = np.random.default_rng(seed)
     state = {"done": 0, "beats": [], "run_of_beat": [], "max_level": 0, "cycles": 0}
     counters = [None] * n_runs
-    names = ("cycles",) + tuple(COUNTER_NAMES)
+    # the ports' payloads as integers, packed and unpacked with the model's records
+    cmd, result, ctrs = CMD.bind(cfg), RESULT.bind(cfg), COUNTERS.bind(cfg)
+    last_bit = result["last"].offset
 
     async def write(ctx, addrs, datas):
         for a, d in zip(addrs.tolist(), datas.tolist()):
@@ -42,7 +43,8 @@ def simulate_runs(unit, scene, runs, *, seed=0, ready_density=0.7, overlap=False
 
     async def read_counters(ctx, k):
         await ctx.tick()
-        counters[k] = {n: int(ctx.get(unit.counters[n])) for n in names}
+        value = ctrs.unpack(ctx.get(unit.counters.as_value()))
+        counters[k] = {n: int(value[n]) for n in COUNTERS.names}
         ctx.set(unit.clear, 1)
         await ctx.tick()
         ctx.set(unit.clear, 0)
@@ -60,10 +62,9 @@ def simulate_runs(unit, scene, runs, *, seed=0, ready_density=0.7, overlap=False
             if not overlap and k:
                 await wait_done(ctx, k)
                 await read_counters(ctx, k - 1)
-            ctx.set(unit.cmd.payload, {"first": int(stim["run_first"][k]),
-                                       "count": int(stim["run_count"][k]),
-                                       "bank": int(banks[k]),
-                                       "indirect": int(stim["run_indirect"][k])})
+            ctx.set(unit.cmd.payload.as_value(),
+                    cmd.pack({"first": stim["run_first"][k], "count": stim["run_count"][k],
+                              "bank": banks[k], "indirect": stim["run_indirect"][k]}))
             ctx.set(unit.cmd.valid, 1)
             await ctx.tick().until(unit.cmd.ready)
             ctx.set(unit.cmd.valid, 0)
@@ -75,17 +76,16 @@ def simulate_runs(unit, scene, runs, *, seed=0, ready_density=0.7, overlap=False
             ready = int(rng.random() < ready_density)
             ctx.set(unit.o.ready, ready)
             _, _, valid, payload, level, ovf = await ctx.tick().sample(
-                unit.o.valid, unit.o.payload, unit.fifo_level, unit.fifo_overflow)
+                unit.o.valid, unit.o.payload.as_value(), unit.fifo_level, unit.fifo_overflow)
             state["cycles"] += 1
             assert state["cycles"] < max_cycles, "simulation timed out"
             assert level <= cfg.fifo_depth, "pair FIFO above its depth"
             assert not ovf, "pair FIFO overflow"
             state["max_level"] = max(state["max_level"], int(level))
             if valid and ready:
-                state["beats"].append(tuple(int(getattr(payload, f)) for f in
-                                            RESULT_DTYPE.names))
+                state["beats"].append(payload)
                 state["run_of_beat"].append(state["done"])
-                if payload.last:
+                if payload >> last_bit & 1:
                     state["done"] += 1
 
     sim = Simulator(unit)
@@ -97,7 +97,7 @@ def simulate_runs(unit, scene, runs, *, seed=0, ready_density=0.7, overlap=False
             sim.run()
     else:
         sim.run()
-    beats = np.array(state["beats"], RESULT_DTYPE)
+    beats = result.unpack(state["beats"])
     rob = np.array(state["run_of_beat"])
     out = []
     for k in range(n_runs):

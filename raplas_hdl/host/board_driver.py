@@ -9,7 +9,8 @@ A bus that cannot complete an access (Wishbone ``err``) raises an exception from
 
 It loads a scene and bundles through the memory window, starts runs, pops the result
 stream and reads the counters, and returns them in the form of
-:func:`raplas_hdl.model.intersection.run_bundle` (a :data:`RESULT_DTYPE` array and a
+:func:`raplas_hdl.model.intersection.run_bundle` (a
+:data:`~raplas_hdl.model.intersection.RESULT_DTYPE` array and a
 counter dict, here with ``cycles`` too), so the two compare directly.
 
 No Amaranth, no cocotb.
@@ -23,8 +24,7 @@ from ..fp.format import FPFormat
 from ..model.board_map import (BOARD_ID, CONTROL_BITS, COUNTER_REGS, MAP_VERSION,
                                REGISTERS, RES_INFO_BITS, RESULT_REGS, STATUS_BITS,
                                cmd_start_word, config_from_words, config_words,
-                               decode_result_words)
-from ..model.intersection import RESULT_DTYPE
+                               decode_result_words, result_beats)
 from ..model.memory_image import (BundleMemory, SceneMemory, UnitConfig, bundle_writes,
                                   run_list_writes, scene_writes)
 
@@ -170,32 +170,35 @@ class BoardDriver:
         self.write_reg("CMD_FIRST", first)
         self.write_reg("CMD_START", word)
 
-    def pop(self) -> dict | None:
-        """Pop one result beat (its fields) or return None when none waits."""
+    def _pop_words(self) -> tuple | None:
+        """Pop one result beat: its six words (``RES_INFO`` and :data:`RESULT_REGS`), or
+        None when none waits."""
         info = self.read_reg("RES_INFO")
         if not info & _VALID:
             return None
-        words = [self.read_reg(name) for name in RESULT_REGS]
-        return decode_result_words(info, *words)
+        return (info, *(self.read_reg(name) for name in RESULT_REGS))
+
+    def pop(self) -> dict | None:
+        """Pop one result beat (its fields) or return None when none waits."""
+        words = self._pop_words()
+        return None if words is None else decode_result_words(*words)
 
     def collect(self) -> np.ndarray:
-        """Pop beats up to the one marked ``last``; returns them as :data:`RESULT_DTYPE`."""
-        beats = []
+        """Pop beats up to the one marked ``last``; returns them as
+        :data:`~raplas_hdl.model.intersection.RESULT_DTYPE`."""
+        rows = []
         while True:
             for _ in range(self.poll_limit):
-                beat = self.pop()
-                if beat is not None:
+                words = self._pop_words()
+                if words is not None:
                     break
             else:
                 raise TimeoutError(f"no result beat after {self.poll_limit} reads "
-                                   f"({len(beats)} beats so far; status {self.status()})")
-            beats.append(beat)
-            if beat["last"]:
+                                   f"({len(rows)} beats so far; status {self.status()})")
+            rows.append(words)
+            if words[0] >> RES_INFO_BITS["last"] & 1:
                 break
-        out = np.zeros(len(beats), RESULT_DTYPE)
-        for name in RESULT_DTYPE.names:
-            out[name] = [b[name] for b in beats]
-        return out
+        return result_beats(*np.array(rows, np.uint64).T)
 
     def read_counters(self) -> dict:
         """``cycles`` and the counters of ``run_bundle``."""

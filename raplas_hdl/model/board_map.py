@@ -36,13 +36,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .memory_image import COUNTER_NAMES
+import numpy as np
+
+from .records import COUNTERS, RESULT, Field, Record
 
 __all__ = ["Register", "REGISTER_MAP", "REGISTERS", "ADDR_BITS", "BOARD_ID", "MAP_VERSION",
            "STATUS_BITS", "CONTROL_BITS", "RES_INFO_BITS", "RESULT_REGS", "COUNTER_REGS",
            "ROUNDING_CODES", "MODE_CODES", "config_words", "config_from_words",
            "cmd_start_word", "decode_cmd_start", "res_info_word", "res_ids_word",
-           "decode_result_words", "markdown_table", "parse_markdown_table"]
+           "decode_result_words", "result_beats", "markdown_table", "parse_markdown_table",
+           "CMD_START_WORD", "RES_INFO_WORD", "RES_IDS_WORD"]
 
 #: Width of ``wb_adr`` (word address).
 ADDR_BITS = 8
@@ -59,15 +62,45 @@ STATUS_BITS = {"busy": 0, "result_valid": 1, "fifo_overflow": 2, "cmd_full": 3,
                "cmd_overrun": 4}
 #: Bits of ``CONTROL`` (write 1 to act; writes of 0 do nothing).
 CONTROL_BITS = {"clear_counters": 0, "clear_overrun": 1}
-#: Bits of ``RES_INFO``.
-RES_INFO_BITS = {"valid": 0, "last": 1, "empty": 2, "hit": 3, "flags": 4}   # flags: 3 bits
+
+# -- the words of the command and result registers (records: fields from bit 0 up) ----------
+#: ``CMD_START``: the fields of the unit's run command but ``first`` (``CMD_FIRST``).
+CMD_START_WORD = Record("cmd_start", [
+    Field("count", 24, "spheres in the run"),
+    Field("bank", 1, "bundle bank"),
+    Field("indirect", 1, "the spheres come from the bank's run list"),
+], "CMD_START register")
+#: ``RES_INFO``: the one-bit fields of a popped result beat (:data:`RESULT`'s).
+RES_INFO_WORD = Record("res_info", [Field("valid", 1, "a beat was popped")] + [
+    RESULT[name] for name in ("last", "empty", "hit", "flags")], "RES_INFO register")
+#: ``RES_IDS``: the IDs of a popped result beat.
+RES_IDS_WORD = Record("res_ids", [RESULT["tri_id"].with_(width=20),
+                                  RESULT["ray_id"].with_(width=12)], "RES_IDS register")
+
+_CMD_START = CMD_START_WORD.bind()
+_RES_INFO = RES_INFO_WORD.bind()
+_RES_IDS = RES_IDS_WORD.bind()
+#: Bits of ``RES_INFO`` (the low bit of ``flags``, 3 bits).
+RES_INFO_BITS = {f.name: f.offset for f in _RES_INFO}
 #: ``RES_IDS``: tri_id in bits 19:0, ray_id in bits 31:20.
-RES_TRI_BITS = 20
-RES_RAY_SHIFT = 20
+RES_TRI_BITS = _RES_IDS["tri_id"].width
+RES_RAY_SHIFT = _RES_IDS["ray_id"].offset
 #: ``CMD_START``: count in bits 23:0, bank bit 24, indirect bit 25.
-CMD_COUNT_BITS = 24
-CMD_BANK_BIT = 24
-CMD_INDIRECT_BIT = 25
+CMD_COUNT_BITS = _CMD_START["count"].width
+CMD_BANK_BIT = _CMD_START["bank"].offset
+CMD_INDIRECT_BIT = _CMD_START["indirect"].offset
+
+
+def _bits(layout) -> str:
+    """``"31:0"``: the bits a register word uses."""
+    return f"{layout.size - 1}:0"
+
+
+def _fields_text(layout) -> str:
+    """``"count 23:0, bank 24, indirect 25"``: where a word's fields are."""
+    def span(f):
+        return f"{f.offset + f.size - 1}:{f.offset}" if f.size > 1 else f"{f.offset}"
+    return ", ".join(f"{f.name} {span(f)}" for f in layout)
 
 
 @dataclass(frozen=True)
@@ -81,18 +114,7 @@ class Register:
     meaning: str
 
 
-_COUNTERS = ("cycles",) + COUNTER_NAMES
-_COUNTER_MEANING = {
-    "cycles": "counter: cycles while a run is outstanding",
-    "spheres": "counter: spheres tested",
-    "plane_tests": "counter: plane-sphere tests (rows + cols per sphere)",
-    "pairs_issued": "counter: pairs sent to the ray-triangle unit",
-    "pairs_skipped": "counter: pairs not issued (disabled rays)",
-    "hits": "counter: hits",
-    "overflow": "counter: operations that raised overflow, over the issued pairs",
-    "underflow": "counter: operations that raised underflow, over the issued pairs",
-    "invalid": "counter: operations that raised invalid, over the issued pairs",
-}
+_COUNTERS = COUNTERS.names
 
 #: The register map, in address order.
 REGISTER_MAP: tuple[Register, ...] = (
@@ -117,19 +139,19 @@ REGISTER_MAP: tuple[Register, ...] = (
     Register(0x0B, "MEM_DATA", "W", "31:0", "write this word at MEM_ADDR, then MEM_ADDR += 1"),
     Register(0x0C, "CMD_FIRST", "RW", "31:0",
              "first sphere ID, or run-list position when indirect"),
-    Register(0x0D, "CMD_START", "W", "25:0",
-             "count 23:0, bank 24, indirect 25; queues the run with CMD_FIRST "
+    Register(0x0D, "CMD_START", "W", _bits(_CMD_START),
+             f"{_fields_text(_CMD_START)}; queues the run with CMD_FIRST "
              "(wb_err and cmd_overrun if the slot is full)"),
-    Register(0x10, "RES_INFO", "R*", "6:0",
-             "pops a beat: valid 0, last 1, empty 2, hit 3, flags 6:4 "
+    Register(0x10, "RES_INFO", "R*", _bits(_RES_INFO),
+             f"pops a beat: {_fields_text(_RES_INFO)} "
              "(overflow, underflow, invalid); 0 when no beat waits"),
-    Register(0x11, "RES_IDS", "R", "31:0", "popped beat: tri_id 19:0, ray_id 31:20"),
+    Register(0x11, "RES_IDS", "R", _bits(_RES_IDS), f"popped beat: {_fields_text(_RES_IDS)}"),
     Register(0x12, "RES_T", "R", "31:0", "popped beat: t' (format bit pattern)"),
     Register(0x13, "RES_U", "R", "31:0", "popped beat: u'"),
     Register(0x14, "RES_V", "R", "31:0", "popped beat: v'"),
     Register(0x15, "RES_DET", "R", "31:0", "popped beat: det"),
-) + tuple(Register(0x20 + k, f"CTR_{name.upper()}", "R", "31:0", _COUNTER_MEANING[name])
-          for k, name in enumerate(_COUNTERS))
+) + tuple(Register(0x20 + k, f"CTR_{f.name.upper()}", "R", f"{f.width - 1}:0",
+                   f"counter: {f.meaning}") for k, f in enumerate(COUNTERS))
 
 #: Name -> word address.
 REGISTERS = {r.name: r.offset for r in REGISTER_MAP}
@@ -183,33 +205,45 @@ def cmd_start_word(count: int, bank: int, indirect: bool) -> int:
         raise ValueError(f"count must be 0 .. {(1 << CMD_COUNT_BITS) - 1}, not {count}")
     if bank not in (0, 1):
         raise ValueError(f"bank must be 0 or 1, not {bank!r}")
-    return int(count) | int(bank) << CMD_BANK_BIT | int(bool(indirect)) << CMD_INDIRECT_BIT
+    return _CMD_START.pack({"count": int(count), "bank": int(bank),
+                            "indirect": int(bool(indirect))})
 
 
 def decode_cmd_start(word: int) -> tuple[int, int, int]:
     """(count, bank, indirect) of a ``CMD_START`` word."""
-    return (word & ((1 << CMD_COUNT_BITS) - 1), (word >> CMD_BANK_BIT) & 1,
-            (word >> CMD_INDIRECT_BIT) & 1)
+    w = _CMD_START.unpack(int(word) & ((1 << _CMD_START.size) - 1))
+    return tuple(int(w[name]) for name in CMD_START_WORD.names)
 
 
 def res_info_word(last, empty, hit, flags) -> int:
     """``RES_INFO`` of a popped beat (``valid`` set)."""
-    b = RES_INFO_BITS
-    return (1 << b["valid"] | int(last) << b["last"] | int(empty) << b["empty"]
-            | int(hit) << b["hit"] | (int(flags) & 7) << b["flags"])
+    return _RES_INFO.pack({"valid": 1, "last": int(last), "empty": int(empty), "hit": int(hit),
+                           "flags": int(flags) & 7})
 
 
 def res_ids_word(ray_id, tri_id) -> int:
-    return int(ray_id) << RES_RAY_SHIFT | int(tri_id)
+    return _RES_IDS.pack({"ray_id": int(ray_id), "tri_id": int(tri_id)})
+
+
+def result_beats(info, ids, t, u, v, det) -> np.ndarray:
+    """Result beats (:data:`~raplas_hdl.model.intersection.RESULT_DTYPE`) from the six words
+    read per beat (arrays, one element per beat)."""
+    info = _RES_INFO.unpack_words(np.asarray(info, np.uint64).reshape(-1, 1))
+    idw = _RES_IDS.unpack_words(np.asarray(ids, np.uint64).reshape(-1, 1))
+    out = np.zeros(len(info), RESULT.dtype())
+    for name in ("last", "empty", "hit", "flags"):
+        out[name] = info[name]
+    for name in ("ray_id", "tri_id"):
+        out[name] = idw[name]
+    for name, word in (("t", t), ("u", u), ("v", v), ("det", det)):
+        out[name] = np.asarray(word, np.uint64).reshape(-1)
+    return out
 
 
 def decode_result_words(info: int, ids: int, t: int, u: int, v: int, det: int) -> dict:
     """Fields of one result beat (the names of ``RESULT_DTYPE``) from its six words."""
-    b = RES_INFO_BITS
-    return {"ray_id": ids >> RES_RAY_SHIFT, "tri_id": ids & ((1 << RES_TRI_BITS) - 1),
-            "hit": (info >> b["hit"]) & 1, "t": t, "u": u, "v": v, "det": det,
-            "flags": (info >> b["flags"]) & 7, "last": (info >> b["last"]) & 1,
-            "empty": (info >> b["empty"]) & 1}
+    beat = result_beats([info], [ids], [t], [u], [v], [det])[0]
+    return {name: int(beat[name]) for name in beat.dtype.names}
 
 
 # -- documentation table --------------------------------------------------------------------

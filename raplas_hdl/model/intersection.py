@@ -24,14 +24,14 @@ from __future__ import annotations
 import numpy as np
 
 from .memory_image import COUNTER_NAMES, BundleMemory, SceneMemory, UnitConfig
+from .records import RESULT
 
 __all__ = ["RESULT_DTYPE", "run_bundle", "enumerate_pairs", "empty_counters",
            "event_counters"]
 
-#: One beat of the unit's result stream.
-RESULT_DTYPE = np.dtype([("ray_id", "u4"), ("tri_id", "u4"), ("hit", "u1"), ("t", "u4"),
-                         ("u", "u4"), ("v", "u4"), ("det", "u4"), ("flags", "u1"),
-                         ("last", "u1"), ("empty", "u1")])
+#: One beat of the unit's result stream: the dtype of the record
+#: :data:`raplas_hdl.model.records.RESULT` (``RESULT.bind(config)`` packs and unpacks beats).
+RESULT_DTYPE = RESULT.dtype()
 
 
 def empty_counters() -> dict:

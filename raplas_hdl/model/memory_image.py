@@ -168,6 +168,13 @@ class UnitConfig:
         """Bits of a run's sphere count 0 .. max_spheres."""
         return _bits_for(self.max_spheres + 1)
 
+    @classmethod
+    def from_params(cls, params: dict) -> UnitConfig:
+        """The configuration of :meth:`params` ``params`` (``testers`` as given there)."""
+        p = dict(params)
+        fmt = FPFormat(p.pop("exp_bits"), p.pop("man_bits"), p.pop("rounding"))
+        return cls(fmt=fmt, **p)
+
     def params(self) -> dict:
         """JSON-serialisable parameters (for headers, manifests and reports)."""
         return {"exp_bits": self.fmt.exp_bits, "man_bits": self.fmt.man_bits,

@@ -52,14 +52,16 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.fifo import SyncFIFOBuffered
 from amaranth.lib.wiring import In, Out
 
-from ..model.memory_image import COUNTER_NAMES, REGIONS, UnitConfig
+from ..model.memory_image import REGIONS, UnitConfig
+from ..model.records import CMD, COUNTERS, RAY, RESULT, TRIANGLE
 from .ram import SyncRAM
+from .records import struct_layout
 
 __all__ = ["IntersectionUnit", "build_intersection_unit", "port_layouts", "COUNTER_PORTS"]
 
 #: Fields of the ``counters`` port, in order.
-COUNTER_PORTS = ("cycles",) + COUNTER_NAMES
-COUNTER_BITS = 32
+COUNTER_PORTS = COUNTERS.names
+COUNTER_BITS = COUNTERS["cycles"].width
 OUT_FIFO_DEPTH = 4
 JOB_FIFO_DEPTH = 4
 
@@ -78,16 +80,13 @@ def _lowest_set(m, mask, n, name):
 
 
 def port_layouts(cfg: UnitConfig) -> dict:
-    """The struct layouts of the ``cmd``, ``o`` (``result``) and ``counters`` ports."""
-    w = cfg.fmt.width
-    return {
-        "cmd": data.StructLayout({"first": cfg.sphere_id_bits, "count": cfg.run_count_bits,
-                                  "bank": 1, "indirect": 1}),
-        "result": data.StructLayout({"ray_id": cfg.ray_id_bits, "tri_id": cfg.tri_id_bits,
-                                     "hit": 1, "t": w, "u": w, "v": w, "det": w, "flags": 3,
-                                     "last": 1, "empty": 1}),
-        "counters": data.StructLayout({n: COUNTER_BITS for n in COUNTER_PORTS}),
-    }
+    """The struct layouts of the ``cmd``, ``o`` (``result``) and ``counters`` ports.
+
+    They are the records :data:`~raplas_hdl.model.records.CMD`,
+    :data:`~raplas_hdl.model.records.RESULT` and :data:`~raplas_hdl.model.records.COUNTERS`
+    bound to ``cfg``."""
+    return {"cmd": struct_layout(CMD, cfg), "result": struct_layout(RESULT, cfg),
+            "counters": struct_layout(COUNTERS, cfg)}
 
 
 class IntersectionUnit(wiring.Component):
@@ -121,7 +120,8 @@ class IntersectionUnit(wiring.Component):
         Results: ``ray_id``, ``tri_id``, ``hit``, ``t``, ``u``, ``v``, ``det``, ``flags``,
         ``last``, ``empty``.
     counters : Out(counter_layout)
-        ``cycles`` and the counters of :data:`COUNTER_NAMES`, 32 bits each.
+        ``cycles`` and the counters of
+        :data:`~raplas_hdl.model.memory_image.COUNTER_NAMES`, 32 bits each.
     clear : In(1)
         Zero every counter.
     busy : Out(1)
@@ -478,8 +478,10 @@ class IntersectionUnit(wiring.Component):
         m.d.comb += [tri_rp.addr.eq(tl_rp.data), tri_rp.en.eq(g_adv),
                      ray_rp.addr.eq(Mux(g1_bank, g1_ray + n_rays, g1_ray)),
                      ray_rp.en.eq(g_adv)]
+        # Ray Memory and Triangle Memory words are the records RAY and TRIANGLE
         pair_layout = data.StructLayout({"ray": ray_bits, "marker": 1, "tri": tri_bits,
-                                         "ray_data": 6 * w, "tri_data": 12 * w})
+                                         "ray_data": struct_layout(RAY, cfg),
+                                         "tri_data": struct_layout(TRIANGLE, cfg)})
         m.submodules.pair_fifo = pair_fifo = SyncFIFOBuffered(width=pair_layout.size,
                                                              depth=cfg.fifo_depth)
         pair_in = data.View(pair_layout, pair_fifo.w_data)
@@ -496,13 +498,11 @@ class IntersectionUnit(wiring.Component):
         # -- 7. ray-triangle unit ---------------------------------------------------------------
         pair_out = data.View(pair_layout, pair_fifo.r_data)
         rp_ = rtu.i.payload
-        rd, td = pair_out.ray_data, pair_out.tri_data
         m.d.comb += [rtu.i.valid.eq(pair_fifo.r_rdy), pair_fifo.r_en.eq(rtu.i.ready),
                      rp_.ray_id.eq(Cat(pair_out.ray, pair_out.marker)),
-                     rp_.tri_id.eq(pair_out.tri),
-                     rp_.o.eq(rd[0:3 * w]), rp_.d.eq(rd[3 * w:6 * w]),
-                     rp_.v0.eq(td[0:3 * w]), rp_.e1.eq(td[3 * w:6 * w]),
-                     rp_.e2.eq(td[6 * w:9 * w]), rp_.n.eq(td[9 * w:12 * w])]
+                     rp_.tri_id.eq(pair_out.tri)]
+        m.d.comb += [rp_[f.name].eq(pair_out.ray_data[f.name]) for f in RAY]
+        m.d.comb += [rp_[f.name].eq(pair_out.tri_data[f.name]) for f in TRIANGLE]
         with m.If(rtu.i.valid & rtu.i.ready & ~pair_out.marker):
             m.d.comb += inc["pairs_issued"].eq(1)
 

@@ -51,10 +51,12 @@ from amaranth.lib.fifo import SyncFIFO
 from amaranth.lib.wiring import In, Out
 
 from ..fp import FP24
+from ..model.records import PLANE, PS_RESULT, SPHERE
 from .fp_add import FPAdd
 from .fp_common import check_format
 from .fp_mul import FPMul, check_multiplier, fp_mul_latency
 from .pipeline import delay
+from .records import struct_layout
 
 __all__ = ["PlaneSphereTester", "PlaneSphereArray", "build_plane_sphere", "plane_layout",
            "sphere_layout", "result_layout"]
@@ -66,21 +68,23 @@ def vec3_layout(width: int) -> data.StructLayout:
 
 
 def plane_layout(fmt) -> data.StructLayout:
-    """Plane word: ``n.x | n.y << W | n.z << 2W | p << 3W`` (``4W`` bits)."""
-    w = fmt.width
-    return data.StructLayout({"nx": w, "ny": w, "nz": w, "p": w})
+    """Plane word, the record :data:`~raplas_hdl.model.records.PLANE`:
+    ``n.x | n.y << W | n.z << 2W | p << 3W`` (``4W`` bits)."""
+    return struct_layout(PLANE, fmt)
 
 
 def sphere_layout(fmt, id_bits: int) -> data.StructLayout:
-    """Sphere payload: ``id`` (``id_bits``), ``c`` (x, y, z, ``3W``), ``r`` (``r'``, ``W``),
-    packed LSB first in that order."""
-    return data.StructLayout({"id": id_bits, "c": vec3_layout(fmt.width), "r": fmt.width})
+    """Sphere payload, the record :data:`~raplas_hdl.model.records.SPHERE`: ``id``
+    (``id_bits``), ``c`` (x, y, z, ``3W``), ``r`` (``r'``, ``W``), packed LSB first in that
+    order."""
+    return struct_layout(SPHERE, fmt, id_bits=id_bits)
 
 
 def result_layout(rows: int, cols: int, id_bits: int) -> data.StructLayout:
-    """Result payload: ``id``, ``row_mask`` (bit k = row plane k), ``col_mask`` (bit k =
-    column plane ``rows + k``), packed LSB first in that order."""
-    return data.StructLayout({"id": id_bits, "row_mask": rows, "col_mask": cols})
+    """Result payload, the record :data:`~raplas_hdl.model.records.PS_RESULT`: ``id``,
+    ``row_mask`` (bit k = row plane k), ``col_mask`` (bit k = column plane ``rows + k``),
+    packed LSB first in that order."""
+    return struct_layout(PS_RESULT, id_bits=id_bits, rows=rows, cols=cols)
 
 
 def _check_int(name, value, low):

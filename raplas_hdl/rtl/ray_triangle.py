@@ -44,9 +44,11 @@ from amaranth.lib.wiring import In, Out
 
 from ..fp.format import FLAG_OVERFLOW, FPFormat
 from ..model.conservative import MARGIN_NAMES, margin_constants
+from ..model.records import EVENT_COUNT_BITS, PAIR, RT_RESULT
 from .fp_add import FPAdd
 from .fp_mul import FPMul, check_multiplier, fp_mul_latency
 from .pipeline import delay
+from .records import struct_layout
 
 __all__ = ["RayTriangleUnit", "vec3_layout", "input_layout", "output_layout", "MODES",
            "EVENTS", "EVENT_COUNT_BITS"]
@@ -54,8 +56,6 @@ __all__ = ["RayTriangleUnit", "vec3_layout", "input_layout", "output_layout", "M
 MODES = ("paper", "conservative")
 #: The events counted per pair (``n_overflow``, ``n_underflow``, ``n_invalid``).
 EVENTS = ("overflow", "underflow", "invalid")
-#: Width of each per-pair event count (up to 34 operations per pair).
-EVENT_COUNT_BITS = 6
 EVENT_COUNT_MAX = (1 << EVENT_COUNT_BITS) - 1
 
 
@@ -65,22 +65,18 @@ def vec3_layout(width: int) -> data.StructLayout:
 
 
 def input_layout(fmt: FPFormat, ray_id_bits: int = 16, tri_id_bits: int = 16):
-    """Payload of the unit's input stream (fields from the low bits up)."""
-    v = vec3_layout(fmt.width)
-    return data.StructLayout({"ray_id": ray_id_bits, "tri_id": tri_id_bits, "o": v, "d": v,
-                              "v0": v, "e1": v, "e2": v, "n": v})
+    """Payload of the unit's input stream: the record :data:`~raplas_hdl.model.records.PAIR`
+    (fields from the low bits up)."""
+    return struct_layout(PAIR, fmt, ray_id_bits=ray_id_bits, tri_id_bits=tri_id_bits)
 
 
 def output_layout(fmt: FPFormat, ray_id_bits: int = 16, tri_id_bits: int = 16):
-    """Payload of the unit's output stream (fields from the low bits up).
+    """Payload of the unit's output stream: the record
+    :data:`~raplas_hdl.model.records.RT_RESULT` (fields from the low bits up).
 
     ``flags`` is the OR of the event flags of the pair's operations; ``n_overflow``,
     ``n_underflow``, ``n_invalid`` count the operations that raised each event."""
-    w = fmt.width
-    n = EVENT_COUNT_BITS
-    return data.StructLayout({"ray_id": ray_id_bits, "tri_id": tri_id_bits, "hit": 1,
-                              "t": w, "u": w, "v": w, "det": w, "flags": 3,
-                              "n_overflow": n, "n_underflow": n, "n_invalid": n})
+    return struct_layout(RT_RESULT, fmt, ray_id_bits=ray_id_bits, tri_id_bits=tri_id_bits)
 
 
 class _Timed:

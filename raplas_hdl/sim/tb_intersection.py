@@ -1,9 +1,11 @@
 """cocotb testbench of the intersection unit (Verilog module ``intersection_unit``).
 
 Started by :func:`raplas_hdl.sim.unit_driver.run_runs`, which passes, in environment variables,
-``UNIT_STIM`` (an ``.npz`` from :func:`raplas_hdl.sim.unit_driver.encode_runs`: scene writes and, per
-run, its memory writes and its command), ``UNIT_META`` (JSON: struct field offsets, seed,
-ready density, FIFO depth) and ``UNIT_OUT`` (where the results go).
+``UNIT_STIM`` (an ``.npz`` from :func:`raplas_hdl.sim.unit_driver.encode_runs`: scene writes
+and, per run, its memory writes and its command), ``UNIT_META`` (JSON: the unit's
+parameters, seed, ready density) and ``UNIT_OUT`` (where the results go). The ports' payloads
+are packed and unpacked with the records of :mod:`raplas_hdl.model.records` (``CMD``,
+``RESULT``, ``COUNTERS``) bound to the unit's parameters.
 
 The testbench loads the scene, then for every run writes its bundle (into the other bank
 while the previous run is still going: the double buffer), waits for the earlier runs of
@@ -26,24 +28,14 @@ import numpy as np
 from cocotb.clock import Clock
 from cocotb.triggers import FallingEdge, RisingEdge
 
+from raplas_hdl.model.memory_image import UnitConfig
+from raplas_hdl.model.records import CMD, COUNTERS, RESULT
+
 
 def _handle(dut, path):
     for part in path.split("."):
         dut = getattr(dut, part)
     return dut
-
-
-def _pack(fields: dict, offsets: dict) -> int:
-    value = 0
-    for name, v in fields.items():
-        off, width = offsets[name]
-        value |= (int(v) & ((1 << width) - 1)) << off
-    return value
-
-
-def _field(value: int, offsets: dict, name: str) -> int:
-    off, width = offsets[name]
-    return (value >> off) & ((1 << width) - 1)
 
 
 class UnitTB:
@@ -53,10 +45,13 @@ class UnitTB:
         self.dut = dut
         self.meta = meta
         self.stim = stim
-        self.offsets = meta["offsets"]
+        config = UnitConfig.from_params(meta["params"])
+        self.cmd = CMD.bind(config)
+        self.counters = COUNTERS.bind(config)
+        self.last_bit = RESULT.bind(config)["last"].offset
         self.rng = random.Random(meta.get("seed", 1))
         self.ready_density = float(meta.get("ready_density", 1.0))
-        self.fifo_depth = int(meta["fifo_depth"])
+        self.fifo_depth = config.fifo_depth
         self.done = 0
         self.beats: list[int] = []
         self.run_of_beat: list[int] = []
@@ -95,9 +90,8 @@ class UnitTB:
     async def read_counters(self):
         dut = self.dut
         await FallingEdge(dut.clk)
-        value = dut.counters.value.to_unsigned()
-        names = ["cycles"] + list(self.meta["counters"])
-        row = [_field(value, self.offsets["counters"], n) for n in names]
+        value = self.counters.unpack(dut.counters.value.to_unsigned())
+        row = [int(value[n]) for n in COUNTERS.names]
         dut.clear.value = 1
         await FallingEdge(dut.clk)
         dut.clear.value = 0
@@ -126,7 +120,7 @@ class UnitTB:
                 beat = dut.o__payload.value.to_unsigned()
                 self.beats.append(beat)
                 self.run_of_beat.append(self.done)
-                if _field(beat, self.offsets["result"], "last"):
+                if beat >> self.last_bit & 1:
                     self.done += 1
 
     async def run(self):
@@ -135,7 +129,7 @@ class UnitTB:
         await self.write(stim["scene_addr"], stim["scene_data"])
         banks, offs = stim["run_bank"], stim["run_offsets"]
         n_runs = len(banks)
-        counters = np.zeros((n_runs, 1 + len(self.meta["counters"])), np.int64)
+        counters = np.zeros((n_runs, len(COUNTERS.names)), np.int64)
         for k in range(n_runs):
             earlier = [j for j in range(k) if banks[j] == banks[k]]
             if earlier:
@@ -145,9 +139,9 @@ class UnitTB:
             if not overlap and k:
                 await self.wait_done(k)
                 counters[k - 1] = await self.read_counters()
-            dut.cmd__payload.value = _pack(
+            dut.cmd__payload.value = self.cmd.pack(
                 {"first": stim["run_first"][k], "count": stim["run_count"][k],
-                 "bank": banks[k], "indirect": stim["run_indirect"][k]}, self.offsets["cmd"])
+                 "bank": banks[k], "indirect": stim["run_indirect"][k]})
             dut.cmd__valid.value = 1
             while True:   # cmd.ready depends only on registers: stable at the falling edge
                 ready = int(dut.cmd__ready.value)

@@ -21,10 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from raplas_hdl.fp import model as fpm
-from raplas_hdl.model.intersection import RESULT_DTYPE
-from raplas_hdl.model.memory_image import (COUNTER_NAMES, BundleMemory, SceneMemory,
-                                           UnitConfig, bundle_writes, run_list_writes,
-                                           scene_writes)
+from raplas_hdl.model.memory_image import (BundleMemory, SceneMemory, UnitConfig,
+                                           bundle_writes, run_list_writes, scene_writes)
+from raplas_hdl.model.records import COUNTERS, RESULT
 
 __all__ = ["random_scene", "random_bundle", "unit_verilog", "run_runs", "encode_runs",
            "decode_results"]
@@ -141,6 +140,7 @@ def _source_digest(config: UnitConfig) -> str:
     h = hashlib.sha256(json.dumps(config.params(), sort_keys=True).encode())
     h.update(amaranth.__version__.encode())
     for path in sorted((root / "rtl").glob("*.py")) + [root / "model" / "memory_image.py",
+                                                        root / "model" / "records.py",
                                                         root / "fp" / "format.py"]:
         h.update(path.name.encode())
         h.update(path.read_bytes())
@@ -176,16 +176,6 @@ def unit_verilog(config: UnitConfig) -> str:
         os.replace(tmp, path)
     _VERILOG_CACHE[config] = text
     return text
-
-
-def layout_offsets(config: UnitConfig) -> dict:
-    """Bit offsets and widths of the ports' struct fields (for the testbench)."""
-    from raplas_hdl.rtl.intersection import port_layouts
-
-    def fields(layout):
-        return {name: [f.offset, f.width] for name, f in layout}
-    layouts = port_layouts(config)
-    return {name: fields(layout) for name, layout in layouts.items()}
 
 
 # -- stimulus and results -----------------------------------------------------------------------
@@ -244,13 +234,11 @@ def encode_runs(config: UnitConfig, scene: SceneMemory, runs, *, overlap: bool =
     return stim
 
 
-def decode_results(config: UnitConfig, beats, offsets: dict) -> np.ndarray:
-    """Raw ``o`` payload integers -> structured array of :data:`RESULT_DTYPE`."""
-    out = np.zeros(len(beats), RESULT_DTYPE)
-    for name, (off, width) in offsets["result"].items():
-        mask = (1 << width) - 1
-        out[name] = [(int(b) >> off) & mask for b in beats]
-    return out
+def decode_results(config: UnitConfig, beats) -> np.ndarray:
+    """Raw ``o`` payload integers -> structured array of
+    :data:`~raplas_hdl.model.intersection.RESULT_DTYPE` (the record
+    :data:`~raplas_hdl.model.records.RESULT` of ``config``)."""
+    return RESULT.bind(config).unpack(beats)
 
 
 def run_runs(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
@@ -291,7 +279,6 @@ def run_runs(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
         return []
     scene.check(config)
     text = unit_verilog(config)
-    offsets = layout_offsets(config)
     with tempfile.TemporaryDirectory(prefix="raplas-unit-") as tmp:
         stim_path = Path(tmp) / "stim.npz"
         out_path = Path(tmp) / "out.npz"
@@ -304,9 +291,8 @@ def run_runs(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
                          + (pairs_bound + 64 * len(runs) + scene.n_spheres * len(runs)
                             * (1 + config.n_planes // config.n_testers)) * 4 / ready_density
                          + 10_000)
-        meta = {"max_cycles": max_cycles, "offsets": offsets, "n_planes": config.n_planes, "seed": seed,
-                "ready_density": ready_density, "fifo_depth": config.fifo_depth,
-                "counters": list(COUNTER_NAMES)}
+        meta = {"max_cycles": max_cycles, "params": config.params(), "seed": seed,
+                "ready_density": ready_density}
         (Path(tmp) / "meta.json").write_text(json.dumps(meta))
         env = {"UNIT_STIM": str(stim_path), "UNIT_OUT": str(out_path),
                "UNIT_META": str(Path(tmp) / "meta.json")}
@@ -323,15 +309,14 @@ def run_runs(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
         run_of_beat = res["run_of_beat"]
         ctr = res["counters"]
         max_level = int(res["max_fifo_level"])
-    results = decode_results(config, beats, offsets)
+    results = decode_results(config, beats)
     out = []
     for k in range(len(runs)):
         stream = results[run_of_beat == k]
         if overlap and k != len(runs) - 1:
             counters = None
         else:
-            counters = {name: int(ctr[k, i]) for i, name in
-                        enumerate(("cycles",) + tuple(COUNTER_NAMES))}
+            counters = {name: int(ctr[k, i]) for i, name in enumerate(COUNTERS.names)}
             counters["_max_fifo_level"] = max_level
         out.append((stream, counters))
     return out
