@@ -1,140 +1,169 @@
 """``raplas-hdl bench``: run time against error over formats, roundings, modes, scenes, bundle
 sizes and backends, with hardware cost from Yosys and the Pareto fronts (issue 6, point 1).
 
-Writes ``results.csv``, ``results.json`` and PNG plots under ``--out-dir`` and a markdown
-report at ``--report``. The default campaign takes about 20 minutes on 2 cores;
-``--quick`` about 3 (cold caches).
+Writes results.csv, results.json and PNG plots under --out (default build/bench, with
+--quick build/bench-quick) and a markdown report at --report (default <out>/bench.md).
+Nothing goes to docs/ unless asked: to regenerate the committed report give
+--out docs/results/bench --report docs/bench.md. The default campaign takes about 20
+minutes on 2 cores; --quick about 3 (cold caches).
 """
 
 from __future__ import annotations
 
+import os
 import shlex
 from pathlib import Path
 
-__all__ = ["add_parser", "run"]
+from . import grammar as g
 
-ROOT = Path(__file__).resolve().parents[2]
+__all__ = ["add_parser", "check", "run", "spec_from_args"]
+
+BENCH_OUT = os.path.join("build", "bench")
+QUICK_OUT = os.path.join("build", "bench-quick")
+MAX_PER_FAMILY = 1_000_000
+MAX_REPEAT = 100
+SCENE_NAMES = ("cornell", "spheres", "terrain", "soup")
+MODES = ("paper", "conservative")
+
+#: The options of a sweep (none applies with --from-json).
+SWEEP_OPTIONS = ("quick", "format", "rounding", "modes", "scenes", "meshes", "bundles",
+                 "size", "mesh_size", "shadow", "rtl", "per_family", "seed", "repeat",
+                 "waves")
 
 
 def add_parser(subparsers):
     p = subparsers.add_parser(
         "bench", help="benchmark: run time against error, hardware cost, Pareto fronts",
-        description="Sweep formats x roundings x ray-triangle modes x scenes x bundle sizes "
-                    "x backends; measure run time per stage, throughput, error against "
-                    "float64 and against the exact reference R, and the Yosys cost of each "
-                    "format; write CSV/JSON, PNG plots and a markdown report.")
+        description=__doc__.split("\n\n", 1)[1])
     p.add_argument("--quick", action="store_true",
                    help="small sweep (FP16, FP24, FP32; rtz; paper; cornell, spheres; 8x8; "
                         "32x32): about 3 minutes")
-    p.add_argument("--formats", default=None, metavar="LIST",
-                   help="comma-separated formats (default FP16,FP20,FP24,FP32)")
-    p.add_argument("--format", action="append", default=[], dest="extra_formats",
-                   metavar="FMT", help="an extra format, e.g. e6m17 (repeatable)")
-    p.add_argument("--roundings", default=None, metavar="LIST",
-                   help="comma-separated roundings (default rtz,rne,chop)")
+    g.add_format_option(p, multiple=True, plural=True, default="FP16,FP20,FP24,FP32; quick "
+                        "FP16,FP24,FP32", rounding_default="rtz,rne,chop; quick rtz")
     p.add_argument("--modes", default=None, metavar="LIST",
-                   help="comma-separated ray-triangle modes (default paper,conservative)")
+                   help="comma-separated ray-triangle modes: paper, conservative (default "
+                        "both; quick paper)")
     p.add_argument("--scenes", default=None, metavar="LIST",
-                   help="comma-separated procedural scenes (default cornell,spheres,terrain,"
-                        "soup)")
+                   help="comma-separated procedural scenes: " + ", ".join(SCENE_NAMES)
+                        + " (default all; quick cornell,spheres)")
     p.add_argument("--meshes", default=None, metavar="DIR",
-                   help="directory of mesh files (default ../shared/meshes; 'none' for none; "
-                        "a missing directory is skipped with a note)")
+                   help="directory of mesh files, or none (default ../shared/meshes, skipped "
+                        "with a note when missing; quick none)")
     p.add_argument("--bundles", default=None, metavar="LIST",
-                   help="comma-separated bundle sizes, the first is the main one "
-                        "(default 8x8,4x4,16x16)")
-    p.add_argument("--size", default=None, metavar="WxH",
-                   help="image size of procedural scenes (default 32x32)")
-    p.add_argument("--mesh-size", default=None, metavar="WxH",
-                   help="image size of mesh scenes (default 32x32)")
-    p.add_argument("--shadow", default=None, metavar="RxC",
-                   help="shadow lattice per point (default 2x2; 0 for no shadows)")
-    p.add_argument("--rtl", default=None, choices=("icarus", "verilator"),
-                   help="also run one tiny point through the RTL (slow)")
-    p.add_argument("--per-family", type=int, default=None, metavar="N",
-                   help="stress rays per family for the R metrics (default 2000; quick 300)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--repeat", type=int, default=1, metavar="N",
-                   help="renders per point; the fastest run's timings are kept (default 1)")
-    p.add_argument("--out-dir", default=None, metavar="DIR",
-                   help="CSV, JSON and plots (default docs/results/bench, quick: "
-                        "build/bench-quick)")
-    p.add_argument("--report", default=None, metavar="FILE",
-                   help="markdown report (default docs/bench.md, quick: "
-                        "<out-dir>/bench.md)")
-    p.add_argument("--from-json", default=None, metavar="FILE",
+                   help=f"comma-separated bundle sizes RxC, sides 1 to {g.MAX_LATTICE}, the "
+                        "first is the main one (default 8x8,4x4,16x16; quick 8x8)")
+    p.add_argument("--size", type=g.size_type("--size"), default=None, metavar="WxH",
+                   help=f"image size of procedural scenes, sides 1 to {g.MAX_IMAGE} "
+                        "(default 32x32)")
+    p.add_argument("--mesh-size", type=g.size_type("--mesh-size"), default=None,
+                   metavar="WxH", help=f"image size of mesh scenes, sides 1 to {g.MAX_IMAGE} "
+                                       "(default 32x32)")
+    p.add_argument("--shadow", type=g.lattice_type("--shadow"), default=None, metavar="RxC",
+                   help=f"shadow lattice per point, sides 1 to {g.MAX_LATTICE}, or 0 for no "
+                        "shadows (default 2x2)")
+    p.add_argument("--rtl", default=None, type=g.choice("icarus", "verilator", what="simulator"),
+                   metavar="{icarus,verilator}",
+                   help="also run one tiny point through the RTL under this simulator (slow)")
+    p.add_argument("--per-family", type=g.int_range(1, MAX_PER_FAMILY), default=None,
+                   metavar="N", help=f"stress rays per family for the R metrics, 1 to "
+                                     f"{MAX_PER_FAMILY:,} (default 2000; quick 300)")
+    p.add_argument("--seed", type=int, default=None, metavar="S", help="seed (default 0)")
+    p.add_argument("--repeat", type=g.int_range(1, MAX_REPEAT), default=None, metavar="N",
+                   help=f"renders per point, 1 to {MAX_REPEAT}; the fastest run's timings "
+                        "are kept (default 1)")
+    p.add_argument("--out", "--out-dir", dest="out", default=None, metavar="DIR",
+                   help=f"directory of the CSV, JSON and plots (default {BENCH_OUT}, quick "
+                        f"{QUICK_OUT}; --out-dir is its old name)")
+    p.add_argument("--report", default=None, metavar="FILE.md",
+                   help="markdown report (default <out>/bench.md)")
+    p.add_argument("--from-json", default=None, metavar="FILE.json",
                    help="do not run: rewrite the CSV, plots and report from a results.json")
     p.add_argument("--quiet", action="store_true", help="no per-point progress lines")
+    g.add_waves_option(p, "the --rtl point's simulations")
     return p
 
 
-def _list(text):
-    return [x.strip() for x in text.split(",") if x.strip()]
-
-
-def _pair(text, name):
-    from .render import _lattice
-
-    r, c = _lattice(text, name)
-    return (r, c)
+def _list(text, name, known=None):
+    items = [x.strip() for x in text.split(",") if x.strip()]
+    if not items:
+        raise g.UsageError(f"{name} is empty")
+    if known is not None:
+        for x in items:
+            if x not in known:
+                raise g.UsageError(f"{name}: unknown value {x!r}; use {', '.join(known)}")
+    return items
 
 
 def spec_from_args(args):
     """The :class:`~raplas_hdl.bench.sweep.BenchSpec` an argument namespace asks for."""
     from ..bench.sweep import full_spec, quick_spec
-    from .render import _size
 
     kw = {}
-    if args.formats:
-        kw["formats"] = _list(args.formats)
-    if args.roundings:
-        kw["roundings"] = _list(args.roundings)
+    if args.format:
+        kw["formats"] = g.format_names(args, ())
+    if args.rounding:
+        kw["roundings"] = g.roundings_of(args, ())
     if args.modes:
-        kw["modes"] = _list(args.modes)
+        kw["modes"] = _list(args.modes, "--modes", MODES)
     if args.scenes:
-        kw["scenes"] = _list(args.scenes)
+        kw["scenes"] = _list(args.scenes, "--scenes", SCENE_NAMES)
     if args.meshes is not None:
         kw["mesh_dir"] = None if args.meshes.lower() == "none" else args.meshes
     if args.bundles:
-        kw["bundles"] = [_pair(b, "--bundles") for b in _list(args.bundles)]
-        if any(b == (0, 0) for b in kw["bundles"]):
-            raise ValueError("--bundles cannot contain 0")
+        kw["bundles"] = g.lattice_list(args.bundles, "--bundles")
     if args.size:
-        kw["size"] = _size(args.size)
+        kw["size"] = args.size
     if args.mesh_size:
-        kw["mesh_size"] = _size(args.mesh_size)
-    if args.shadow:
-        kw["shadow"] = _pair(args.shadow, "--shadow")
+        kw["mesh_size"] = args.mesh_size
+    if args.shadow is not None:
+        kw["shadow"] = args.shadow
     if args.per_family is not None:
         kw["per_family"] = args.per_family
-    kw.update(rtl=args.rtl, seed=args.seed, repeats=args.repeat)
-    spec = quick_spec(**kw) if args.quick else full_spec(**kw)
-    for f in args.extra_formats:
-        if f not in spec.formats:
-            spec.formats.append(f)
-    spec.__post_init__()
-    return spec
+    kw.update(rtl=args.rtl, seed=args.seed or 0, repeats=args.repeat or 1)
+    return quick_spec(**kw) if args.quick else full_spec(**kw)
+
+
+def check(args) -> None:
+    if args.from_json:
+        g.reject(args, SWEEP_OPTIONS, "with --from-json (it rewrites the outputs of a "
+                                      "finished run)")
+        g.check_input_file(args.from_json, "--from-json", (".json",))
+        from ..bench.report import load_results
+
+        try:
+            args.results = load_results(args.from_json)
+        except (ValueError, KeyError, TypeError) as exc:
+            raise ValueError(f"--from-json {args.from_json!r} is not a bench results.json "
+                             f"({type(exc).__name__}: {g.one_line(exc)})") from None
+    else:
+        if args.meshes is not None and args.meshes.lower() != "none":
+            p = Path(args.meshes)
+            if not p.is_dir():
+                raise g.UsageError(f"--meshes {args.meshes!r} is not a directory (give none "
+                                   "for no meshes)")
+        args.spec = spec_from_args(args)
+        g.check_waves(args, args.rtl, applies=args.rtl is not None,
+                      why="without --rtl (only the rtl point simulates)")
+        if args.rtl:
+            g.require_simulator(args.rtl)
+    args.out = args.out or (QUICK_OUT if args.quick else BENCH_OUT)
+    g.check_output_dir(args.out, "--out")
+    args.report = args.report or os.path.join(args.out, "bench.md")
+    g.check_output_file(args.report, (".md",), "--report", must_exist_dir=False)
 
 
 def run(args) -> int:
-    from ..bench.report import load_results, write_outputs
+    from ..bench.report import write_outputs
     from ..bench.sweep import run_sweep
 
+    command = _command(args)
     if args.from_json:
-        results = load_results(args.from_json)
-        out_dir = Path(args.out_dir) if args.out_dir else Path(args.from_json).parent
-        report = Path(args.report) if args.report else ROOT / "docs" / "bench.md"
-        for f in write_outputs(results, out_dir, report, command=_command(args)):
+        for f in write_outputs(args.results, args.out, args.report, command=command):
             print(f"  wrote {f}")
         return 0
-    spec = spec_from_args(args)
-    out_dir = Path(args.out_dir) if args.out_dir else (
-        ROOT / "build" / "bench-quick" if args.quick else ROOT / "docs" / "results" / "bench")
-    report = Path(args.report) if args.report else (
-        out_dir / "bench.md" if args.quick else ROOT / "docs" / "bench.md")
-    command = _command(args)
-    results = run_sweep(spec, progress=None if args.quiet else _say)
-    files = write_outputs(results, out_dir, report, command=command)
+    with g.waves(args):
+        results = run_sweep(args.spec, progress=None if args.quiet else _say)
+    files = write_outputs(results, args.out, args.report, command=command)
     print(f"bench: {len(results['points'])} points in {results['wall_seconds']:.0f} s")
     for f in files:
         print(f"  wrote {f}")
@@ -146,20 +175,25 @@ def _command(args) -> str:
     parts = ["raplas-hdl", "bench"]
     if args.quick:
         parts.append("--quick")
-    for opt, dest in (("--formats", "formats"), ("--roundings", "roundings"),
-                      ("--modes", "modes"), ("--scenes", "scenes"), ("--meshes", "meshes"),
-                      ("--bundles", "bundles"), ("--size", "size"),
-                      ("--mesh-size", "mesh_size"), ("--shadow", "shadow"), ("--rtl", "rtl"),
-                      ("--per-family", "per_family"), ("--out-dir", "out_dir"),
+    if args.format:
+        parts += ["--format", ",".join(g.format_names(args, ()))]
+    if args.rounding:
+        parts += ["--rounding", ",".join(g.roundings_of(args, ()))]
+    for opt, dest in (("--modes", "modes"), ("--scenes", "scenes"), ("--meshes", "meshes"),
+                      ("--bundles", "bundles"), ("--rtl", "rtl"),
+                      ("--per-family", "per_family"), ("--out", "out"),
                       ("--report", "report"), ("--from-json", "from_json")):
         v = getattr(args, dest)
         if v is not None:
             parts += [opt, str(v)]
-    for f in args.extra_formats:
-        parts += ["--format", f]
+    for opt, dest in (("--size", "size"), ("--mesh-size", "mesh_size"),
+                      ("--shadow", "shadow")):
+        v = getattr(args, dest)
+        if v is not None:
+            parts += [opt, "0" if v == (0, 0) else f"{v[0]}x{v[1]}"]
     if args.seed:
         parts += ["--seed", str(args.seed)]
-    if args.repeat != 1:
+    if args.repeat and args.repeat != 1:
         parts += ["--repeat", str(args.repeat)]
     return " ".join(shlex.quote(p) for p in parts)
 

@@ -1,11 +1,13 @@
 """``raplas-hdl demo``: the README's main job.
 
-1. Emit the Verilog of every unit into ``build/verilog/`` (one file and JSON manifest
-   each; a unit that fails is reported, the render still runs, and the exit status is 1);
-2. render the default scene (the Cornell box) with the bit-accurate ``model`` backend
-   (FP24) and with the ``float64`` reference;
+1. Emit the Verilog of every unit into build/verilog/ (one file and JSON manifest each; a
+   unit that fails is reported, the render still runs, and the exit status is 1);
+2. render the default scene (the Cornell box) with the bit-accurate model backend (FP24)
+   and with the float64 reference;
 3. write both PNGs and the difference image, and print the summary with the image error
    of the model against float64.
+
+The scene, the size and the output directories are checked before step 1.
 """
 
 from __future__ import annotations
@@ -15,19 +17,23 @@ import sys
 import time
 from pathlib import Path
 
+from . import grammar as g
+
 
 def add_parser(subparsers):
     from .render import add_render_options
 
     p = subparsers.add_parser(
         "demo", help="emit the Verilog, render the default scene with model and float64",
-        description=__doc__.split("\n\n", 1)[1] if __doc__ else None)
-    p.add_argument("--scene", default="cornell", help="scene name or mesh file (default "
-                   "cornell)")
-    p.add_argument("--size", default="64x64", help="image size WxH (default 64x64)")
-    p.add_argument("--out-dir", default="build/demo", help="where the PNGs go "
-                   "(default build/demo)")
-    p.add_argument("--verilog-dir", default="build/verilog",
+        description=__doc__.split("\n\n", 1)[1])
+    p.add_argument("--scene", default="cornell", metavar="NAME|FILE",
+                   help="cornell | spheres | terrain | soup | path to .obj/.ply/.stl "
+                        "(default cornell)")
+    p.add_argument("--size", type=g.size_type("--size"), default=(64, 64), metavar="WxH",
+                   help=f"image size, sides 1 to {g.MAX_IMAGE} (default 64x64)")
+    p.add_argument("--out", "--out-dir", dest="out", default="build/demo", metavar="DIR",
+                   help="where the PNGs and the JSON summary go (default build/demo)")
+    p.add_argument("--verilog-dir", default=None, metavar="DIR",
                    help="where the Verilog goes (default build/verilog)")
     p.add_argument("--no-verilog", action="store_true", help="skip the Verilog step")
     add_render_options(p)
@@ -52,15 +58,34 @@ def emit_verilog(outdir: Path, fmt) -> tuple[list, list]:
     return written, failed
 
 
+def check(args) -> None:
+    from .render import check_scene
+
+    args.fmt = g.format_from_args(args)
+    if args.no_verilog:
+        g.reject(args, ("verilog_dir",), "with --no-verilog")
+    else:
+        args.verilog_dir = args.verilog_dir or "build/verilog"
+        g.check_output_dir(args.verilog_dir, "--verilog-dir")
+    check_scene(args.scene)
+    g.check_output_dir(args.out, "--out")
+
+
 def run(args) -> int:
-    from ..host.backends import make_backend
-    from ..host.render import compare, difference_image, format_summary, render, save_png
     from ..host.scenes import get_scene
-    from .render import _jsonable, _size, settings_from_args
-    from .verilog import format_from_args
 
     t0 = time.perf_counter()
-    fmt = format_from_args(args)
+    scene = get_scene(args.scene, bound=None)   # a bad mesh fails here, before the Verilog
+
+    from ..host.backends import make_backend
+    from ..host.render import compare, difference_image, format_summary, render, save_png
+    from .render import settings_from_args
+
+    fmt = args.fmt
+    size = args.size
+    settings = settings_from_args(args, size)
+    scene = scene.normalised(settings.bound)
+    failed = []
     if not args.no_verilog:
         vdir = Path(args.verilog_dir)
         written, failed = emit_verilog(vdir, fmt)
@@ -69,13 +94,11 @@ def run(args) -> int:
             print(f"      {path}")
         for name, why in failed:
             print(f"      {name}: FAILED: {why}", file=sys.stderr)
-    size = _size(args.size)
-    settings = settings_from_args(args, size)
-    scene = get_scene(args.scene, bound=settings.bound)
-    out = Path(args.out_dir)
+    out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    shadow = "off" if args.shadow == (0, 0) else f"{args.shadow[0]}x{args.shadow[1]}"
     print(f"[2/3] rendering {scene.name} ({scene.n_triangles} triangles) at "
-          f"{size[0]}x{size[1]}, shadows {args.shadow}: model {fmt} {args.mode}, then float64")
+          f"{size[0]}x{size[1]}, shadows {shadow}: model {fmt} {args.mode}, then float64")
     model = render(scene, make_backend("model", fmt, mode=args.mode), settings)
     ref = render(scene, make_backend("float64"), settings)
     cmp = compare(model, ref)
@@ -85,18 +108,18 @@ def run(args) -> int:
     save_png(ref.image, paths["float64"])
     save_png(difference_image(model, ref), paths["diff"], linear=False)
     summary = out / f"{scene.name}_summary.json"
-    summary.write_text(json.dumps(_jsonable({"model": {"stats": model.stats,
-                                                       "timings": model.timings},
-                                             "float64": {"stats": ref.stats,
-                                                         "timings": ref.timings},
-                                             "comparison": cmp}), indent=2))
+    summary.write_text(json.dumps(g.jsonable({"model": {"stats": model.stats,
+                                                        "timings": model.timings},
+                                              "float64": {"stats": ref.stats,
+                                                          "timings": ref.timings},
+                                              "comparison": cmp}), indent=2))
     print("[3/3] summary")
     print(format_summary(model, cmp))
     print(format_summary(ref))
     print(f"wrote {paths['model']}, {paths['float64']}, {paths['diff']} (x4 difference, "
           f"magenta: nearest triangle differs), {summary}")
     print(f"demo done in {time.perf_counter() - t0:.1f} s")
-    if not args.no_verilog and failed:
+    if failed:
         print(f"raplas-hdl demo: {len(failed)} unit(s) failed to emit Verilog (see above)",
               file=sys.stderr)
         return 1

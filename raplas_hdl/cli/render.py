@@ -3,68 +3,103 @@
 from __future__ import annotations
 
 import json
-import math
-import sys
 from pathlib import Path
+
+from . import grammar as g
+
+__all__ = ["add_parser", "add_render_options", "check", "check_scene", "run",
+           "settings_from_args", "_size", "_lattice", "_jsonable"]
+
+#: Limits of the render options (stated in --help, checked while parsing).
+MAX_TRIS_PER_SPHERE = 4096
+MAX_FANOUT = 64
+MAX_BATCH = 4096
 
 
 def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(x) for x in text.lower().split("x"))
-    except ValueError:
-        raise ValueError(f"size {text!r} is not WxH (for example 128x96)") from None
-    if w < 1 or h < 1:
-        raise ValueError(f"size {text!r} must be at least 1x1")
-    return w, h
+    """``WxH`` with sides 1 to :data:`grammar.MAX_IMAGE` (used by scripts too)."""
+    return g.size(text)
 
 
 def _lattice(text: str, name: str) -> tuple[int, int]:
-    if text in ("0", "off", "none"):
-        return 0, 0
-    try:
-        r, c = (int(x) for x in text.lower().split("x"))
-    except ValueError:
-        raise ValueError(f"{name} {text!r} is not RxC (for example 4x4)") from None
-    if r < 1 or c < 1 or r > 64 or c > 64:
-        raise ValueError(f"{name} {text!r}: rows and cols must be 1 to 64")
-    return r, c
+    """``RxC`` with sides 1 to 64, or ``0`` (used by scripts too)."""
+    return g.lattice(text, name)
+
+
+_jsonable = g.jsonable
+
+
+def _power_of_two(text):
+    v = g.int_range(2, MAX_FANOUT)(text)
+    if v & (v - 1):
+        import argparse
+
+        raise argparse.ArgumentTypeError(f"must be a power of two from 2 to {MAX_FANOUT}, "
+                                         f"not {v}")
+    return v
 
 
 def add_render_options(p):
-    """Options shared by ``render`` and ``demo``."""
-    from .verilog import add_format_options
-
-    add_format_options(p)
-    p.add_argument("--mode", choices=("paper", "conservative"), default="paper",
-                   help="ray-triangle mode of the model/rtl backends (default paper)")
-    p.add_argument("--tile", default="8x8", help="primary bundle size RxC (default 8x8)")
-    p.add_argument("--shadow", default="3x3",
-                   help="light lattice of a shadow bundle RxC, or 0 for no shadows "
-                        "(default 3x3)")
-    p.add_argument("--tris-per-sphere", type=int, default=8,
-                   help="triangles per bounding sphere (default 8)")
-    p.add_argument("--fanout", type=int, default=8, help="sphere hierarchy fan-out (default 8)")
-    p.add_argument("--no-hierarchy", action="store_true",
+    """Options shared by ``render`` and ``demo``: the format and the render settings."""
+    g.add_format_option(p, field_widths=True)
+    r = p.add_argument_group("render settings")
+    r.add_argument("--mode", type=g.choice("paper", "conservative", what="mode"),
+                   default="paper", metavar="{paper,conservative}",
+                   help="ray-triangle mode of the model and rtl backends (default paper)")
+    r.add_argument("--tile", type=g.lattice_type("--tile", allow_zero=False), default=(8, 8),
+                   metavar="RxC", help=f"primary bundle size, sides 1 to {g.MAX_LATTICE} "
+                                       "(default 8x8)")
+    r.add_argument("--shadow", type=g.lattice_type("--shadow"), default=(3, 3), metavar="RxC",
+                   help=f"light lattice of a shadow bundle, sides 1 to {g.MAX_LATTICE}, or 0 "
+                        "for no shadows (default 3x3)")
+    r.add_argument("--tris-per-sphere", type=g.int_range(1, MAX_TRIS_PER_SPHERE), default=8,
+                   metavar="N", help=f"triangles per bounding sphere, 1 to "
+                                     f"{MAX_TRIS_PER_SPHERE} (default 8)")
+    r.add_argument("--fanout", type=_power_of_two, default=8, metavar="N",
+                   help=f"sphere hierarchy fan-out, a power of two from 2 to {MAX_FANOUT} "
+                        "(default 8)")
+    r.add_argument("--no-hierarchy", action="store_true",
                    help="send every leaf sphere to the unit (no host hierarchy cull)")
-    p.add_argument("--no-early-out", action="store_true",
+    r.add_argument("--no-early-out", action="store_true",
                    help="do not disable blocked shadow rays between sphere batches")
-    p.add_argument("--batch", type=int, default=16,
-                   help="leaf spheres per shadow run (early-out granularity, default 16)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    r.add_argument("--batch", type=g.int_range(1, MAX_BATCH), default=16, metavar="N",
+                   help=f"leaf spheres per shadow run (early-out granularity), 1 to "
+                        f"{MAX_BATCH} (default 16)")
+    r.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def settings_from_args(args, size):
     from ..host.render import RenderSettings
 
-    rows, cols = _lattice(args.tile, "--tile")
-    if rows == 0:
-        raise ValueError("--tile cannot be 0")
-    sr, sc = _lattice(args.shadow, "--shadow")
+    rows, cols = args.tile
+    sr, sc = args.shadow
     return RenderSettings(width=size[0], height=size[1], rows=rows, cols=cols,
                           shadow_rows=sr, shadow_cols=sc,
                           tris_per_sphere=args.tris_per_sphere, fanout=args.fanout,
                           hierarchy=not args.no_hierarchy, early_out=not args.no_early_out,
                           batch_spheres=args.batch, progress=not args.no_progress)
+
+
+def check_scene(spec: str) -> None:
+    """A scene name or a mesh file that exists (its contents are read by the command)."""
+    from ..host import scenes
+
+    if spec in scenes.SCENES:
+        return
+    suffixes = tuple(getattr(scenes, "SCENE_SUFFIXES", ())) + tuple(scenes.MESH_SUFFIXES)
+    p = Path(spec)
+    if p.suffix.lower() in suffixes or p.exists():
+        if p.is_dir():
+            raise ValueError(f"scene {spec!r} is a directory, not a mesh file")
+        if not p.exists():
+            raise ValueError(f"scene file {spec!r} does not exist")
+        if p.suffix.lower() not in suffixes:
+            raise ValueError(f"scene file {spec!r}: unsupported type {p.suffix!r} (use "
+                             f"{', '.join(suffixes)})")
+        g.check_input_file(spec, "scene file")
+        return
+    raise ValueError(f"unknown scene {spec!r}: use one of {', '.join(scenes.SCENES)} or a "
+                     f"path to an {'/'.join(s[1:].upper() for s in suffixes)} file")
 
 
 def add_parser(subparsers):
@@ -74,55 +109,70 @@ def add_parser(subparsers):
                     "file (OBJ, PLY, STL) with primary bundles, Phong shading and soft "
                     "shadows, and print rays, bundles, spheres, plane tests, pairs against "
                     "brute force, hits, time per stage and arithmetic events.")
-    p.add_argument("--scene", default="cornell",
+    p.add_argument("--scene", default="cornell", metavar="NAME|FILE",
                    help="cornell | spheres | terrain | soup | path to .obj/.ply/.stl "
                         "(default cornell)")
-    p.add_argument("--size", default="128x128", help="image size WxH (default 128x128)")
-    p.add_argument("--backend", choices=("float64", "model", "rtl"), default="model",
+    p.add_argument("--size", type=g.size_type("--size"), default=(128, 128), metavar="WxH",
+                   help=f"image size, sides 1 to {g.MAX_IMAGE} (default 128x128)")
+    p.add_argument("--backend", type=g.choice("float64", "model", "rtl", what="backend"),
+                   default="model", metavar="{float64,model,rtl}",
                    help="intersection backend (default model)")
-    p.add_argument("--sim", choices=("icarus", "verilator"), default="icarus",
-                   help="simulator of the rtl backend (default icarus)")
+    p.add_argument("--sim", type=g.choice("icarus", "verilator", what="simulator"),
+                   default=None, metavar="{icarus,verilator}",
+                   help="simulator of the rtl backend (default icarus; --backend rtl only)")
     add_render_options(p)
-    p.add_argument("--compare", action="store_true",
-                   help="also render with float64 and report PSNR and differing pixels")
-    p.add_argument("--diff", metavar="PNG",
+    o = p.add_argument_group("outputs")
+    o.add_argument("-o", "--output", required=True, metavar="FILE.png", help="PNG to write")
+    o.add_argument("--compare", action="store_true",
+                   help="also render with float64 and report PSNR and differing pixels "
+                        "(not with --backend float64)")
+    o.add_argument("--diff", metavar="FILE.png",
                    help="write the difference image against float64 (implies --compare)")
-    p.add_argument("--ids", metavar="NPZ",
+    o.add_argument("--ids", metavar="FILE.npz",
                    help="write per-pixel nearest triangle IDs (and t, visibility) as .npz")
-    p.add_argument("--json", metavar="FILE", help="write the summary as JSON")
-    p.add_argument("-o", "--output", required=True, help="PNG to write")
+    o.add_argument("--json", metavar="FILE.json", help="write the summary as JSON")
+    g.add_waves_option(p, "every simulation of the rtl backend")
     return p
 
 
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {k: _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, float) and not math.isfinite(x):
-        return str(x)
-    if hasattr(x, "item"):
-        return _jsonable(x.item())
-    return x
+def check(args) -> None:
+    args.fmt = g.format_from_args(args)
+    if args.backend == "float64":
+        g.reject(args, ("compare", "diff"), "to --backend float64 (it is the reference)")
+    if args.backend != "rtl":
+        g.reject(args, ("sim",), f"to --backend {args.backend} (only to rtl)")
+    check_scene(args.scene)
+    g.check_output_file(args.output, (".png",), "-o")
+    if args.diff:
+        g.check_output_file(args.diff, (".png",), "--diff")
+    if args.ids:
+        g.check_output_file(args.ids, (".npz",), "--ids")
+    if args.json:
+        g.check_output_file(args.json, (".json",), "--json")
+    g.check_distinct(**{"-o": args.output, "--diff": args.diff, "--ids": args.ids,
+                        "--json": args.json})
+    args.sim = args.sim or "icarus"
+    g.check_waves(args, args.sim, applies=args.backend == "rtl",
+                  why=f"to --backend {args.backend} (it simulates nothing; use --backend rtl)")
+    if args.backend == "rtl":
+        g.require_simulator(args.sim)
 
 
 def run(args) -> int:
-    from ..host.backends import BackendUnavailable, make_backend
-    from ..host.render import compare, difference_image, format_summary, render, save_ids, save_png
     from ..host.scenes import get_scene
-    from .verilog import format_from_args
 
-    size = _size(args.size)
+    scene = get_scene(args.scene, bound=None)   # a bad mesh fails here, before the rest
+
+    from ..host.backends import make_backend
+    from ..host.render import compare, difference_image, format_summary, render, save_ids, save_png
+
+    size = args.size
     settings = settings_from_args(args, size)
-    fmt = format_from_args(args)
-    scene = get_scene(args.scene, bound=settings.bound)
-    try:
-        backend = make_backend(args.backend, fmt, mode=args.mode, sim=args.sim)
-    except BackendUnavailable as exc:
-        print(f"raplas-hdl render: the {args.backend} backend is not available: {exc}",
-              file=sys.stderr)
-        return 3
-    result = render(scene, backend, settings)
+    fmt = args.fmt
+    scene = scene.normalised(settings.bound)
+    backend = make_backend(args.backend, fmt, mode=args.mode, sim=args.sim)
+    with g.waves(args):
+        result = render(scene, backend, settings)
     save_png(result.image, args.output)
     cmp = None
     if (args.compare or args.diff) and args.backend != "float64":
@@ -137,6 +187,7 @@ def run(args) -> int:
         print(f"wrote {args.ids}")
     if args.json:
         out = {"stats": result.stats, "timings": result.timings, "comparison": cmp}
-        Path(args.json).write_text(json.dumps(_jsonable(out), indent=2))
+        Path(args.json).write_text(json.dumps(g.jsonable(out), indent=2))
         print(f"wrote {args.json}")
     return 0
+

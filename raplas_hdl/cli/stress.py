@@ -2,16 +2,43 @@
 unit (golden model) against the exact reference R, as a table per format and mode.
 
 ``raplas-hdl stress campaign``: the same families and the plane-culling proof at scale,
-sharded over the machine's cores, resumable (:mod:`raplas_hdl.verify.campaign`)."""
+sharded over the machine's cores, resumable (:mod:`raplas_hdl.verify.campaign`). Its
+reports go under build/stress-campaign/ unless --out (or --results/--report) says
+otherwise."""
 
 from __future__ import annotations
 
 import json
+import os
 
-__all__ = ["add_parser", "run", "format_table"]
+from . import grammar as g
+
+__all__ = ["add_parser", "check", "run", "format_table"]
 
 COLUMNS = ("pairs", "unguaranteed", "r_hits", "unit_hits", "false_hits", "false_misses",
            "edge_rays", "leaks", "t_rel_median", "t_rel_max")
+
+#: Limits of the sizes (stated in --help).
+MAX_PER_FAMILY = 1_000_000
+MAX_CAMPAIGN_RAYS = 10_000_000
+MAX_CAMPAIGN_BUNDLES = 1_000_000
+MAX_SPHERES = 256
+MAX_JOBS = 256
+
+CAMPAIGN_OUT = os.path.join("build", "stress-campaign")
+CAMPAIGN_SHARDS = os.path.join("build", "campaign")
+
+
+def _families(text: str) -> tuple:
+    from ..verify.stress import FAMILIES
+
+    names = tuple(x.strip() for x in text.split(",") if x.strip())
+    if not names:
+        raise ValueError("--families is empty")
+    for n in names:
+        if n not in FAMILIES:
+            raise ValueError(f"unknown stress family {n!r}; known: {', '.join(FAMILIES)}")
+    return names
 
 
 def add_parser(subparsers):
@@ -19,52 +46,73 @@ def add_parser(subparsers):
         "stress", help="numerical stress suites against exact references",
         description="Run a seeded stress suite and print false hits, false misses, leaks and "
                     "the relative error of t per case family, against the exact reference R.")
-    p.add_argument("target", choices=["ray-triangle", "campaign"],
-                   help="the unit to stress, or the whole campaign (both units, every format, "
-                        "rounding and mode)")
-    p.add_argument("--format", action="append", dest="formats", metavar="FMT",
-                   help="format, e.g. FP24/rtz, FP24/chop, FP32 (repeatable; default FP24/rtz)")
-    p.add_argument("--mode", choices=["paper", "conservative", "both"], default="both")
-    p.add_argument("--per-family", type=int, default=1000, metavar="N",
-                   help="rays per family (default 1000)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--families", default=None,
+    sub = p.add_subparsers(dest="target", metavar="TARGET")
+    sub.required = True
+
+    r = sub.add_parser(
+        "ray-triangle", help="the ray-triangle unit's stress families, a table per format",
+        description="The seeded stress families of the ray-triangle unit (golden model) "
+                    "against the exact reference R: a table per format and mode.")
+    g.add_format_option(r, multiple=True, default="FP24/rtz")
+    r.add_argument("--mode", type=g.choice("paper", "conservative", "both", what="mode"),
+                   default="both", metavar="{paper,conservative,both}",
+                   help="ray-triangle mode(s) (default both)")
+    r.add_argument("--per-family", type=g.int_range(1, MAX_PER_FAMILY), default=1000,
+                   metavar="N", help=f"rays per family, 1 to {MAX_PER_FAMILY:,} (default 1000)")
+    r.add_argument("--seed", type=int, default=0, metavar="S", help="seed (default 0)")
+    r.add_argument("--families", default=None, metavar="LIST",
                    help="comma-separated subset of the families (default: all)")
-    p.add_argument("--margin-scale", type=float, default=1.0, metavar="S",
-                   help="scale s of the conservative margin (default 1: the derivation)")
-    p.add_argument("--bisect", action="store_true",
+    r.add_argument("--margin-scale", type=g.float_range(0.0, 1e6, lo_open=True), default=1.0,
+                   metavar="S", help="scale s of the conservative margin, above 0 (default 1: "
+                                     "the derivation)")
+    r.add_argument("--bisect", action="store_true",
                    help="also find the smallest s with zero false misses (conservative mode)")
-    p.add_argument("--json", default=None, metavar="FILE", help="write the results as JSON")
-    g = p.add_argument_group("campaign options")
-    g.add_argument("--formats", dest="campaign_formats", default="FP16,FP20,FP24,FP32",
-                   help="campaign: comma-separated formats (FP24 = every rounding of "
-                        "--roundings; FP24/rne = that one). Default FP16,FP20,FP24,FP32")
-    g.add_argument("--roundings", default="rtz,rne,chop",
-                   help="campaign: roundings of the formats given without one")
-    g.add_argument("--rays-per-family", type=int, default=50000, metavar="N",
-                   help="campaign: rays per family, format and rounding (default 50000)")
-    g.add_argument("--shard-rays", type=int, default=5000, metavar="N",
-                   help="campaign: rays per ray-triangle shard (default 5000)")
-    g.add_argument("--bundles", type=int, default=5000, metavar="N",
-                   help="campaign: culling bundles per sphere kind, format and rounding "
-                        "(default 5000)")
-    g.add_argument("--shard-bundles", type=int, default=250, metavar="N",
-                   help="campaign: bundles per culling shard (default 250)")
-    g.add_argument("--spheres", type=int, default=16, metavar="N",
-                   help="campaign: spheres per bundle (default 16)")
-    g.add_argument("--campaign-seed", type=int, default=2026, metavar="S",
-                   help="campaign: seed (default 2026)")
-    g.add_argument("--out-dir", default="build/campaign", metavar="DIR",
-                   help="campaign: shard directory (default build/campaign)")
-    g.add_argument("--jobs", type=int, default=None, metavar="N",
-                   help="campaign: worker processes (default: os.cpu_count())")
-    g.add_argument("--max-shards", type=int, default=None, metavar="K",
-                   help="campaign: run at most K new shards, then stop (no merge)")
-    g.add_argument("--results", default="docs/results/stress_campaign.json", metavar="FILE",
-                   help="campaign: merged JSON (default docs/results/stress_campaign.json)")
-    g.add_argument("--report", default="docs/stress-campaign.md", metavar="FILE",
-                   help="campaign: markdown summary (default docs/stress-campaign.md)")
-    g.add_argument("--no-progress", action="store_true", help="campaign: no progress bar")
+    r.add_argument("--json", default=None, metavar="FILE.json",
+                   help="write the results as JSON")
+    r.set_defaults(_check_target=check_ray_triangle, _run_target=run_ray_triangle)
+
+    c = sub.add_parser(
+        "campaign", help="the stress families and the culling proof at scale (resumable)",
+        description="The stress families and the plane-culling proof over formats, roundings "
+                    "and both modes (48.5 M cases by default), sharded over the cores, "
+                    "seeded, resumable: run the same command again after an interruption. "
+                    f"Shards go to --shard-dir (default {CAMPAIGN_SHARDS}), the merged JSON "
+                    f"and markdown report to --out (default {CAMPAIGN_OUT}). To regenerate "
+                    "the committed report, give --results docs/results/stress_campaign.json "
+                    "--report docs/stress-campaign.md.")
+    g.add_format_option(c, multiple=True, plural=True, default="FP16,FP20,FP24,FP32",
+                        rounding_default="rtz,rne,chop")
+    c.add_argument("--families", default=None, metavar="LIST",
+                   help="comma-separated subset of the ray-triangle families (default: all)")
+    c.add_argument("--rays-per-family", type=g.int_range(0, MAX_CAMPAIGN_RAYS), default=50000,
+                   metavar="N", help=f"rays per family, format and rounding, 0 to "
+                                     f"{MAX_CAMPAIGN_RAYS:,} (default 50000)")
+    c.add_argument("--shard-rays", type=g.int_range(1, MAX_CAMPAIGN_RAYS), default=5000,
+                   metavar="N", help="rays per ray-triangle shard (default 5000)")
+    c.add_argument("--bundles", type=g.int_range(0, MAX_CAMPAIGN_BUNDLES), default=5000,
+                   metavar="N", help=f"culling bundles per sphere kind, format and rounding, "
+                                     f"0 to {MAX_CAMPAIGN_BUNDLES:,} (default 5000)")
+    c.add_argument("--shard-bundles", type=g.int_range(1, MAX_CAMPAIGN_BUNDLES), default=250,
+                   metavar="N", help="bundles per culling shard (default 250)")
+    c.add_argument("--spheres", type=g.int_range(1, MAX_SPHERES), default=16, metavar="N",
+                   help=f"spheres per bundle, 1 to {MAX_SPHERES} (default 16)")
+    c.add_argument("--seed", "--campaign-seed", dest="seed", type=int, default=2026,
+                   metavar="S", help="seed (default 2026)")
+    c.add_argument("--shard-dir", "--out-dir", dest="shard_dir", default=CAMPAIGN_SHARDS,
+                   metavar="DIR", help=f"shard directory (default {CAMPAIGN_SHARDS}; "
+                                       "--out-dir is its old name)")
+    g.add_out_option(c, CAMPAIGN_OUT, "directory of the merged JSON (stress_campaign.json) "
+                                      "and the report (stress-campaign.md)")
+    c.add_argument("--results", default=None, metavar="FILE.json",
+                   help="merged JSON (default <out>/stress_campaign.json)")
+    c.add_argument("--report", default=None, metavar="FILE.md",
+                   help="markdown summary (default <out>/stress-campaign.md)")
+    c.add_argument("--jobs", type=g.int_range(1, MAX_JOBS), default=None, metavar="N",
+                   help=f"worker processes, 1 to {MAX_JOBS} (default: the number of cores)")
+    c.add_argument("--max-shards", type=g.int_range(1), default=None, metavar="K",
+                   help="run at most K new shards, then stop (no merge)")
+    c.add_argument("--no-progress", action="store_true", help="no progress bar")
+    c.set_defaults(_check_target=check_campaign, _run_target=run_campaign)
     return p
 
 
@@ -81,75 +129,33 @@ def format_table(table: dict, pooled: dict) -> str:
     return "\n".join(lines)
 
 
-def _split(text):
-    return tuple(x.strip() for x in text.split(",") if x.strip())
-
-
-def run_campaign(args) -> int:
-    """``stress campaign``: run the missing shards, then merge and write the reports."""
-    import sys
-    import time
-
-    from ..verify import campaign
-
-    params = campaign.CampaignParams(
-        formats=_split(args.campaign_formats), roundings=_split(args.roundings),
-        families=() if args.families is None else _split(args.families),
-        rays_per_family=args.rays_per_family, shard_rays=args.shard_rays,
-        bundles=args.bundles, shard_bundles=args.shard_bundles,
-        spheres_per_bundle=args.spheres, seed=args.campaign_seed)
-    t0 = time.perf_counter()
-    try:
-        info = campaign.run_campaign(params, args.out_dir, args.jobs, args.max_shards,
-                                     progress=not args.no_progress)
-    except KeyboardInterrupt:
-        print("\ninterrupted: finished shards are kept; run the same command to resume",
-              file=sys.stderr)
-        return 130
-    print(f"{info['run']} shards run, {info['reused']} reused, {info['pending']} of "
-          f"{info['shards']} missing ({info['wall_s']:.1f} s)")
-    if info["pending"]:
-        print("campaign incomplete: run the same command again to resume; not merged")
-        return 0
-    command = " ".join(["raplas-hdl stress campaign", "--formats", args.campaign_formats,
-                        "--roundings", args.roundings]
-                       + (["--families", args.families] if args.families else [])
-                       + ["--rays-per-family", str(args.rays_per_family),
-                          "--shard-rays", str(args.shard_rays), "--bundles", str(args.bundles),
-                          "--shard-bundles", str(args.shard_bundles),
-                          "--spheres", str(args.spheres),
-                          "--campaign-seed", str(args.campaign_seed),
-                          "--out-dir", args.out_dir]
-                       + (["--jobs", str(args.jobs)] if args.jobs else []))
-    doc = campaign.merge(params, args.out_dir, command,
-                         {"wall_s": time.perf_counter() - t0, "shards_run": info["run"],
-                          "shards_reused": info["reused"]})
-    campaign.write_outputs(doc, args.results, args.report)
-    tot, g = doc["totals"], doc["guarantees"]
-    print(f"{tot['cases']:,} cases ({tot['raytri_pairs']:,} ray-triangle pairs x 2 modes, "
-          f"{tot['sphere_tests']:,} culling sphere tests); CPU {doc['cpu_s']:.0f} s")
-    print(f"in-domain culling false rejections {g['culling_false_rejections']}; conservative "
-          f"false misses {g['conservative_false_misses']}, leaks {g['conservative_leaks']}")
-    print(f"written {args.results} and {args.report}")
-    if not g["ok"]:
-        print("GUARANTEE VIOLATED (see the report)")
-        return 1
-    return 0
+def check(args) -> None:
+    args._check_target(args)
 
 
 def run(args) -> int:
-    if args.target == "campaign":
-        return run_campaign(args)
-    from ..fp import parse_format
+    return args._run_target(args)
+
+
+# -- stress ray-triangle --------------------------------------------------------------
+
+def check_ray_triangle(args) -> None:
+    args.fmts = g.formats_from_args(args, default=("FP24/rtz",), default_roundings=("rtz",))
+    args.family_list = None if args.families is None else _families(args.families)
+    if args.bisect and args.mode == "paper":
+        raise g.UsageError("--bisect applies to the conservative mode; not with --mode paper")
+    if args.json:
+        g.check_output_file(args.json, (".json",), "--json")
+
+
+def run_ray_triangle(args) -> int:
     from ..verify import stress
 
-    formats = [parse_format(f) for f in (args.formats or ["FP24/rtz"])]
-    families = stress.FAMILIES if args.families is None else tuple(
-        f.strip() for f in args.families.split(",") if f.strip())
+    families = stress.FAMILIES if args.family_list is None else args.family_list
     modes = ("paper", "conservative") if args.mode == "both" else (args.mode,)
     results = []
     status = 0
-    for fmt in formats:
+    for fmt in args.fmts:
         cases = stress.generate(fmt, args.per_family, args.seed, families)
         enc = stress.reference(cases, fmt)
         for mode in modes:
@@ -176,4 +182,80 @@ def run(args) -> int:
         with open(args.json, "w") as fh:
             json.dump(results, fh, indent=1, sort_keys=True)
             fh.write("\n")
+        print(f"wrote {args.json}")
     return status
+
+
+# -- stress campaign --------------------------------------------------------------------
+
+def check_campaign(args) -> None:
+    from ..verify import campaign
+
+    args.format_names = g.format_names(args, ("FP16", "FP20", "FP24", "FP32"))
+    args.rounding_names = g.roundings_of(args, ("rtz", "rne", "chop"))
+    families = () if args.families is None else _families(args.families)
+    args.params = campaign.CampaignParams(
+        formats=tuple(args.format_names), roundings=tuple(args.rounding_names),
+        families=families, rays_per_family=args.rays_per_family,
+        shard_rays=args.shard_rays, bundles=args.bundles, shard_bundles=args.shard_bundles,
+        spheres_per_bundle=args.spheres, seed=args.seed)
+    out = args.out or CAMPAIGN_OUT
+    args.results = args.results or os.path.join(out, "stress_campaign.json")
+    args.report = args.report or os.path.join(out, "stress-campaign.md")
+    g.check_output_dir(args.shard_dir, "--shard-dir")
+    for opt, path, ext in (("--results", args.results, ".json"),
+                           ("--report", args.report, ".md")):
+        g.check_output_file(path, (ext,), opt, must_exist_dir=False)
+    g.check_distinct(**{"--results": args.results, "--report": args.report})
+
+
+def _campaign_command(args) -> str:
+    """The command line that reproduces the campaign (the committed reports quote it)."""
+    parts = ["raplas-hdl stress campaign", "--formats", ",".join(args.format_names),
+             "--roundings", ",".join(args.rounding_names)]
+    if args.families:
+        parts += ["--families", args.families]
+    parts += ["--rays-per-family", str(args.rays_per_family), "--shard-rays",
+              str(args.shard_rays), "--bundles", str(args.bundles), "--shard-bundles",
+              str(args.shard_bundles), "--spheres", str(args.spheres), "--seed",
+              str(args.seed), "--shard-dir", args.shard_dir]
+    if args.jobs:
+        parts += ["--jobs", str(args.jobs)]
+    return " ".join(parts)
+
+
+def run_campaign(args) -> int:
+    """``stress campaign``: run the missing shards, then merge and write the reports."""
+    import sys
+    import time
+
+    from ..verify import campaign
+
+    params = args.params
+    t0 = time.perf_counter()
+    try:
+        info = campaign.run_campaign(params, args.shard_dir, args.jobs, args.max_shards,
+                                     progress=not args.no_progress)
+    except KeyboardInterrupt:
+        print("\ninterrupted: finished shards are kept; run the same command to resume",
+              file=sys.stderr)
+        return 130
+    print(f"{info['run']} shards run, {info['reused']} reused, {info['pending']} of "
+          f"{info['shards']} missing ({info['wall_s']:.1f} s)")
+    if info["pending"]:
+        print("campaign incomplete: run the same command again to resume; not merged")
+        return 0
+    doc = campaign.merge(params, args.shard_dir, _campaign_command(args),
+                         {"wall_s": time.perf_counter() - t0, "shards_run": info["run"],
+                          "shards_reused": info["reused"]})
+    campaign.write_outputs(doc, args.results, args.report)
+    tot, gu = doc["totals"], doc["guarantees"]
+    print(f"{tot['cases']:,} cases ({tot['raytri_pairs']:,} ray-triangle pairs x 2 modes, "
+          f"{tot['sphere_tests']:,} culling sphere tests); CPU {doc['cpu_s']:.0f} s")
+    print(f"in-domain culling false rejections {gu['culling_false_rejections']}; conservative "
+          f"false misses {gu['conservative_false_misses']}, leaks {gu['conservative_leaks']}")
+    print(f"written {args.results} and {args.report}")
+    if not gu["ok"]:
+        print("GUARANTEE VIOLATED (see the report)")
+        return 1
+    return 0

