@@ -115,38 +115,6 @@ def test_render_command_errors(tmp_path, capsys):
     assert "empty" in capsys.readouterr().err
 
 
-def test_model_run_many_equals_run_bundle():
-    """The batched model path gives run_bundle's results and counters, run by run."""
-    from raplas_hdl.host.bundles import RayBundle
-    from raplas_hdl.host.spheres import build_sphere_tree
-    from raplas_hdl.model.intersection import run_bundle
-
-    scene = get_scene("soup", n=40)
-    be = make_backend("model", FP24.with_rounding("chop"), mode="conservative")
-    tree = build_sphere_tree(scene.triangles, 4, 4)
-    be.load(scene.triangles, tree, 8.0)
-    rng = np.random.default_rng(3)
-    runs = []
-    for k in range(6):
-        b = RayBundle(rng.uniform(-1, 1, 3) + [0, 0, 5], [0, 0, 0], [1, 0, 0], [0, 1, 0], 3, 5)
-        job = be.prepare(b, rng.random(15) < 0.8)
-        ids = np.sort(rng.choice(tree.n_leaves, size=int(rng.integers(0, tree.n_leaves)),
-                                 replace=False))
-        runs.append((job, ids))
-    batched = be.run_many(runs)
-    for (job, ids), got in zip(runs, batched):
-        job.memory.enable = job.enable
-        out, counters = run_bundle(be.config(3, 5), be.scene_memory, job.memory, ids)
-        assert got.counters == counters
-        if out["empty"][0]:
-            assert got.ray_id.size == 0
-            continue
-        np.testing.assert_array_equal(got.ray_id, out["ray_id"])
-        np.testing.assert_array_equal(got.tri_id, out["tri_id"])
-        np.testing.assert_array_equal(got.hit, out["hit"].astype(bool))
-        np.testing.assert_array_equal(got.flags, out["flags"])
-
-
 def test_demo_command(tmp_path, capsys):
     rc = main(["demo", "--size", "8x8", "--shadow", "2x2", "--no-verilog", "--no-progress",
                "--out-dir", str(tmp_path)])

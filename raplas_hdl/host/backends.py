@@ -1,31 +1,36 @@
 """Intersection backends behind one interface: ``float64``, ``model`` and ``rtl``.
 
-The renderer talks to the accelerator only through :class:`Backend`:
+The renderer talks to the accelerator only through :class:`Backend`, a pass at a time:
 
 1. :meth:`Backend.load` writes a scene: triangle records and the leaf spheres of a
    :class:`~raplas_hdl.host.spheres.SphereTree` (the Sphere Memory), and keeps the inner
    nodes' spheres for the host's hierarchy test;
-2. :meth:`Backend.prepare` turns a :class:`~raplas_hdl.host.bundles.RayBundle` and the
-   rays' enable bits into a :class:`BundleJob` (Plane Memory and Ray Memory);
-3. :meth:`Backend.touched` is the plane test of inner nodes (the hierarchy cull), with the
-   same arithmetic as the unit's plane-sphere testers;
-4. :meth:`Backend.run_many` runs the unit once per ``(job, sphere_ids)`` and returns, per
-   run, the issued pairs in the unit's stream order (spheres in run order, rows ascending,
-   columns ascending, triangles in list order) with the hit bit, ``t, u, v`` (divided on
-   the host), the event flags and the unit's counters.
+2. :meth:`Backend.batch` turns ``B`` bundles of one size, given as arrays (origins, screen
+   centres and axes, enable bits), into a :class:`~raplas_hdl.engine.passes.BundleBatch`:
+   Plane Memory and Ray Memory in the backend's arithmetic, and the *keep-all* bit of
+   every bundle whose quantisation slack is over the culling budget
+   (:mod:`raplas_hdl.host.culling`): neither the host nor the unit culls with it;
+3. :meth:`Backend.cull` is the hierarchy cull of the whole batch, with the same arithmetic
+   as the unit's plane-sphere testers;
+4. :meth:`Backend.trace` runs the unit over the batch's runs and folds each ray's nearest
+   accepted hit; :meth:`Backend.stream` gives the runs' pair streams instead (the unit's
+   result beats with ``t, u, v`` divided on the host), for checks and analyses.
 
 Backends:
 
 - ``float64``: the reference with no quantisation: float64 planes and spheres,
   ``|n.C + p| <= r`` with a float64-rounding allowance, and the division-free
-  Moller-Trumbore decision of ``shared/spec/raplas.md`` evaluated in float64 on the
-  original geometry (exact-inequality mode). No event flags.
-- ``model``: the bit-accurate golden model of the intersection unit
-  (:func:`raplas_hdl.model.intersection.run_bundle`) in any format, rounding and
-  ray-triangle mode, with the radius inflation of :mod:`raplas_hdl.host.culling`.
+  Moller-Trumbore decision of ``docs/raplas.md`` evaluated in float64 on the original
+  geometry (exact-inequality mode). No event flags.
+- ``model``: the bit-accurate golden model of the intersection unit in any format,
+  rounding and ray-triangle mode, with the radius inflation of
+  :mod:`raplas_hdl.host.culling`. Its passes run in the compiled kernels of
+  :mod:`raplas_hdl.engine`; its streams come from
+  :func:`raplas_hdl.engine.stream.run_runs`, the model's side of the interface the RTL
+  driver has (``config, scene, runs``).
 - ``rtl``: the same memories run through the Verilog of the unit under cocotb (Icarus or
-  Verilator); it raises :class:`BackendUnavailable` with what is missing when the
-  simulator or the unit's driver is not there.
+  Verilator) with the driver's ``run_runs``; it raises :class:`BackendUnavailable` with what
+  is missing when the simulator or the unit's driver is not there.
 
 Nothing here imports Amaranth.
 """
@@ -33,20 +38,26 @@ Nothing here imports Amaranth.
 from __future__ import annotations
 
 import importlib
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..engine.kernels import F64_SLACK, cull_f64, model_kernels, trace_f64
+from ..engine.passes import (COUNTER_NAMES, Arithmetic, BundleBatch, EngineScene,
+                             cull_pass, round_runs, trace_pass)
 from ..fp.format import FP24, FPFormat
-from .bundles import RayBundle
-from .exact import float64_intersect
+from ..fp.kernels import rmode_code
+from ..model.ray_triangle import MODES
+from .bundles import RayBundle, bundle_geometry, encode_bundle_arrays
+from .shading import nearest_hits
 from .spheres import SphereTree
 
 __all__ = [
     "BACKENDS",
     "Backend",
     "BackendUnavailable",
-    "BundleJob",
+    "COUNTERS",
     "Float64Backend",
     "ModelBackend",
     "RtlBackend",
@@ -56,37 +67,12 @@ __all__ = [
 
 BACKENDS = ("float64", "model", "rtl")
 
-#: Relative allowance of the float64 plane test for float64's own rounding (the float64
-#: backend has no format to inflate for; this keeps it from rejecting a touching sphere
-#: by an ulp of float64).
-_F64_SLACK = 1e-9
+#: The unit's counters (one definition: :data:`raplas_hdl.model.memory_image.COUNTER_NAMES`).
+COUNTERS = COUNTER_NAMES
 
 
 class BackendUnavailable(RuntimeError):
     """A backend cannot run here; the message says what is missing and how to get it."""
-
-
-@dataclass
-class BundleJob:
-    """A bundle as loaded into the unit: the float64 bundle and the backend's memories.
-
-    Attributes
-    ----------
-    bundle : RayBundle
-    enable : ndarray (rows*cols,) bool
-        Enable bit of each ray; the host clears bits between runs (early-out).
-    memory : object
-        Backend data (``BundleMemory`` for the model and RTL backends).
-    origin, directions : ndarray
-        The rays as the backend sees them (decoded encoded rays for ``model``), float64.
-    """
-
-    bundle: RayBundle
-    enable: np.ndarray
-    memory: object = None
-    origin: np.ndarray = None
-    directions: np.ndarray = None
-    guaranteed: bool = True
 
 
 @dataclass
@@ -113,8 +99,8 @@ class RunResult:
                    np.zeros(0, np.uint8), dict(counters or {}))
 
 
-COUNTERS = ("spheres", "plane_tests", "pairs_issued", "pairs_skipped", "hits", "overflow",
-            "underflow", "invalid")
+def _runs_of(run_b, run_start, run_sph):
+    return [(int(b), run_sph[run_start[u]:run_start[u + 1]]) for u, b in enumerate(run_b)]
 
 
 class Backend:
@@ -127,6 +113,7 @@ class Backend:
     def __init__(self):
         self.tree: SphereTree | None = None
         self.tris: np.ndarray | None = None
+        self.scene: EngineScene | None = None
 
     # -- interface ------------------------------------------------------------------------
     def usable(self, tris: np.ndarray) -> tuple[np.ndarray, dict]:
@@ -148,23 +135,67 @@ class Backend:
         self.bound = float(bound)
         return {}
 
-    def prepare(self, bundle: RayBundle, enable=None) -> BundleJob:
+    def warm_pass(self, origins, centres, col_axes, row_axes, rows: int, cols: int) -> float:
+        """Run a throw-away pass of the given bundles (one is enough) through the cull and the
+        trace of the loaded scene, so that the kernels are compiled (or loaded from numba's
+        disk cache) before the real passes; returns the seconds it took."""
+        t0 = time.perf_counter()
+        batch = self.batch(origins, centres, col_axes, row_axes, rows, cols)
+        cr = self.cull(batch)
+        best_t = np.full((batch.n_bundles, batch.n_rays), np.inf)
+        best_tri = np.full(best_t.shape, -1, np.int64)
+        self.trace(batch, *round_runs(cr.start, cr.leaves, None, 0), best_t, best_tri, 0.0,
+                   np.full(best_t.shape, np.inf), np.full(batch.n_bundles, -1, np.int64))
+        return time.perf_counter() - t0
+
+    def batch(self, origins, centres, col_axes, row_axes, rows: int, cols: int,
+              enable=None) -> BundleBatch:
+        """``B`` bundles of ``rows`` x ``cols`` rays from arrays (B, 3) (see
+        :func:`raplas_hdl.host.bundles.bundle_geometry`); ``enable`` (B, rows*cols) bool."""
         raise NotImplementedError
 
-    def touched(self, job: BundleJob, nodes: np.ndarray) -> np.ndarray:
-        raise NotImplementedError
+    def cull(self, batch: BundleBatch, hierarchy: bool = True):
+        """The hierarchy cull of a batch (:func:`raplas_hdl.engine.passes.cull_pass`)."""
+        return cull_pass(self._arith(), self.scene, batch, hierarchy)
 
-    def run(self, job: BundleJob, sphere_ids) -> RunResult:
-        raise NotImplementedError
+    def trace(self, batch: BundleBatch, run_b, run_start, run_sph, best_t, best_tri,
+              tmin: float = 0.0, tmax=None, exclude=None) -> np.ndarray:
+        """Runs of a batch folded into each ray's nearest hit
+        (:func:`raplas_hdl.engine.passes.trace_pass`); counters (U, 8)."""
+        return trace_pass(self._arith(), self.scene, batch, run_b, run_start, run_sph,
+                          best_t, best_tri, tmin, tmax, exclude)
 
-    def run_many(self, runs) -> list[RunResult]:
-        """Run ``[(job, sphere_ids), ...]`` in order (the RTL backend batches them)."""
-        return [self.run(job, ids) for job, ids in runs]
+    def stream(self, batch: BundleBatch, runs) -> list[RunResult]:
+        """The pair stream of each run ``(bundle index, sphere ids)`` of a batch."""
+        raise NotImplementedError
 
     def describe(self) -> str:
         return self.name
 
+    # -- one bundle at a time (tests and exploration) ---------------------------------------
+    def prepare(self, bundle: RayBundle, enable=None) -> BundleBatch:
+        """A batch of one :class:`~raplas_hdl.host.bundles.RayBundle`."""
+        en = None if enable is None else self._enable(bundle, enable)[None]
+        return self.batch(bundle.origin[None], bundle.centre[None], bundle.col_axis[None],
+                          bundle.row_axis[None], bundle.rows, bundle.cols, en)
+
+    def touched(self, batch: BundleBatch, nodes) -> np.ndarray:
+        """The host's hierarchy test of nodes against bundle 0 of a batch (bool array)."""
+        nodes = np.asarray(nodes, np.int64)
+        keep = np.empty(nodes.size, np.bool_)
+        self._arith().cull(batch.pn, batch.pp, batch.rows, batch.n_planes,
+                           np.zeros(nodes.size, np.int64), nodes, self.scene.node_c,
+                           self.scene.node_r, 0, nodes.size, keep)
+        return keep
+
+    def run(self, batch: BundleBatch, sphere_ids) -> RunResult:
+        """One run of bundle 0 of a batch: its pair stream."""
+        return self.stream(batch, [(0, np.asarray(sphere_ids, np.int64))])[0]
+
     # -- helpers --------------------------------------------------------------------------
+    def _arith(self) -> Arithmetic:
+        raise NotImplementedError
+
     def _enable(self, bundle, enable):
         if enable is None:
             return np.ones(bundle.n_rays, dtype=bool)
@@ -173,12 +204,27 @@ class Backend:
             raise ValueError(f"enable must have {bundle.n_rays} entries, not {en.size}")
         return en.copy()
 
+    @staticmethod
+    def _enable_array(enable, b, r):
+        if enable is None:
+            return np.ones((b, r), bool)
+        en = np.ascontiguousarray(enable, dtype=bool)
+        if en.shape != (b, r):
+            raise ValueError(f"enable must have shape ({b}, {r}), not {en.shape}")
+        return en.copy()
 
-class _PairConfig:
-    """The part of a unit configuration that fixes the pair order (rows, cols)."""
-
-    def __init__(self, rows, cols):
-        self.rows, self.cols = rows, cols
+    def _scene_tree(self, tree, node_c, node_r, sc, sr, v0, e1, e2, nn):
+        lists = tree.leaf_tris
+        return EngineScene(
+            node_c=np.ascontiguousarray(node_c), node_r=np.ascontiguousarray(node_r),
+            child_start=tree.child_start.astype(np.int64),
+            child_index=tree.child_index.astype(np.int64),
+            node_leaf=tree.node_leaf.astype(np.int64), depth=tree.depth.astype(np.int64),
+            node_tris=tree.node_tris.astype(np.int64), sc=np.ascontiguousarray(sc),
+            sr=np.ascontiguousarray(sr), tcount=(lists >= 0).sum(axis=1).astype(np.int64),
+            tlist=np.ascontiguousarray(np.where(lists >= 0, lists, 0), np.int64),
+            v0=np.ascontiguousarray(v0), e1=np.ascontiguousarray(e1),
+            e2=np.ascontiguousarray(e2), nn=np.ascontiguousarray(nn), levels=tree.levels)
 
 
 class Float64Backend(Backend):
@@ -188,49 +234,74 @@ class Float64Backend(Backend):
 
     def load(self, tris, tree, bound):
         rep = super().load(tris, tree, bound)
-        self._r = tree.radii * (1.0 + _F64_SLACK)
+        r = tree.radii * (1.0 + F64_SLACK)
+        t = self.tris
+        v0 = t[:, 0]
+        e1, e2 = t[:, 1] - v0, t[:, 2] - v0
+        nn = np.stack([e1[:, 1] * e2[:, 2] - e1[:, 2] * e2[:, 1],
+                       e1[:, 2] * e2[:, 0] - e1[:, 0] * e2[:, 2],
+                       e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]], axis=1)
+        leaf = tree.leaf_node
+        self.scene = self._scene_tree(tree, tree.centres, r, tree.centres[leaf], r[leaf], v0,
+                                      e1, e2, nn)
         return rep
 
-    def prepare(self, bundle, enable=None):
-        return BundleJob(bundle, self._enable(bundle, enable), None, bundle.origin,
-                         bundle.directions)
+    def _arith(self):
+        return Arithmetic("float64", cull_f64, trace_f64, ())
 
-    def _masks(self, job, centres, radii):
-        b = job.bundle
-        d = centres @ b.plane_n.T + b.plane_p[None, :]
-        # allowance for float64 rounding of d, relative to the terms' magnitude
-        slack = _F64_SLACK * (np.abs(centres) @ np.abs(b.plane_n.T) + np.abs(b.plane_p))
-        keep = np.abs(d) <= radii[:, None] + slack
-        return keep[:, :b.rows], keep[:, b.rows:]
+    def batch(self, origins, centres, col_axes, row_axes, rows, cols, enable=None):
+        g = bundle_geometry(origins, centres, col_axes, row_axes, rows, cols)
+        B = len(g["plane_p"])
+        o = np.ascontiguousarray(origins, np.float64).reshape(B, 3)
+        return BundleBatch(rows, cols, np.ascontiguousarray(g["plane_n"].reshape(-1, 3)),
+                           np.ascontiguousarray(g["plane_p"].reshape(-1)), o,
+                           np.ascontiguousarray(g["directions"].reshape(-1, 3)),
+                           self._enable_array(enable, B, rows * cols), np.zeros(B, bool), o,
+                           g["directions"], g)
 
-    def touched(self, job, nodes):
-        rm, cm = self._masks(job, self.tree.centres[nodes], self._r[nodes])
-        return rm.any(axis=1) & cm.any(axis=1)
+    def _masks(self, batch, b, ids):
+        """The float64 plane test of leaf spheres ``ids`` against bundle ``b``'s planes
+        (S, P), the arithmetic of :func:`raplas_hdl.engine.kernels.cull_f64`."""
+        P = batch.n_planes
+        if batch.keep_all[b]:
+            return np.ones((ids.size, P), bool)
+        pn = batch.pn[b * P:(b + 1) * P]
+        pp = batch.pp[b * P:(b + 1) * P]
+        a = self.scene.sc[ids][:, None, :] * pn[None, :, :]
+        d = a[..., 0] + a[..., 1] + a[..., 2] + pp
+        slack = F64_SLACK * (np.abs(a[..., 0]) + np.abs(a[..., 1]) + np.abs(a[..., 2])
+                             + np.abs(pp))
+        return np.abs(d) <= self.scene.sr[ids][:, None] + slack
 
-    def run(self, job, sphere_ids):
+    def stream(self, batch, runs):
         from ..model.intersection import enumerate_pairs
+        from .exact import float64_intersect
 
-        ids = np.asarray(sphere_ids, dtype=np.int64)
-        b = job.bundle
-        counters = dict.fromkeys(COUNTERS, 0)
-        counters["spheres"] = int(ids.size)
-        counters["plane_tests"] = int(ids.size) * b.n_planes
-        if ids.size == 0:
-            return RunResult.empty(counters)
-        nodes = self.tree.leaf_node[ids]
-        rm, cm = self._masks(job, self.tree.centres[nodes], self._r[nodes])
-        lists = self.tree.leaf_tris[ids]
-        ray, tri, skipped = enumerate_pairs(_PairConfig(b.rows, b.cols), rm, cm,
-                                            (lists >= 0).sum(axis=1), lists, job.enable)
-        counters["pairs_skipped"] = skipped
-        counters["pairs_issued"] = int(ray.size)
-        tv = self.tris[tri]
-        r = float64_intersect(np.broadcast_to(b.origin, (ray.size, 3)), b.directions[ray],
-                              tv[:, 0], tv[:, 1], tv[:, 2])
-        hit = np.asarray(r["hit"], bool)
-        t, u, v = (np.where(hit, r[k], np.nan) for k in ("t", "u", "v"))
-        counters["hits"] = int(hit.sum())
-        return RunResult(ray, tri, hit, t, u, v, np.zeros(ray.size, np.uint8), counters)
+        out = []
+        sc = self.scene
+        for b, ids in runs:
+            ids = np.asarray(ids, dtype=np.int64)
+            counters = dict.fromkeys(COUNTERS, 0)
+            counters["spheres"] = int(ids.size)
+            counters["plane_tests"] = int(ids.size) * batch.n_planes
+            if ids.size == 0:
+                out.append(RunResult.empty(counters))
+                continue
+            keep = self._masks(batch, b, ids)
+            rm, cm = keep[:, :batch.rows], keep[:, batch.rows:]
+            ray, tri, skipped = enumerate_pairs(batch, rm, cm, sc.tcount[ids], sc.tlist[ids],
+                                                batch.enable[b])
+            counters["pairs_skipped"] = skipped
+            counters["pairs_issued"] = int(ray.size)
+            tv = self.tris[tri]
+            r = float64_intersect(np.broadcast_to(batch.origin[b], (ray.size, 3)),
+                                  batch.directions[b][ray], tv[:, 0], tv[:, 1], tv[:, 2])
+            hit = np.asarray(r["hit"], bool)
+            t, u, v = (np.where(hit, r[k], np.nan) for k in ("t", "u", "v"))
+            counters["hits"] = int(hit.sum())
+            out.append(RunResult(ray, tri, hit, t, u, v, np.zeros(ray.size, np.uint8),
+                                 counters))
+        return out
 
 
 class ModelBackend(Backend):
@@ -255,8 +326,8 @@ class ModelBackend(Backend):
         super().__init__()
         if not isinstance(fmt, FPFormat):
             raise ValueError(f"fmt must be an FPFormat, not {fmt!r}")  # noqa: TRY004
-        if mode not in ("paper", "conservative"):
-            raise ValueError(f"mode must be paper or conservative, not {mode!r}")
+        if mode not in MODES:
+            raise ValueError(f"mode must be one of {', '.join(MODES)}, not {mode!r}")
         self.fmt, self.mode, self.testers, self.margin_scale = fmt, mode, testers, margin_scale
         self._configs = {}
 
@@ -281,6 +352,16 @@ class ModelBackend(Backend):
                 mode=self.mode, margin_scale=self.margin_scale)
         return self._configs[key]
 
+    def _arith(self):
+        from ..model.conservative import margin_constants, margin_table
+
+        cons = self.mode == "conservative"
+        cull, trace = model_kernels(self.fmt.exp_bits, self.fmt.man_bits,
+                                    rmode_code(self.fmt), cons)
+        mc = (margin_table(margin_constants(self.fmt, self.margin_scale)) if cons
+              else np.zeros((3, 5), np.int64))
+        return Arithmetic("model", cull, trace, (mc,))
+
     def usable(self, tris):
         """Triangles that :func:`raplas_hdl.host.triangles.make_triangles` keeps (not
         non-finite, degenerate, flushed, or outside the format's domain)."""
@@ -295,9 +376,9 @@ class ModelBackend(Backend):
 
     def load(self, tris, tree, bound):
         from ..model.memory_image import SceneMemory
+        from .culling import CullingBudget, encode_spheres
 
         rep = super().load(tris, tree, bound)
-        fmt = self.fmt
         cached = getattr(self, "_records", None)
         if cached is None or cached[0] is not tris and not np.array_equal(cached[0], tris):
             self.usable(tris)
@@ -307,9 +388,7 @@ class ModelBackend(Backend):
         v0, e1, e2, n = (np.zeros((len(self.tris), 3), np.uint32) for _ in range(4))
         v0[rec.ids], e1[rec.ids], e2[rec.ids], n[rec.ids] = (rec.v0_bits, rec.e1_bits,
                                                              rec.e2_bits, rec.n_bits)
-        from .culling import CullingBudget, encode_spheres
-
-        self.budget = CullingBudget(fmt, o_max=2.0 * self.bound)
+        self.budget = CullingBudget(self.fmt, o_max=2.0 * self.bound)
         self._centres, _, self._radii, ok = encode_spheres(tree.centres, tree.radii,
                                                            self.budget)
         rep["spheres_out_of_domain"] = int(np.count_nonzero(~ok[tree.leaf_node]))
@@ -319,34 +398,45 @@ class ModelBackend(Backend):
         self.scene_memory = SceneMemory(v0, e1, e2, n, self._centres[leaf], self._radii[leaf],
                                         np.where(lists >= 0, lists, 0).astype(np.uint32),
                                         counts.astype(np.uint32))
+        sm = self.scene_memory
+        self.scene = self._scene_tree(tree, self._centres, self._radii, sm.centres, sm.radii,
+                                      sm.v0, sm.e1, sm.e2, sm.n)
         self._configs = {}
         return rep
 
-    def prepare(self, bundle, enable=None):
+    def batch(self, origins, centres, col_axes, row_axes, rows, cols, enable=None):
         from ..fp import model as fpm
-        from ..model.memory_image import BundleMemory
+        from .culling import slack_arrays
 
         fmt = self.fmt
-        pn, pp = bundle.encode_planes(fmt)
-        o, d = bundle.encode_rays(fmt)
-        en = self._enable(bundle, enable)
-        mem = BundleMemory(pn, pp, np.broadcast_to(o, d.shape), d, en)
-        job = BundleJob(bundle, en, mem, fpm.decode(o, fmt), fpm.decode(d, fmt))
-        if fmt.man_bits <= 25:
-            from .culling import bundle_slack
+        g = bundle_geometry(origins, centres, col_axes, row_axes, rows, cols)
+        B = len(g["plane_p"])
+        n, p, o, d = encode_bundle_arrays(np.asarray(origins, np.float64).reshape(B, 3),
+                                          g["plane_n"], g["directions"], fmt)
+        keep_all = np.zeros(B, bool)
+        if fmt.man_bits <= 25 and B:
+            keep_all = ~self.budget.admits_arrays(slack_arrays(n, p, o, d, rows, cols, fmt))
+        return BundleBatch(rows, cols, np.ascontiguousarray(n.reshape(-1, 3)),
+                           np.ascontiguousarray(p.reshape(-1)), np.ascontiguousarray(o),
+                           np.ascontiguousarray(d.reshape(-1, 3)),
+                           self._enable_array(enable, B, rows * cols), keep_all,
+                           fpm.decode(o, fmt), fpm.decode(d, fmt), g)
 
-            job.guaranteed = self.budget.admits(
-                bundle_slack(pn, pp, o, d, bundle.rows, bundle.cols, fmt))
-        return job
+    def memory(self, batch: BundleBatch, b: int):
+        """Plane Memory and Ray Memory of bundle ``b`` of a batch (a
+        :class:`~raplas_hdl.model.memory_image.BundleMemory`, keep-all bit included)."""
+        from ..model.memory_image import BundleMemory
 
-    def touched(self, job, nodes):
-        from ..model.plane_sphere import tester_flags
-
-        mem = job.memory
-        keep = tester_flags(mem.plane_n, mem.plane_p, self._centres[nodes], self._radii[nodes],
-                            self.fmt)
-        r = job.bundle.rows
-        return keep[:, :r].any(axis=1) & keep[:, r:].any(axis=1)
+        P, R = batch.n_planes, batch.n_rays
+        mem = BundleMemory(batch.pn[b * P:(b + 1) * P], batch.pp[b * P:(b + 1) * P],
+                           np.broadcast_to(batch.ro[b], (R, 3)), batch.rd[b * R:(b + 1) * R],
+                           batch.enable[b].copy())
+        if batch.keep_all[b]:
+            if "keep_all" not in getattr(BundleMemory, "__dataclass_fields__", {}):
+                raise ValueError("this unit model has no keep-all bit: an over-budget bundle "
+                                 "cannot run without culling")
+            mem.keep_all = True
+        return mem
 
     def _convert(self, out, counters) -> RunResult:
         from ..fp import model as fpm
@@ -361,82 +451,19 @@ class ModelBackend(Backend):
         return RunResult(out["ray_id"].astype(np.int64), out["tri_id"].astype(np.int64), hit,
                          t, u, v, out["flags"].astype(np.uint8), counters)
 
-    def run(self, job, sphere_ids):
-        from ..model.intersection import run_bundle
+    def _run_runs(self, config, runs):
+        from ..engine.stream import run_runs
 
-        b = job.bundle
-        job.memory.enable = job.enable
-        out, counters = run_bundle(self.config(b.rows, b.cols), self.scene_memory, job.memory,
-                                   np.asarray(sphere_ids, dtype=np.int64))
-        return self._convert(out, counters)
+        return run_runs(config, self.scene_memory, runs)
 
-    def run_many(self, runs):
-        """Many runs with one ray-triangle model call.
-
-        Per run exactly what :func:`raplas_hdl.model.intersection.run_bundle` does (the
-        plane-sphere model's masks, :func:`~raplas_hdl.model.intersection.enumerate_pairs`
-        for the stream order, the ray-triangle model per pair, the same counters), but the
-        pairs of all runs go through :func:`~raplas_hdl.model.ray_triangle.intersect` at
-        once: the per-pair arithmetic does not depend on the other pairs, so the results
-        are the same bits (a test compares them with ``run_bundle``).
-        """
-        from ..model.intersection import (RESULT_DTYPE, empty_counters, enumerate_pairs,
-                                          event_counters)
-        from ..model.plane_sphere import sphere_masks
-        from ..model.ray_triangle import intersect
-
+    def stream(self, batch, runs):
         runs = list(runs)
-        sm = self.scene_memory
-        parts, counters = [], []
-        for job, ids in runs:
-            b = job.bundle
-            cfg = self.config(b.rows, b.cols)
-            ids = np.asarray(ids, dtype=np.int64)
-            c = empty_counters()
-            c["spheres"] = int(ids.size)
-            c["plane_tests"] = int(ids.size) * cfg.n_planes
-            if ids.size:
-                rm, cm = sphere_masks(job.memory.plane_n, job.memory.plane_p, sm.centres[ids],
-                                      sm.radii[ids], cfg.rows, cfg.cols, cfg.fmt)
-                ray, tri, skipped = enumerate_pairs(cfg, np.asarray(rm, bool),
-                                                    np.asarray(cm, bool), sm.tri_counts[ids],
-                                                    sm.tri_lists[ids], job.enable)
-            else:
-                ray = tri = np.zeros(0, np.int64)
-                skipped = 0
-            c["pairs_skipped"] = skipped
-            c["pairs_issued"] = int(ray.size)
-            parts.append((job, ray, tri))
-            counters.append(c)
-        total = sum(r.size for _, r, _ in parts)
-        if total:
-            o = np.concatenate([np.broadcast_to(j.memory.ray_o[0], (r.size, 3))
-                                for j, r, _ in parts])
-            d = np.concatenate([j.memory.ray_d[r] for j, r, _ in parts])
-            tri_all = np.concatenate([t for _, _, t in parts])
-            res = intersect(o, d, sm.v0[tri_all], sm.e1[tri_all], sm.e2[tri_all],
-                            sm.n[tri_all], self.fmt, mode=self.mode,
-                            margin_scale=self.margin_scale)
-        out, pos = [], 0
-        for (job, ray, tri), c in zip(parts, counters):
-            n = ray.size
-            if n == 0:
-                out.append(RunResult.empty(c))
-                continue
-            beats = np.zeros(n, RESULT_DTYPE)
-            beats["ray_id"], beats["tri_id"] = ray, tri
-            sl = slice(pos, pos + n)
-            beats["hit"] = np.asarray(res["hit"][sl]).astype(np.uint8)
-            for key in ("t", "u", "v", "det"):
-                beats[key] = res[key][sl]
-            fl = np.asarray(res["flags"][sl]).astype(np.uint8)
-            beats["flags"] = fl
-            beats["last"][-1] = 1
-            c["hits"] = int(beats["hit"].sum())
-            c.update(event_counters(res["event_counts"][sl]))
-            out.append(self._convert(beats, c))
-            pos += n
-        return out
+        if not runs:
+            return []
+        cfg = self.config(batch.rows, batch.cols)
+        results = self._run_runs(cfg, [(self.memory(batch, b), np.asarray(ids, np.int64))
+                                       for b, ids in runs])
+        return [self._convert(stream, counters) for stream, counters in results]
 
 
 class RtlBackend(ModelBackend):
@@ -485,26 +512,32 @@ class RtlBackend(ModelBackend):
     def describe(self):
         return f"{self.name} ({self.sim}) {self.fmt} {self.mode}"
 
-    def run(self, job, sphere_ids):
-        return self.run_many([(job, sphere_ids)])[0]
+    def _run_runs(self, config, runs):
+        return self._driver.run_runs(self.sim, config, self.scene_memory, runs)
 
-    def run_many(self, runs):
-        runs = list(runs)
-        if not runs:
-            return []
-        by_size = {}
-        for k, (job, ids) in enumerate(runs):
-            job.memory.enable = job.enable
-            b = job.bundle
-            by_size.setdefault((b.rows, b.cols), []).append(k)
-        out = [None] * len(runs)
-        for (rows, cols), idx in by_size.items():
-            results = self._driver.run_runs(
-                self.sim, self.config(rows, cols), self.scene_memory,
-                [(runs[k][0].memory, np.asarray(runs[k][1], dtype=np.int64)) for k in idx])
-            for k, (stream, counters) in zip(idx, results):
-                out[k] = self._convert(stream, counters)
-        return out
+    def warm_pass(self, *args, **kwargs) -> float:
+        """Nothing to compile on the host side (the simulator builds on first use)."""
+        return 0.0
+
+    def trace(self, batch, run_b, run_start, run_sph, best_t, best_tri, tmin=0.0, tmax=None,
+              exclude=None):
+        """The runs through the simulated unit (one simulation per pass), each run's stream
+        folded into the nearest hits on the host."""
+        runs = _runs_of(run_b, run_start, run_sph)
+        counters = np.zeros((len(runs), len(COUNTERS)), np.int64)
+        R = batch.n_rays
+        if runs:
+            for k, ((b, _), res) in enumerate(zip(runs, self.stream(batch, runs))):
+                counters[k] = [res.counters.get(n, 0) for n in COUNTERS]
+                hi = np.inf if tmax is None else np.asarray(tmax)[b]
+                ex = None if exclude is None else int(np.asarray(exclude)[b])
+                tri, t, _ = nearest_hits(R, res.ray_id, res.tri_id, res.hit, res.t, tmin, hi,
+                                         ex)
+                better = (tri >= 0) & ((t < best_t[b]) | ((t == best_t[b])
+                                                          & (tri < best_tri[b])))
+                best_t[b] = np.where(better, t, best_t[b])
+                best_tri[b] = np.where(better, tri, best_tri[b])
+        return counters
 
 
 def make_backend(name: str, fmt: FPFormat = FP24, mode: str = "conservative",

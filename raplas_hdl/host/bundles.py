@@ -126,16 +126,13 @@ class RayBundle:
         if height <= _DEGENERATE_REL * max(la, lb):
             raise ValueError("the origin lies on the screen plane: the rays would not span "
                              "a bundle")
-        x = (2.0 * np.arange(self.cols) + 1.0) / self.cols - 1.0
-        y = (2.0 * np.arange(self.rows) + 1.0) / self.rows - 1.0
-        self.points = (self.centre + x[None, :, None] * a + y[:, None, None] * b)
-        rel = self.points - self.origin
-        self.directions = _normalise(rel.reshape(-1, 3))
-        row_n = _normalise(np.cross(rel[:, 0, :], a))
-        col_n = _normalise(np.cross(rel[0, :, :], b))
-        self.plane_n = np.concatenate([row_n, col_n])
-        self.plane_p = -(self.plane_n @ self.origin)
-        if not (np.all(np.isfinite(self.directions)) and np.all(np.isfinite(self.plane_n))):
+        g = bundle_geometry(self.origin[None], self.centre[None], a[None], b[None], self.rows,
+                            self.cols)
+        self.points = g["points"][0]
+        self.directions = g["directions"][0]
+        self.plane_n = g["plane_n"][0]
+        self.plane_p = g["plane_p"][0]
+        if not g["finite"][0]:
             raise ValueError("the bundle's geometry overflows float64")
 
     # ------------------------------------------------------------------------------
@@ -185,6 +182,69 @@ class RayBundle:
     def __repr__(self):
         return (f"RayBundle(rows={self.rows}, cols={self.cols}, origin={self.origin.tolist()}, "
                 f"centre={self.centre.tolist()})")
+
+
+def bundle_geometry(origins, centres, col_axes, row_axes, rows: int, cols: int) -> dict:
+    """The float64 geometry of ``B`` bundles of one size at once (module docstring).
+
+    Parameters
+    ----------
+    origins, centres, col_axes, row_axes : array_like, shape (B, 3)
+    rows, cols : int
+
+    Returns
+    -------
+    dict
+        ``points`` (B, rows, cols, 3), ``directions`` (B, rows*cols, 3) unit vectors in
+        ray-ID order, ``plane_n`` (B, rows+cols, 3) unit normals in plane-ID order,
+        ``plane_p`` (B, rows+cols) offsets ``-n . O``, ``finite`` (B,) bool (False where
+        the geometry overflows float64), ``degenerate`` (B,) bool (parallel axes, or the
+        origin on the screen plane: :class:`RayBundle` refuses these).
+    """
+    o = np.asarray(origins, np.float64)
+    c = np.asarray(centres, np.float64)
+    a = np.asarray(col_axes, np.float64)
+    b = np.asarray(row_axes, np.float64)
+    x = (2.0 * np.arange(cols) + 1.0) / cols - 1.0
+    y = (2.0 * np.arange(rows) + 1.0) / rows - 1.0
+    points = (c[:, None, None, :] + x[None, None, :, None] * a[:, None, None, :]
+              + y[None, :, None, None] * b[:, None, None, :])
+    rel = points - o[:, None, None, :]
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        directions = _normalise(rel.reshape(len(o), rows * cols, 3))
+        row_n = _normalise(np.cross(rel[:, :, 0, :], a[:, None, :]))
+        col_n = _normalise(np.cross(rel[:, 0, :, :], b[:, None, :]))
+        plane_n = np.concatenate([row_n, col_n], axis=1)
+        plane_p = -np.einsum("bpk,bk->bp", plane_n, o)
+        la, lb = np.linalg.norm(a, axis=1), np.linalg.norm(b, axis=1)
+        normal = np.cross(a, b)
+        ln = np.linalg.norm(normal, axis=1)
+        unit = normal / np.where(ln > 0, ln, 1.0)[:, None]
+        height = np.abs(np.einsum("bk,bk->b", o - c, unit))
+    degenerate = ((la == 0) | (lb == 0) | (ln <= _DEGENERATE_REL * la * lb)
+                  | (height <= _DEGENERATE_REL * np.maximum(la, lb)))
+    finite = (np.isfinite(directions).all(axis=(1, 2)) & np.isfinite(plane_n).all(axis=(1, 2)))
+    return {"points": points, "directions": directions, "plane_n": plane_n, "plane_p": plane_p,
+            "finite": finite, "degenerate": degenerate}
+
+
+def encode_bundle_arrays(origins, plane_n, directions, fmt: FPFormat):
+    """Encode ``B`` bundles of one size given as arrays (:func:`bundle_geometry`).
+
+    Returns
+    -------
+    n : ndarray of uint32, shape (B, P, 3)
+        Normals, encoded toward zero.
+    p : ndarray of uint32, shape (B, P)
+        Offsets ``-(n_enc . O_enc)`` (float64) encoded with the format's rounding.
+    o : ndarray of uint32, shape (B, 3)
+    d : ndarray of uint32, shape (B, R, 3)
+    """
+    n = encode_toward_zero(plane_n, fmt)
+    o = fpm.encode(np.asarray(origins, np.float64), fmt)
+    p = fpm.encode(-np.sum(fpm.decode(n, fmt) * fpm.decode(o, fmt)[:, None, :], axis=2), fmt)
+    d = fpm.encode(directions, fmt)
+    return n, p, o, d
 
 
 def encode_bundles(bundles, fmt: FPFormat):

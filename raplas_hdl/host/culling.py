@@ -75,7 +75,8 @@ import numpy as np
 from raplas_hdl.fp import FPFormat
 from raplas_hdl.fp import model as fpm
 
-__all__ = ["CullingBudget", "BundleSlack", "bundle_slack", "bundle_slacks", "encode_spheres"]
+__all__ = ["CullingBudget", "BundleSlack", "bundle_slack", "bundle_slacks", "slack_arrays",
+           "encode_spheres"]
 
 #: Relative allowance for float64 rounding when r' is computed before encoding it up.
 _F64_ALLOWANCE = 2.0 ** -46
@@ -197,6 +198,11 @@ class CullingBudget:
         return (slack.nu <= self.nu0 and slack.delta <= self.delta0 and slack.b <= self.b0
                 and slack.o_norm <= self.o_max)
 
+    def admits_arrays(self, slack: dict) -> np.ndarray:
+        """:meth:`admits` of every bundle of :func:`slack_arrays`' result (bool array)."""
+        return ((slack["nu"] <= self.nu0) & (slack["delta"] <= self.delta0)
+                & (slack["b"] <= self.b0) & (slack["o_norm"] <= self.o_max))
+
     def __repr__(self):
         return (f"CullingBudget({self.fmt}, o_max={self.o_max:g}, margin={self.margin:g}: "
                 f"r' = up({self.coef_r!r} r + {self.coef_c:.6g} |C| + {self.const:.6g}))")
@@ -269,18 +275,46 @@ def bundle_slacks(encoded, fmt: FPFormat) -> list[BundleSlack]:
 
 
 def _slack(n, p, o, d, rows, cols, fmt) -> BundleSlack:
+    sl = slack_arrays(n[None], p[None], o[None], d[None], rows, cols, fmt, decoded=True)
+    return BundleSlack(nu=float(sl["nu"][0]), delta=float(sl["delta"][0]), b=float(sl["b"][0]),
+                       o_norm=float(sl["o_norm"][0]))
+
+
+def slack_arrays(n, p, o, d, rows: int, cols: int, fmt: FPFormat, decoded: bool = False):
+    """:func:`bundle_slack` of ``B`` bundles of one size given as arrays.
+
+    Parameters
+    ----------
+    n : array, shape (B, rows+cols, 3)
+    p : array, shape (B, rows+cols)
+    o : array, shape (B, 3)
+    d : array, shape (B, rows*cols, 3)
+        Encoded planes and rays (bit patterns), or their decoded values with ``decoded``.
+    rows, cols : int
+    fmt : FPFormat
+
+    Returns
+    -------
+    dict
+        ``nu``, ``delta``, ``b``, ``o_norm``: float64 arrays (B,) (see :class:`BundleSlack`).
+    """
+    if fmt.man_bits > 25:
+        raise ValueError("bundle_slack needs exact float64 products: man_bits <= 25")
+    if not decoded:
+        n, p, o, d = (fpm.decode(np.asarray(x, np.uint32), fmt) for x in (n, p, o, d))
     tiny = 2.0 ** -50
-    nu = float(np.max(np.sqrt(np.sum(n * n, axis=1)) * (1 + tiny)))
+    nu = np.max(np.sqrt(np.sum(n * n, axis=2)) * (1 + tiny), axis=1)
     ids = np.arange(rows * cols)
-    dn = np.linalg.norm(d, axis=1) * (1 - tiny)
-    delta = 0.0
+    dn = np.sqrt(np.sum(d * d, axis=2)) * (1 - tiny)
+    delta = np.zeros(len(n))
     for planes in (ids // cols, rows + ids % cols):
-        terms = n[planes] * d
-        dot = np.abs(terms.sum(axis=1)) + 4 * tiny * np.abs(terms).sum(axis=1)
-        delta = max(delta, float(np.max(dot / dn)))
-    terms = np.concatenate([n * o, p[:, None]], axis=1)
-    eps = np.abs(terms.sum(axis=1)) + 4 * tiny * np.abs(terms).sum(axis=1)
-    o_norm = float(np.linalg.norm(o) * (1 + tiny))
+        terms = n[:, planes] * d
+        dot = np.abs(terms.sum(axis=2)) + 4 * tiny * np.abs(terms).sum(axis=2)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            delta = np.maximum(delta, np.max(dot / dn, axis=1))
+    terms = np.concatenate([n * o[:, None, :], p[:, :, None]], axis=2)
+    eps = np.abs(terms.sum(axis=2)) + 4 * tiny * np.abs(terms).sum(axis=2)
+    o_norm = np.sqrt(np.sum(o * o, axis=1)) * (1 + tiny)
     g3 = (1 + fmt.ulp) ** 3 - 1
-    b = float(np.max(eps + delta * o_norm + g3 * np.abs(p)) * (1 + tiny))
-    return BundleSlack(nu=nu, delta=delta, b=b, o_norm=o_norm)
+    b = np.max(eps + delta[:, None] * o_norm[:, None] + g3 * np.abs(p), axis=1) * (1 + tiny)
+    return {"nu": nu, "delta": delta, "b": b, "o_norm": o_norm}

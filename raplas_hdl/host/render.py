@@ -35,10 +35,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .backends import COUNTERS, Backend, RunResult
+from ..engine.passes import round_runs, select_runs
+from .backends import COUNTERS, Backend
 from .scenes import Scene
-from .shading import face_normals, nearest_hits, phong, shadow_bundles
-from .spheres import CullStats, build_sphere_tree, cull_tree, unit_margin
+from .shading import face_normals, phong, shadow_bundles
+from .spheres import build_sphere_tree, unit_margin
 
 __all__ = [
     "RenderResult",
@@ -74,14 +75,15 @@ class RenderSettings:
     batch_spheres : int
         Leaf spheres per shadow run.
     chunk : int
-        Bundles handed to the backend at once (the RTL backend runs one simulation per
-        chunk and batch round).
+        Bundles per pass handed to the backend at once (the RTL backend runs one simulation
+        per pass and early-out round); the results do not depend on it.
     bound : float
         The scene's normalisation bound (coordinates in ``[-bound, bound]``).
     progress : bool
         Show a tqdm progress bar.
     threads : int or None
-        Numba threads for the per-bundle kernels (default 1; None leaves numba's setting).
+        Threads of the compiled passes (default None: numba's setting, every core); the
+        results do not depend on it.
     """
 
     width: int = 128
@@ -95,10 +97,10 @@ class RenderSettings:
     hierarchy: bool = True
     early_out: bool = True
     batch_spheres: int = 32
-    chunk: int = 512
+    chunk: int = 4096
     bound: float = 8.0
     progress: bool = True
-    threads: int | None = 1
+    threads: int | None = None
 
     def __post_init__(self):
         for name in ("width", "height", "rows", "cols", "tris_per_sphere", "batch_spheres",
@@ -182,8 +184,7 @@ def _light_hits(origin, dirs, light, t_hit):
 
 @contextmanager
 def _numba_threads(n: int | None):
-    """Run the per-bundle kernels on ``n`` threads (the bundles are small: thread
-    start-up costs more than it saves, especially on a shared machine)."""
+    """Run the compiled passes on ``n`` threads (None: leave numba's setting)."""
     if n is None:
         yield
         return
@@ -244,26 +245,35 @@ def _render(scene: Scene, backend: Backend, settings: RenderSettings):
         stats.update(backend.load(tris, tree, s.bound) or {})
     normals_all = face_normals(tris)
 
-    unit = {}
-    cull = CullStats.zero(tree.levels)
+    unit = np.zeros(len(COUNTERS), np.int64)
+    L = tree.levels
+    hier = {"tested": np.zeros(L, np.int64), "dropped": np.zeros(L, np.int64),
+            "tris_dropped": np.zeros(L, np.int64), "leaves": 0}
     counts = {"primary_bundles": 0, "primary_rays": 0, "shadow_bundles": 0,
               "shadow_rays": 0, "host_plane_tests": 0, "brute_force_pairs": 0,
               "shadow_spheres_skipped": 0, "early_out_pairs_skipped": 0,
               "unguaranteed_bundles": 0}
     F = scene.n_triangles
 
-    def culled(job):
-        def touched(nodes):
-            counts["host_plane_tests"] += len(nodes) * job.bundle.n_planes
-            return backend.touched(job, nodes)
-        leaves, st = cull_tree(tree, touched, s.hierarchy)
-        nonlocal cull
-        cull += st
-        if not getattr(job, "guaranteed", True):
-            counts["unguaranteed_bundles"] += 1
-        return leaves
+    def cull(batch):
+        cr = backend.cull(batch, s.hierarchy)
+        for k in ("tested", "dropped", "tris_dropped"):
+            hier[k] += getattr(cr, k)
+        hier["leaves"] += int(cr.leaves.size)
+        counts["host_plane_tests"] += cr.plane_tests
+        counts["unguaranteed_bundles"] += int(np.count_nonzero(batch.keep_all))
+        return cr
 
     tiles = scene.camera.tiles(W, H, s.rows, s.cols)
+    t_org = np.array([t.origin for t in tiles])
+    t_cen = np.array([t.centre for t in tiles])
+    t_col = np.array([0.5 * t.cols * t.step_col for t in tiles])
+    t_row = np.array([0.5 * t.rows * t.step_row for t in tiles])
+    t_valid = np.array([t.valid.reshape(-1) for t in tiles])
+    t_y0 = np.array([t.y0 for t in tiles], np.int64)
+    t_x0 = np.array([t.x0 for t in tiles], np.int64)
+    R = s.rows * s.cols
+    ii, jj = np.divmod(np.arange(R), s.cols)
     tri_img = np.full((H, W), -1, np.int64)
     t_img = np.full((H, W), np.inf)
     dir_img = np.zeros((H, W, 3))
@@ -273,41 +283,39 @@ def _render(scene: Scene, backend: Backend, settings: RenderSettings):
     bar = tqdm(total=len(tiles) + n_shadow_est, unit="bundle", disable=not s.progress,
                desc=f"render {scene.name} [{backend.name}]", leave=False)
     try:
-        # 3. primary ---------------------------------------------------------------------
-        for lo in range(0, len(tiles), s.chunk):
-            part = tiles[lo:lo + s.chunk]
-            runs = []
-            with timer("primary cull"):
-                for tile in part:
-                    from .bundles import RayBundle
+        # compile (or load from numba's cache) the kernels: its own phase, not a rate
+        with timer("compile"):
+            bar.set_description_str(f"render {scene.name} [{backend.name}]: compiling "
+                                    "kernels (once per machine)")
+            backend.warm_pass(t_org[:1], t_cen[:1], t_col[:1], t_row[:1], s.rows, s.cols)
+            bar.set_description_str(f"render {scene.name} [{backend.name}]")
+            bar.reset(total=len(tiles) + n_shadow_est)
 
-                    b = RayBundle(tile.origin, tile.centre, 0.5 * tile.cols * tile.step_col,
-                                  0.5 * tile.rows * tile.step_row, tile.rows, tile.cols)
-                    job = backend.prepare(b, tile.valid.reshape(-1))
-                    n_en = int(job.enable.sum())
-                    counts["primary_bundles"] += 1
-                    counts["primary_rays"] += n_en
-                    counts["brute_force_pairs"] += n_en * F
-                    runs.append((job, culled(job)))
-            with timer("primary unit"):
-                # a bundle whose cull left no sphere needs no run: its result is empty
-                todo = [k for k, (_, ids) in enumerate(runs) if len(ids)]
-                done = backend.run_many([runs[k] for k in todo])
-                results = [RunResult.empty(dict.fromkeys(COUNTERS, 0)) for _ in runs]
-                for k, res in zip(todo, done):
-                    results[k] = res
+        # 3. primary: all tiles, a pass of ``chunk`` bundles at a time -------------------
+        for lo in range(0, len(tiles), s.chunk):
+            hi = min(lo + s.chunk, len(tiles))
             with timer("primary cull"):
-                for tile, (job, _), res in zip(part, runs, results):
-                    _add_counters(unit, res.counters)
-                    n = job.bundle.n_rays
-                    tri, t, _ = nearest_hits(n, res.ray_id, res.tri_id, res.hit, res.t, 0.0)
-                    y, x = tile.pixels()
-                    v = tile.valid
-                    tri_img[y[v], x[v]] = tri.reshape(tile.rows, tile.cols)[v]
-                    t_img[y[v], x[v]] = t.reshape(tile.rows, tile.cols)[v]
-                    dir_img[y[v], x[v]] = job.directions.reshape(tile.rows, tile.cols, 3)[v]
-                    org = job.origin
-            bar.update(len(part))
+                batch = backend.batch(t_org[lo:hi], t_cen[lo:hi], t_col[lo:hi], t_row[lo:hi],
+                                      s.rows, s.cols, t_valid[lo:hi])
+                n_en = int(batch.enable.sum())
+                counts["primary_bundles"] += hi - lo
+                counts["primary_rays"] += n_en
+                counts["brute_force_pairs"] += n_en * F
+                cr = cull(batch)
+            with timer("primary unit"):
+                best_t = np.full((hi - lo, R), np.inf)
+                best_tri = np.full((hi - lo, R), -1, np.int64)
+                unit += backend.trace(batch, *round_runs(cr.start, cr.leaves, None, 0),
+                                      best_t, best_tri, 0.0).sum(axis=0)
+            with timer("primary cull"):
+                v = t_valid[lo:hi]
+                y = (t_y0[lo:hi, None] + ii[None, :])[v]
+                x = (t_x0[lo:hi, None] + jj[None, :])[v]
+                tri_img[y, x] = best_tri[v]
+                t_img[y, x] = best_t[v]
+                dir_img[y, x] = batch.directions[v]
+                org = batch.origin[-1]
+            bar.update(hi - lo)
 
         # 4. shading ---------------------------------------------------------------------
         with timer("shading"):
@@ -327,56 +335,49 @@ def _render(scene: Scene, backend: Backend, settings: RenderSettings):
                 vis[no_bundle] = 0.0      # behind the light or facing away: unlit
                 stats["points_behind_light"] = plan.behind_light
                 stats["points_facing_away"] = plan.facing_away
-                bar.total = len(tiles) + len(plan.bundles)
+                bar.total = len(tiles) + len(plan)
                 bar.refresh()
 
-        # 5. shadows ---------------------------------------------------------------------
+        # 5. shadows: passes of ``chunk`` bundles, early-out rounds within each ------------
         if s.shadows:
             nr = s.shadow_rows * s.shadow_cols
-            for lo in range(0, len(plan.bundles), s.chunk):
-                hi = min(lo + s.chunk, len(plan.bundles))
-                jobs, batches, blocked = [], [], []
+            step = s.batch_spheres if s.early_out else None
+            for lo in range(0, len(plan), s.chunk):
+                hi = min(lo + s.chunk, len(plan))
+                k = hi - lo
                 with timer("shadow cull"):
-                    for k in range(lo, hi):
-                        job = backend.prepare(plan.bundles[k])
-                        counts["shadow_bundles"] += 1
-                        counts["shadow_rays"] += nr
-                        counts["brute_force_pairs"] += nr * F
-                        leaves = culled(job)
-                        step = s.batch_spheres if s.early_out else max(1, len(leaves))
-                        jobs.append(job)
-                        batches.append([leaves[i:i + step] for i in range(0, len(leaves), step)])
-                        blocked.append(np.zeros(nr, bool))
+                    batch = backend.batch(plan.origins[lo:hi], np.broadcast_to(plan.centre, (k, 3)),
+                                          np.broadcast_to(plan.col_axis, (k, 3)),
+                                          np.broadcast_to(plan.row_axis, (k, 3)),
+                                          s.shadow_rows, s.shadow_cols)
+                    counts["shadow_bundles"] += k
+                    counts["shadow_rays"] += k * nr
+                    counts["brute_force_pairs"] += k * nr * F
+                    cr = cull(batch)
+                    own = tri_h[plan.point[lo:hi]]
+                    best_t = np.full((k, nr), np.inf)
+                    best_tri = np.full((k, nr), -1, np.int64)
                 rnd = 0
                 while True:
-                    live = [k for k in range(len(jobs)) if rnd < len(batches[k])]
-                    if not live:
-                        break
-                    runs = []
                     with timer("shadow cull"):
-                        for k in live:
-                            if jobs[k].enable.any():
-                                runs.append(k)
-                            else:
-                                counts["shadow_spheres_skipped"] += len(batches[k][rnd])
+                        run_b, run_start, run_sph = round_runs(cr.start, cr.leaves, step, rnd)
+                        if not run_b.size:
+                            break
+                        live = batch.enable[run_b].any(axis=1)
+                        counts["shadow_spheres_skipped"] += int(
+                            np.diff(run_start)[~live].sum())
+                        run_b, run_start, run_sph = select_runs(run_b, run_start, run_sph,
+                                                                live)
                     with timer("shadow unit"):
-                        results = backend.run_many([(jobs[k], batches[k][rnd]) for k in runs])
-                    with timer("shadow cull"):
-                        for k, res in zip(runs, results):
-                            _add_counters(unit, res.counters)
-                            counts["early_out_pairs_skipped"] += res.counters.get(
-                                "pairs_skipped", 0)
-                            g = lo + k
-                            own = tri_h[plan.point[g]]
-                            tri, _, _ = nearest_hits(nr, res.ray_id, res.tri_id, res.hit, res.t,
-                                                     eps, plan.tmax[g], own)
-                            blocked[k] |= tri >= 0
-                            if s.early_out:
-                                jobs[k].enable &= ~blocked[k]
+                        ctr = backend.trace(batch, run_b, run_start, run_sph, best_t, best_tri,
+                                            eps, plan.tmax[lo:hi], own)
+                        unit += ctr.sum(axis=0)
+                        counts["early_out_pairs_skipped"] += int(ctr[:, 3].sum())
+                    if s.early_out:
+                        batch.enable &= ~(best_tri >= 0)
                     rnd += 1
-                for k in range(len(jobs)):
-                    vis[plan.point[lo + k]] = 1.0 - blocked[k].mean()
-                bar.update(hi - lo)
+                vis[plan.point[lo:hi]] = 1.0 - (best_tri >= 0).mean(axis=1)
+                bar.update(k)
 
         # 6. image -----------------------------------------------------------------------
         with timer("image"):
@@ -394,6 +395,7 @@ def _render(scene: Scene, backend: Backend, settings: RenderSettings):
     finally:
         bar.close()
 
+    unit = {name: int(v) for name, v in zip(COUNTERS, unit)}
     stats.update(counts)
     stats["rays"] = counts["primary_rays"] + counts["shadow_rays"]
     stats["bundles"] = counts["primary_bundles"] + counts["shadow_bundles"]
@@ -404,9 +406,9 @@ def _render(scene: Scene, backend: Backend, settings: RenderSettings):
     stats["pair_fraction"] = stats["pairs_issued"] / bf if bf else 0.0
     stats["hits"] = unit.get("hits", 0)
     stats["events"] = {k: unit.get(k, 0) for k in ("overflow", "underflow", "invalid")}
-    stats["hierarchy"] = {"tested": cull.tested.tolist(), "dropped": cull.dropped.tolist(),
-                          "triangles_dropped": cull.tris_dropped.tolist(),
-                          "leaves_to_unit": int(cull.leaves)}
+    stats["hierarchy"] = {"tested": hier["tested"].tolist(), "dropped": hier["dropped"].tolist(),
+                          "triangles_dropped": hier["tris_dropped"].tolist(),
+                          "leaves_to_unit": hier["leaves"]}
     stats["pixels_hit"] = int(hit_px.sum())
     return RenderResult(img, tri_img, t_img, vis_img, stats, dict(timer.times))
 

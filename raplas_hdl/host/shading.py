@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .bundles import RayBundle
+from .bundles import RayBundle, bundle_geometry
 from .scenes import AreaLight, Material
 
 __all__ = [
@@ -140,13 +140,17 @@ def phong(points, normals, albedo, eye, light: AreaLight, material: Material, vi
 
 @dataclass
 class ShadowPlan:
-    """Shadow bundles of a set of shading points.
+    """Shadow bundles of a set of shading points, as arrays (one pass).
 
     Attributes
     ----------
     point : ndarray (k,) int64
         Index (into the caller's shading points) of each bundle.
-    bundles : list of RayBundle
+    origins : ndarray (k, 3)
+        Bundle origins ``P + eps N``.
+    centre, col_axis, row_axis : ndarray (3,)
+        The light's screen, shared by every bundle.
+    rows, cols : int
     tmax : ndarray (k, rows*cols)
         Per ray: distance to its lattice point minus ``eps``.
     behind_light, facing_away : int
@@ -154,42 +158,57 @@ class ShadowPlan:
     """
 
     point: np.ndarray
-    bundles: list
+    origins: np.ndarray
+    centre: np.ndarray
+    col_axis: np.ndarray
+    row_axis: np.ndarray
+    rows: int
+    cols: int
     tmax: np.ndarray
     behind_light: int
     facing_away: int
+
+    def __len__(self) -> int:
+        return len(self.point)
+
+    @property
+    def bundles(self) -> list:
+        """The bundles as :class:`~raplas_hdl.host.bundles.RayBundle` objects (one per
+        point; for inspection, the renderer uses the arrays)."""
+        return [RayBundle(o, self.centre, self.col_axis, self.row_axis, self.rows, self.cols)
+                for o in self.origins]
 
 
 def shadow_bundles(points, normals, light: AreaLight, rows: int, cols: int,
                    eps: float) -> ShadowPlan:
     """One ``rows`` x ``cols`` bundle per shading point towards the light's lattice.
 
-    ``normals`` are unit normals facing the viewer; the origin is ``P + eps * N``.
+    ``normals`` are unit normals facing the viewer; the origin is ``P + eps * N``. Points
+    behind the light's plane (or numerically on it) and points facing away get none.
     """
-    points = np.asarray(points, float)
-    normals = np.asarray(normals, float)
+    points = np.asarray(points, float).reshape(-1, 3)
+    normals = np.asarray(normals, float).reshape(-1, 3)
     ln = light.normal
-    lc = light.centre
+    lc = np.asarray(light.centre, float)
     origins = points + eps * normals
     in_front = (origins - lc) @ ln > 0.0
     facing = np.einsum("ij,ij->i", normals, lc - points) > 0.0
-    want = in_front & facing
+    want = np.flatnonzero(in_front & facing)
     behind = int(np.count_nonzero(~in_front))
     away = int(np.count_nonzero(in_front & ~facing))
     col_axis = 0.5 * np.asarray(light.edge_v, float)
     row_axis = 0.5 * np.asarray(light.edge_u, float)
-    idx, bundles, tmax = [], [], []
-    for k in np.flatnonzero(want):
-        try:
-            b = RayBundle(origins[k], lc, col_axis, row_axis, rows, cols)
-        except ValueError:
-            behind += 1      # numerically on the light's plane
-            continue
-        idx.append(k)
-        bundles.append(b)
-        tmax.append(np.linalg.norm(b.points.reshape(-1, 3) - origins[k], axis=1) - eps)
-    tm = np.array(tmax) if tmax else np.zeros((0, rows * cols))
-    return ShadowPlan(np.array(idx, np.int64), bundles, tm, behind, away)
+    k = want.size
+    g = bundle_geometry(origins[want], np.broadcast_to(lc, (k, 3)),
+                        np.broadcast_to(col_axis, (k, 3)), np.broadcast_to(row_axis, (k, 3)),
+                        rows, cols)
+    ok = ~g["degenerate"] & g["finite"]
+    behind += int(np.count_nonzero(~ok))      # numerically on the light's plane
+    idx = want[ok]
+    rel = g["points"][ok].reshape(-1, rows * cols, 3) - origins[idx][:, None, :]
+    tmax = np.linalg.norm(rel, axis=2) - eps
+    return ShadowPlan(idx.astype(np.int64), origins[idx], lc, col_axis, row_axis, rows, cols,
+                      tmax, behind, away)
 
 
 def blocked_rays(n_rays: int, ray_id, tri_id, hit, t, eps: float, tmax, own_tri: int):

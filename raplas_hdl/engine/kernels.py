@@ -1,0 +1,282 @@
+"""Compiled pass kernels: the hierarchy cull and the unit's runs over a whole pass.
+
+Two arithmetics run the same passes:
+
+- the **model**: the bit-exact plane test and ray-triangle pair of the golden models
+  (:func:`raplas_hdl.model.plane_sphere.plane_keep`,
+  :func:`raplas_hdl.model.ray_triangle.pair_fast` with its fallback
+  :func:`~raplas_hdl.model.ray_triangle.pair_exact`), with the format, the rounding and the
+  mode as compile-time constants: :func:`model_kernels` builds one set per
+  ``(E, M, rounding, mode)`` and numba caches it on disk;
+- **float64**: the reference, ``|n.C + p| <= r`` with a float64-rounding allowance and the
+  division-free Moller-Trumbore decision on the original geometry
+  (:func:`raplas_hdl.host.exact.float64_intersect`, operation for operation), compiled once.
+
+Each kernel takes a half-open range ``lo, hi`` of its independent items (candidate
+(bundle, node) pairs for the cull, runs for the unit) and releases the GIL, so
+:func:`raplas_hdl.model.parallel.run_chunks` spreads a pass over the cores; every item
+writes only its own outputs, so the results do not depend on the thread count.
+
+Pass layout (``B`` bundles of ``rows`` x ``cols`` rays, ``P = rows + cols`` planes):
+
+- planes ``pn (B*P, 3)``, ``pp (B*P,)``: bundle ``b``'s plane ``k`` is row ``b*P + k``
+  (rows first, then columns);
+- rays ``ro (B, 3)`` (one origin per bundle), ``rd (B*R, 3)``: ray ``r`` of bundle ``b``
+  is row ``b*R + r``, ``R = rows*cols``; ``enable (B, R)``; ``keep_all (B,)``;
+- runs: run ``u`` tests spheres ``run_sph[run_start[u]:run_start[u+1]]`` (in order)
+  against bundle ``run_b[u]``; a pass names each bundle at most once;
+- the unit's stream order inside a run is the RTL's: spheres in run order, rows
+  ascending, columns ascending, triangles in list order.
+
+The trace kernels reduce the stream as the renderer needs it: per ray the nearest hit
+accepted by ``tmin <= t <= tmax[b, r]`` and ``tri != exclude[b]`` (ties to the lower
+triangle ID), the same choice as :func:`raplas_hdl.host.shading.nearest_hits`; and the
+unit's counters per run, in :data:`~raplas_hdl.model.memory_image.COUNTER_NAMES` order.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..fp.kernels import decode_k
+from ..fp.numba_cache import drop_stale_cache
+from ..model.plane_sphere import plane_keep
+from ..model.ray_triangle import pair_exact, pair_fast
+
+drop_stale_cache(__file__)
+
+__all__ = ["model_kernels", "cull_f64", "trace_f64", "F64_SLACK", "N_COUNTERS"]
+
+#: Relative allowance of the float64 plane test for float64's own rounding.
+F64_SLACK = 1e-9
+#: Columns of the counters array (COUNTER_NAMES).
+N_COUNTERS = 8
+
+
+@njit(cache=True)
+def _accept(t, tid, b, ray, tmin, tmax, excl, best_t, best_tri):
+    """Fold one hit into the ray's nearest (ties to the lower triangle ID)."""
+    if np.isfinite(t) and t >= tmin and t <= tmax[b, ray] and tid != excl[b]:
+        bt = best_t[b, ray]
+        if t < bt or (t == bt and tid < best_tri[b, ray]):
+            best_t[b, ray] = t
+            best_tri[b, ray] = tid
+
+
+# -- float64 ------------------------------------------------------------------------------
+@njit(cache=True)
+def _keep_f64(pn, pk, pp, c, s, r):
+    a0 = c[s, 0] * pn[pk, 0]
+    a1 = c[s, 1] * pn[pk, 1]
+    a2 = c[s, 2] * pn[pk, 2]
+    d = a0 + a1 + a2 + pp[pk]
+    slack = F64_SLACK * (abs(a0) + abs(a1) + abs(a2) + abs(pp[pk]))
+    return abs(d) <= r[s] + slack
+
+
+@njit(nogil=True, cache=True)
+def cull_f64(pn, pp, rows, n_planes, cand_b, cand_node, nc, nr, lo, hi, keep):
+    """Hierarchy cull, float64: ``keep[q]`` when some row plane and some column plane of
+    bundle ``cand_b[q]`` touch node ``cand_node[q]``."""
+    for q in range(lo, hi):
+        base = cand_b[q] * n_planes
+        s = cand_node[q]
+        row = False
+        for i in range(rows):
+            if _keep_f64(pn, base + i, pp, nc, s, nr):
+                row = True
+                break
+        col = False
+        if row:
+            for j in range(rows, n_planes):
+                if _keep_f64(pn, base + j, pp, nc, s, nr):
+                    col = True
+                    break
+        keep[q] = row and col
+
+
+@njit(cache=True)
+def _pair_f64(o, oi, d, di, v0, e1, e2, nn, ti):
+    """float64 Moller-Trumbore of :func:`raplas_hdl.host.exact.float64_intersect`:
+    ``(hit, t)``."""
+    tx = v0[ti, 0] - o[oi, 0]
+    ty = v0[ti, 1] - o[oi, 1]
+    tz = v0[ti, 2] - o[oi, 2]
+    dx, dy, dz = d[di, 0], d[di, 1], d[di, 2]
+    det = nn[ti, 0] * dx + nn[ti, 1] * dy + nn[ti, 2] * dz
+    tp = nn[ti, 0] * tx + nn[ti, 1] * ty + nn[ti, 2] * tz
+    qx = dy * tz - dz * ty
+    qy = dz * tx - dx * tz
+    qz = dx * ty - dy * tx
+    up = -(qx * e2[ti, 0] + qy * e2[ti, 1] + qz * e2[ti, 2])
+    vp = qx * e1[ti, 0] + qy * e1[ti, 1] + qz * e1[ti, 2]
+    s = up + vp
+    if det > 0:
+        hit = up >= 0 and vp >= 0 and s <= det and tp >= 0
+    elif det < 0:
+        hit = up <= 0 and vp <= 0 and s >= det and tp <= 0
+    else:
+        hit = False
+    return hit, tp / det if hit else np.nan
+
+
+@njit(nogil=True, cache=True, error_model="numpy")
+def trace_f64(pn, pp, ro, rd, enable, keep_all, rows, cols, run_b, run_start, run_sph, sc, sr,
+              tcount, tlist, v0, e1, e2, nn, tmin, tmax, excl, lo, hi, best_t, best_tri,
+              counters):
+    """Runs ``lo .. hi-1`` of a pass, float64 (module docstring)."""
+    n_planes = rows + cols
+    n_rays = rows * cols
+    rm = np.empty(rows, np.bool_)
+    cm = np.empty(cols, np.bool_)
+    for u in range(lo, hi):
+        b = run_b[u]
+        base = b * n_planes
+        issued = 0
+        skipped = 0
+        hits = 0
+        for q in range(run_start[u], run_start[u + 1]):
+            s = run_sph[q]
+            for i in range(rows):
+                rm[i] = keep_all[b] or _keep_f64(pn, base + i, pp, sc, s, sr)
+            for j in range(cols):
+                cm[j] = keep_all[b] or _keep_f64(pn, base + rows + j, pp, sc, s, sr)
+            nt = tcount[s]
+            for i in range(rows):
+                if not rm[i]:
+                    continue
+                for j in range(cols):
+                    if not cm[j]:
+                        continue
+                    ray = i * cols + j
+                    if not enable[b, ray]:
+                        skipped += nt
+                        continue
+                    for k in range(nt):
+                        tid = tlist[s, k]
+                        h, t = _pair_f64(ro, b, rd, b * n_rays + ray, v0, e1, e2, nn, tid)
+                        issued += 1
+                        if h:
+                            hits += 1
+                            _accept(t, tid, b, ray, tmin, tmax, excl, best_t, best_tri)
+        n_sph = run_start[u + 1] - run_start[u]
+        counters[u, 0] = n_sph
+        counters[u, 1] = n_sph * n_planes
+        counters[u, 2] = issued
+        counters[u, 3] = skipped
+        counters[u, 4] = hits
+        counters[u, 5] = 0
+        counters[u, 6] = 0
+        counters[u, 7] = 0
+
+
+# -- the model ----------------------------------------------------------------------------
+_MODEL = {}
+
+
+def model_kernels(E: int, M: int, R: int, conservative: bool):
+    """``(cull, trace)`` of the model for one format, rounding code and mode.
+
+    ``cull(pn, pp, rows, n_planes, cand_b, cand_node, nc, nr, lo, hi, keep)`` and
+    ``trace(pn, pp, ro, rd, enable, keep_all, rows, cols, run_b, run_start, run_sph, sc, sr,
+    tcount, tlist, v0, e1, e2, nn, mc, tmin, tmax, excl, lo, hi, best_t, best_tri,
+    counters)``; every geometric array holds bit patterns (``uint32``), ``mc`` the
+    conservative margin table. Built once per process and key; cached on disk by numba.
+    """
+    key = (int(E), int(M), int(R), bool(conservative))
+    if key in _MODEL:
+        return _MODEL[key]
+    E, M, R, CONS = key
+
+    @njit(nogil=True, cache=True)
+    def cull(pn, pp, rows, n_planes, cand_b, cand_node, nc, nr, lo, hi, keep):
+        for q in range(lo, hi):
+            base = cand_b[q] * n_planes
+            s = cand_node[q]
+            row = False
+            for i in range(rows):
+                k = base + i
+                if plane_keep(pn[k, 0], pn[k, 1], pn[k, 2], pp[k], nc[s, 0], nc[s, 1],
+                              nc[s, 2], nr[s], E, M, R):
+                    row = True
+                    break
+            col = False
+            if row:
+                for j in range(rows, n_planes):
+                    k = base + j
+                    if plane_keep(pn[k, 0], pn[k, 1], pn[k, 2], pp[k], nc[s, 0], nc[s, 1],
+                                  nc[s, 2], nr[s], E, M, R):
+                        col = True
+                        break
+            keep[q] = row and col
+
+    @njit(nogil=True, cache=True, error_model="numpy")
+    def trace(pn, pp, ro, rd, enable, keep_all, rows, cols, run_b, run_start, run_sph, sc,
+              sr, tcount, tlist, v0, e1, e2, nn, mc, tmin, tmax, excl, lo, hi, best_t,
+              best_tri, counters):
+        n_planes = rows + cols
+        n_rays = rows * cols
+        rm = np.empty(rows, np.bool_)
+        cm = np.empty(cols, np.bool_)
+        for u in range(lo, hi):
+            b = run_b[u]
+            base = b * n_planes
+            issued = 0
+            skipped = 0
+            hits = 0
+            n_ovf = 0
+            n_unf = 0
+            n_inv = 0
+            for q in range(run_start[u], run_start[u + 1]):
+                s = run_sph[q]
+                for k in range(n_planes):
+                    pk = base + k
+                    keep = keep_all[b] or plane_keep(pn[pk, 0], pn[pk, 1], pn[pk, 2], pp[pk],
+                                                     sc[s, 0], sc[s, 1], sc[s, 2], sr[s],
+                                                     E, M, R)
+                    if k < rows:
+                        rm[k] = keep
+                    else:
+                        cm[k - rows] = keep
+                nt = tcount[s]
+                for i in range(rows):
+                    if not rm[i]:
+                        continue
+                    for j in range(cols):
+                        if not cm[j]:
+                            continue
+                        ray = i * cols + j
+                        if not enable[b, ray]:
+                            skipped += nt
+                            continue
+                        di = b * n_rays + ray
+                        for k in range(nt):
+                            tid = tlist[s, k]
+                            ok, h, tp, up, vp, det = pair_fast(ro, b, rd, di, v0, e1, e2, nn,
+                                                               tid, E, M, R, CONS, mc)
+                            if not ok:
+                                h, tp, up, vp, det, c = pair_exact(ro, b, rd, di, v0, e1, e2,
+                                                                   nn, tid, E, M, R, CONS, mc)
+                                n_ovf += c & 0xFF
+                                n_unf += (c >> 8) & 0xFF
+                                n_inv += (c >> 16) & 0xFF
+                            issued += 1
+                            if h:
+                                hits += 1
+                                tf = np.int64(decode_k(tp, E, M)).view(np.float64)
+                                df = np.int64(decode_k(det, E, M)).view(np.float64)
+                                _accept(tf * (1.0 / df), tid, b, ray, tmin, tmax, excl,
+                                        best_t, best_tri)
+            n_sph = run_start[u + 1] - run_start[u]
+            counters[u, 0] = n_sph
+            counters[u, 1] = n_sph * n_planes
+            counters[u, 2] = issued
+            counters[u, 3] = skipped
+            counters[u, 4] = hits
+            counters[u, 5] = n_ovf
+            counters[u, 6] = n_unf
+            counters[u, 7] = n_inv
+
+    _MODEL[key] = (cull, trace)
+    return cull, trace
