@@ -352,6 +352,9 @@ def test_debug_prints_the_traceback(t, capsys):
                                             "to unit fp-mul (its options: --stages, --target)")
     assert main(["--debug", "render", "--size", "0x0", "-o", str(t / "x.png")]) == 2
     assert "raplas-hdl render: error: argument --size" in capsys.readouterr().err
+    assert main(["stress", "ray-triangle", "--families", "bogus", "--debug"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" in err and "unknown stress family 'bogus'" in err
 
 
 def test_a_failure_is_one_line_without_traceback(t, capsys, monkeypatch):

@@ -54,8 +54,19 @@ def build_parser() -> Parser:
         if module is not None:
             p = module.add_parser(sub)
             p.set_defaults(_run=module.run, _check=getattr(module, "check", None))
-            add_debug_option(p)
+            _add_debug_everywhere(p)
     return parser
+
+
+def _add_debug_everywhere(p) -> None:
+    """``--debug`` on ``p`` and on every parser nested under it (``stress campaign``)."""
+    import argparse
+
+    add_debug_option(p)
+    for action in p._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for child in dict.fromkeys(action.choices.values()):
+                _add_debug_everywhere(child)
 
 
 def _message(exc: BaseException) -> str:

@@ -208,7 +208,31 @@ def _runner(simulator: str, log_file: Path | None, timeout_s: float | None,
                 raise subprocess.CalledProcessError(res.returncode, cmd)
 
     runner._execute_cmds = _execute_cmds
+    if simulator == "icarus":
+        def _create_iverilog_dump_file():
+            # cocotb's dump module declares a SystemVerilog `string`, which Icarus rejects in
+            # the -g2005 builds (the intersection unit's): the same module in Verilog-2005
+            top = runner.hdl_toplevel
+            path = str(runner.build_dir / f"{top}.fst").replace("\\", "\\\\")
+            runner.iverilog_dump_file.write_text(_ICARUS_DUMP.format(top=top, path=path))
+
+        runner._create_iverilog_dump_file = _create_iverilog_dump_file
     return runner
+
+
+#: The waveform dump module of Icarus builds with waves (FST path from the plusarg
+#: ``+dumpfile_path=``, else ``<build dir>/<top>.fst``; the run adds ``-fst``).
+_ICARUS_DUMP = """module cocotb_iverilog_dump();
+reg [8*1024-1:0] dumpfile_path;
+initial begin
+    if ($value$plusargs("dumpfile_path=%s", dumpfile_path))
+        $dumpfile(dumpfile_path);
+    else
+        $dumpfile("{path}");
+    $dumpvars(0, {top});
+end
+endmodule
+"""
 
 
 def _child_cpu() -> float:
