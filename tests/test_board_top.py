@@ -3,9 +3,10 @@
 - the register table of ``docs/board-top.md`` equals :data:`REGISTER_MAP`, which the RTL
   and the driver both use;
 - the host driver (:class:`~raplas_hdl.host.board_driver.BoardDriver`) runs a FP24 scene
-  of 40 triangles through ``board_top``'s Verilog over Wishbone, under Icarus and
-  Verilator: six runs (range and list runs, an early-out rewrite of the enable bits, an
-  empty run, an all-disabled run, the first bundle again), random idle cycles on the bus;
+  of 30 triangles through ``board_top``'s Verilog over Wishbone, under Icarus and
+  Verilator: seven runs (range and list runs, an early-out rewrite of the enable bits, an
+  empty run, a keep-all run (``CMD_START.keep_all``), an all-disabled run, the first
+  bundle's planes again), random idle cycles on the bus;
   every run's stream and counters equal the golden model's bit for bit. The same
   simulation checks the bus protocol (``wb_err``, the memory window, a refused command);
 - the driver imports neither Amaranth nor cocotb;
@@ -23,7 +24,7 @@ import pytest
 from raplas_hdl.fp import FP24
 from raplas_hdl.model.board_map import REGISTER_MAP, parse_markdown_table
 from raplas_hdl.model.memory_image import UnitConfig
-from unit_scenes import check_against_model, scene_and_runs
+from unit_scenes import assert_keep_all, check_against_model, scene_and_runs
 
 ROOT = Path(__file__).resolve().parent.parent
 CFG = UnitConfig(fmt=FP24, rows=4, cols=4, testers=4, tris_per_sphere=4, max_triangles=256,
@@ -56,6 +57,7 @@ def test_board_cosim_matches_model(simulator, scene_runs):
     results, stats = run_board(simulator, CFG, scene, runs, seed=7, gap_density=0.3,
                                build_key="board-test")
     ref = check_against_model(CFG, scene, runs, results)
+    assert_keep_all(CFG, scene, runs, ref)
     print(f"{simulator}: {time.monotonic() - t0:.1f} s, {stats}")
     assert sum(r[1]["pairs_issued"] for r in ref) > 50
     assert sum(r[1]["hits"] for r in ref) > 0

@@ -1,8 +1,13 @@
 """The whole intersection unit in Amaranth's simulator against its golden model.
 
+The runs of :func:`unit_scenes.scene_and_runs` (a keep-all run among them), every result
+bit and counter compared with the model.
+
 A small format (E=5, M=6) and a time-shared tester array keep the Python simulation short;
 the cocotb tests run FP24 scenes of a few hundred triangles.
 """
+
+import gc
 
 import pytest
 
@@ -10,7 +15,8 @@ from raplas_hdl.fp import FP24, FPFormat
 from raplas_hdl.model.memory_image import UnitConfig
 from raplas_hdl.rtl.intersection import IntersectionUnit, build_intersection_unit
 from unit_amaranth_tb import simulate_runs
-from unit_scenes import assert_operation_events, check_against_model, scene_and_runs
+from unit_scenes import (assert_keep_all, assert_operation_events, check_against_model,
+                         scene_and_runs)
 
 SMALL = UnitConfig(fmt=FPFormat(5, 6), rows=2, cols=3, testers=2, tris_per_sphere=3,
                    max_triangles=32, max_spheres=24, fifo_depth=4)
@@ -20,6 +26,7 @@ def test_unit_amaranth_matches_model():
     scene, runs = scene_and_runs(SMALL, 24, seed=5)
     results = simulate_runs(IntersectionUnit(SMALL), scene, runs, seed=2, ready_density=0.5)
     ref = check_against_model(SMALL, scene, runs, results)
+    assert_keep_all(SMALL, scene, runs, ref)
     issued = sum(r[1]["pairs_issued"] for r in ref)
     assert issued >= 20, "the scene must issue pairs"
     assert sum(r[1]["pairs_skipped"] for r in ref) > 0
@@ -41,6 +48,7 @@ def test_unit_parameter_errors(kw, word):
         IntersectionUnit(**kw)
     with pytest.raises(ValueError, match=word):
         build_intersection_unit(FP24, **kw)
+    gc.collect()     # the refused units warn while the warning is ignored here
 
 
 @pytest.mark.filterwarnings("ignore::amaranth.hdl.UnusedElaboratable")
@@ -52,5 +60,9 @@ def test_unit_ports():
             "fifo_level", "fifo_overflow"} <= set(sig.keys())
     names = [n for n, _ in unit.result_layout]
     assert names == ["ray_id", "tri_id", "hit", "t", "u", "v", "det", "flags", "last", "empty"]
+    assert [n for n, _ in unit.cmd_layout] == ["first", "count", "bank", "indirect",
+                                               "keep_all"]
     with pytest.raises(ValueError, match="either"):
         IntersectionUnit(SMALL, rows=3)
+    del unit
+    gc.collect()

@@ -1,24 +1,30 @@
-"""The intersection unit's transaction-level model against a plain per-pair loop."""
+"""The intersection unit's transaction-level model against a plain per-pair loop.
+
+Culled runs and keep-all runs (the run command's ``keep_all`` bit: every plane keeps every
+sphere, for a bundle over the culling budget)."""
 
 import numpy as np
 import pytest
 
 from raplas_hdl.fp import FP16, FP24
 from raplas_hdl.model.intersection import RESULT_DTYPE, run_bundle
-from raplas_hdl.model.memory_image import (REGIONS, BundleMemory, SceneMemory, UnitConfig,
-                                           bundle_writes, run_list_writes, scene_writes,
-                                           write_address)
+from raplas_hdl.host.culling import CullingBudget, bundle_slack
+from raplas_hdl.model.memory_image import (REGIONS, BundleMemory, Run, SceneMemory, UnitConfig,
+                                           as_run, bundle_writes, run_list_writes,
+                                           scene_writes, write_address)
 from raplas_hdl.model.plane_sphere import tester_flags as plane_flags
 from raplas_hdl.model.ray_triangle import intersect
 from raplas_hdl.sim.unit_driver import random_bundle, random_scene
 
 
-def ref_run(config, scene, bundle, ids):
+def ref_run(config, scene, bundle, ids, keep_all=False):
     """One pair at a time, straight from the definition of the stream."""
     beats = []
     skipped = 0
     events = np.zeros(3, np.int64)
     keep = plane_flags(bundle.plane_n, bundle.plane_p, scene.centres, scene.radii, config.fmt)
+    if keep_all:
+        keep = np.ones_like(keep)
     for s in ids:
         for i in range(config.rows):
             if not keep[s, i]:
@@ -46,10 +52,10 @@ def ref_run(config, scene, bundle, ids):
     return np.array(beats, RESULT_DTYPE), skipped, events
 
 
-def check_run(config, scene, bundle, ids=None):
-    out, ctr = run_bundle(config, scene, bundle, ids)
+def check_run(config, scene, bundle, ids=None, keep_all=False):
+    out, ctr = run_bundle(config, scene, bundle, ids, keep_all=keep_all)
     ids_ = np.arange(scene.n_spheres) if ids is None else np.asarray(ids)
-    ref, skipped, events = ref_run(config, scene, bundle, ids_)
+    ref, skipped, events = ref_run(config, scene, bundle, ids_, keep_all)
     assert out.dtype == RESULT_DTYPE
     assert np.array_equal(out, ref)
     real = out[out["empty"] == 0]
@@ -101,6 +107,55 @@ def test_model_empty_run(scene):
     b = random_bundle(CFG, seed=1, disable=1.0, spread=0.3)
     out, ctr = check_run(CFG, scene, b)
     assert len(out) == 1 and out["empty"][0] == 1 and ctr["pairs_skipped"] > 0
+
+
+def test_model_keep_all_over_budget(scene):
+    """A bundle over the culling budget (its origin beyond ``o_max``) run with ``keep_all``:
+    the masks are all ones, so the stream is every enabled ray (ascending) against every
+    triangle of every sphere of the run (list order), whatever the planes say; the counters
+    count as usual."""
+    budget = CullingBudget(CFG.fmt, o_max=8.0)
+    b = random_bundle(CFG, seed=6, disable=0.3, spread=0.2, origin=np.array([0.5, 0.0, -40.0]))
+    slack = bundle_slack(b.plane_n, b.plane_p, b.ray_o[0], b.ray_d, CFG.rows, CFG.cols, CFG.fmt)
+    assert not budget.admits(slack), "the bundle must be over budget"
+    rng = np.random.default_rng(8)
+    ids = rng.integers(0, scene.n_spheres, 12)         # a list with repeats
+    out, ctr = check_run(CFG, scene, b, ids, keep_all=True)
+    want = [(ray, int(scene.tri_lists[s, k])) for s in ids for ray in range(CFG.n_rays)
+            if b.enable[ray] for k in range(int(scene.tri_counts[s]))]
+    assert list(zip(out["ray_id"].tolist(), out["tri_id"].tolist())) == want
+    tris = int(scene.tri_counts[ids].sum())
+    disabled = int(np.count_nonzero(~b.enable))
+    assert 0 < disabled < CFG.n_rays
+    assert ctr["spheres"] == 12 and ctr["plane_tests"] == 12 * CFG.n_planes
+    assert ctr["pairs_issued"] == (CFG.n_rays - disabled) * tris
+    assert ctr["pairs_skipped"] == disabled * tris
+    # the same run culled keeps fewer pairs: the bit is what lets them through
+    _, culled = run_bundle(CFG, scene, b, ids)
+    assert culled["pairs_issued"] < ctr["pairs_issued"]
+    assert {k: culled[k] for k in ("spheres", "plane_tests")} == \
+        {k: ctr[k] for k in ("spheres", "plane_tests")}
+
+
+def test_model_keep_all_empty_runs(scene):
+    b = random_bundle(CFG, seed=1, spread=0.3)
+    out, ctr = check_run(CFG, scene, b, np.zeros(0, np.int64), keep_all=True)
+    assert len(out) == 1 and out["empty"][0] == 1 and ctr["plane_tests"] == 0
+    off = BundleMemory(b.plane_n, b.plane_p, b.ray_o, b.ray_d, np.zeros(CFG.n_rays, bool))
+    out, ctr = check_run(CFG, scene, off, keep_all=True)
+    assert len(out) == 1 and out["empty"][0] == 1
+    assert ctr["pairs_skipped"] == CFG.n_rays * int(scene.tri_counts.sum())
+
+
+def test_runs():
+    b = random_bundle(CFG, seed=0)
+    assert as_run((b, None)) == Run(b, None, False)
+    assert as_run((b, [1, 2], 1)).keep_all is True
+    assert as_run(Run(b, keep_all=True)) == (b, None, True)
+    with pytest.raises(ValueError, match="a run is"):
+        as_run((b,))
+    with pytest.raises(ValueError, match="BundleMemory"):
+        as_run(("bundle", None))
 
 
 def test_model_conservative_and_fp16():

@@ -1,6 +1,6 @@
 """Amaranth-simulator testbench of the intersection unit (used by ``test_unit_amaranth.py``).
 
-:func:`simulate_runs` loads a scene, then runs ``[(BundleMemory, sphere_ids), ...]``: the
+:func:`simulate_runs` loads a scene, then runs ``[(BundleMemory, sphere_ids[, keep_all])]``: the
 next run's bundle is written into the other bank while the current run goes (the
 double-buffered Plane and Ray Memory), a run that reuses the previous bundle rewrites only
 its enable bits, and ``o`` sees random back-pressure. Every cycle it asserts that the pair
@@ -64,7 +64,8 @@ def simulate_runs(unit, scene, runs, *, seed=0, ready_density=0.7, overlap=False
                 await read_counters(ctx, k - 1)
             ctx.set(unit.cmd.payload.as_value(),
                     cmd.pack({"first": stim["run_first"][k], "count": stim["run_count"][k],
-                              "bank": banks[k], "indirect": stim["run_indirect"][k]}))
+                              "bank": banks[k], "indirect": stim["run_indirect"][k],
+                              "keep_all": stim["run_keep_all"][k]}))
             ctx.set(unit.cmd.valid, 1)
             await ctx.tick().until(unit.cmd.ready)
             ctx.set(unit.cmd.valid, 0)

@@ -4,7 +4,7 @@ import numpy as np
 
 from raplas_hdl.fp import model as fpm
 from raplas_hdl.model.intersection import run_bundle
-from raplas_hdl.model.memory_image import BundleMemory
+from raplas_hdl.model.memory_image import BundleMemory, Run, as_run
 from raplas_hdl.sim.unit_driver import random_bundle, random_scene
 
 
@@ -50,7 +50,8 @@ def scene_and_runs(config, n_tris, seed=0, size=1.2, extent=4.0):
 
     Runs: all spheres (range); another bundle (the other bank) with a sphere list with
     repeats; the same bundle with more rays disabled (enable bits rewritten only); an
-    empty list; a range whose rays are all disabled (an empty run that skips pairs); and
+    empty list; a *keep-all* run (nothing culled) of a few spheres with a quarter of the
+    rays disabled; a range whose rays are all disabled (an empty run that skips pairs); and
     the first bundle's planes again, with extreme ray directions (arithmetic events,
     :func:`extreme_directions`).
     """
@@ -63,14 +64,33 @@ def scene_and_runs(config, n_tris, seed=0, size=1.2, extent=4.0):
     c = aimed_bundle(config, scene, seed + 3)
     off = with_enable(c, np.zeros(config.n_rays, bool))
     ids = rng.integers(0, s, max(4, s // 2))
+    keep = with_enable(c, rng.random(config.n_rays) >= 0.25)
     runs = [(a, None), (b, ids), (b2, np.arange(s // 3, s)), (c, np.zeros(0, np.int64)),
+            Run(keep, rng.permutation(s)[:min(s, 6)], keep_all=True),
             (off, np.arange(0, s)), (extreme_directions(config, a), np.arange(1, s // 2))]
     return scene, runs
 
 
 def model_runs(config, scene, runs):
-    return [run_bundle(config, scene, b, None if ids is None else np.asarray(ids))
-            for b, ids in runs]
+    return [run_bundle(config, scene, b, None if ids is None else np.asarray(ids),
+                       keep_all=keep_all) for b, ids, keep_all in map(as_run, runs)]
+
+
+def assert_keep_all(config, scene, runs, ref):
+    """Every keep-all run issued every enabled ray against every triangle of its spheres
+    (and skipped those of the disabled rays), where the culled run would have issued
+    fewer pairs."""
+    kept = [(run, r) for run, r in zip(map(as_run, runs), ref) if run.keep_all]
+    assert kept, "no keep-all run"
+    for run, (out, ctr) in kept:
+        ids = np.arange(scene.n_spheres) if run.sphere_ids is None else run.sphere_ids
+        tris = int(scene.tri_counts[np.asarray(ids)].sum())
+        enabled = int(run.bundle.enable.sum())
+        assert ctr["pairs_issued"] == enabled * tris
+        assert ctr["pairs_skipped"] == (config.n_rays - enabled) * tris
+        assert ctr["plane_tests"] == len(ids) * config.n_planes
+        culled = run_bundle(config, scene, run.bundle, np.asarray(ids))[1]
+        assert culled["pairs_issued"] < ctr["pairs_issued"], "the keep-all run culls nothing"
 
 
 def check_against_model(config, scene, runs, results, *, overlap=False):

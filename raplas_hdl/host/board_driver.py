@@ -25,8 +25,8 @@ from ..model.board_map import (BOARD_ID, CONTROL_BITS, COUNTER_REGS, MAP_VERSION
                                REGISTERS, RES_INFO_BITS, RESULT_REGS, STATUS_BITS,
                                cmd_start_word, config_from_words, config_words,
                                decode_result_words, result_beats)
-from ..model.memory_image import (BundleMemory, SceneMemory, UnitConfig, bundle_writes,
-                                  run_list_writes, scene_writes)
+from ..model.memory_image import (BundleMemory, Run, SceneMemory, UnitConfig, as_run,
+                                  bundle_writes, run_list_writes, scene_writes)
 
 __all__ = ["BoardDriver", "BoardMismatch"]
 
@@ -163,9 +163,11 @@ class BoardDriver:
         raise TimeoutError(f"{what}: no progress after {self.poll_limit} reads "
                            f"(status {self.status()})")
 
-    def start(self, first: int, count: int, bank: int = 0, indirect: bool = False) -> None:
-        """Queue a run, waiting for the command slot to be free."""
-        word = cmd_start_word(count, bank, indirect)
+    def start(self, first: int, count: int, bank: int = 0, indirect: bool = False,
+              keep_all: bool = False) -> None:
+        """Queue a run, waiting for the command slot to be free (``keep_all``: cull
+        nothing, for a bundle over the culling budget)."""
+        word = cmd_start_word(count, bank, indirect, keep_all)
         self._poll("waiting for the command slot", lambda: not self.status()["cmd_full"])
         self.write_reg("CMD_FIRST", first)
         self.write_reg("CMD_START", word)
@@ -237,17 +239,18 @@ class BoardDriver:
                 (int(ids[0]) if ids.size else 0), ids.size, False
         return run_list_writes(self.config, ids, bank), 0, ids.size, True
 
-    def run_bundle(self, bundle: BundleMemory, sphere_ids=None, bank: int = 0):
+    def run_bundle(self, bundle: BundleMemory, sphere_ids=None, bank: int = 0, *,
+                   keep_all: bool = False):
         """Load ``bundle`` into ``bank``, run ``sphere_ids`` (default all) against it.
 
         Returns ``(results, counters)`` as :func:`raplas_hdl.model.intersection.run_bundle`
         (counters of this run alone, plus ``cycles``).
         """
-        return self.run_runs([(bundle, sphere_ids)], first_bank=bank)[0]
+        return self.run_runs([Run(bundle, sphere_ids, keep_all)], first_bank=bank)[0]
 
     def run_runs(self, runs, scene: SceneMemory | None = None, *, prefetch: bool = True,
                  first_bank: int = 0):
-        """Run ``runs`` (``[(BundleMemory, sphere_ids or None), ...]``) one after another.
+        """Run ``runs`` one after another.
 
         A run whose bundle has the previous run's planes and rays reuses its bank and
         rewrites only the enable bits (the host's early-out); otherwise the bundle goes
@@ -258,7 +261,9 @@ class BoardDriver:
 
         Parameters
         ----------
-        runs : list of (BundleMemory, sphere_ids)
+        runs : list of Run, (BundleMemory, sphere_ids) or (BundleMemory, sphere_ids, keep_all)
+            See :class:`~raplas_hdl.model.memory_image.Run` (``sphere_ids`` None: every
+            sphere of the loaded scene; ``keep_all``: cull nothing).
         scene : SceneMemory, optional
             Loaded first when given.
 
@@ -271,14 +276,15 @@ class BoardDriver:
         runs = list(runs)
         plans = []
         bank, prev = first_bank ^ 1, None
-        for bundle, ids in runs:
+        for bundle, ids, keep_all in map(as_run, runs):
             bundle.check(self.config)
             enable_only = prev is not None and _same_geometry(bundle, prev)
             if not enable_only:
                 bank ^= 1
             prev = bundle
             list_writes, first, count, indirect = self._plan(ids, bank)
-            plans.append((bundle, bank, enable_only, list_writes, first, count, indirect))
+            plans.append((bundle, bank, enable_only, list_writes, first, count, indirect,
+                          keep_all))
         loaded = [False] * len(plans)
 
         def load(k):
@@ -289,10 +295,10 @@ class BoardDriver:
 
         out = []
         self.clear_counters()
-        for k, (_, bank, _, _, first, count, indirect) in enumerate(plans):
+        for k, (_, bank, _, _, first, count, indirect, keep_all) in enumerate(plans):
             if not loaded[k]:
                 load(k)
-            self.start(first, count, bank, indirect)
+            self.start(first, count, bank, indirect, keep_all)
             if prefetch and k + 1 < len(plans) and plans[k + 1][1] != bank:
                 load(k + 1)
             stream = self.collect()

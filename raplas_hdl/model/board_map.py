@@ -15,16 +15,18 @@ access is a whole word). The registers:
   :mod:`raplas_hdl.model.memory_image`); each write to ``MEM_DATA`` writes that word into
   the unit and adds 1 to ``MEM_ADDR``, so a record's consecutive fields need one
   ``MEM_ADDR`` write;
-- **command**: ``CMD_FIRST`` then ``CMD_START`` (:func:`cmd_start_word`) queue a run in a
-  one-deep slot; a ``CMD_START`` write while the slot is full is refused (``wb_err``,
-  sticky ``cmd_overrun``), so a driver waits for ``STATUS.cmd_full`` = 0;
+- **command**: ``CMD_FIRST`` then ``CMD_START`` (:func:`cmd_start_word`: count, bank,
+  indirect and keep_all, the record :data:`CMD_START_WORD`) queue a run in a one-deep
+  slot; a ``CMD_START`` write while the slot is full is refused (``wb_err``, sticky
+  ``cmd_overrun``), so a driver waits for ``STATUS.cmd_full`` = 0;
 - **status and control**: ``STATUS`` (:data:`STATUS_BITS`) and ``CONTROL``
   (:data:`CONTROL_BITS`);
 - **result window**: a read of ``RES_INFO`` pops the head beat of the unit's result stream
   into a latch and returns its flags with ``valid`` = 1, or returns 0 (nothing popped)
   when no beat is waiting; ``RES_IDS``, ``RES_T``, ``RES_U``, ``RES_V``, ``RES_DET`` then
-  read the latched beat. The unit stalls while the host does not pop (its stream's
-  back-pressure), so nothing is dropped however slow the host is;
+  read the latched beat (words: the records :data:`RES_INFO_WORD`, :data:`RES_IDS_WORD`;
+  :func:`result_beats` turns them into result beats). The unit stalls while the host does
+  not pop (its stream's back-pressure), so nothing is dropped however slow the host is;
 - **counters**: the unit's nine 32-bit counters, one word each (wrap around, zeroed by
   ``CONTROL.clear_counters``).
 
@@ -45,14 +47,15 @@ __all__ = ["Register", "REGISTER_MAP", "REGISTERS", "ADDR_BITS", "BOARD_ID", "MA
            "ROUNDING_CODES", "MODE_CODES", "config_words", "config_from_words",
            "cmd_start_word", "decode_cmd_start", "res_info_word", "res_ids_word",
            "decode_result_words", "result_beats", "markdown_table", "parse_markdown_table",
-           "CMD_START_WORD", "RES_INFO_WORD", "RES_IDS_WORD"]
+           "CMD_START_WORD", "RES_INFO_WORD", "RES_IDS_WORD", "CMD_KEEP_ALL_BIT"]
 
 #: Width of ``wb_adr`` (word address).
 ADDR_BITS = 8
 #: Value of the ``ID`` register: ASCII "RPLS".
 BOARD_ID = 0x52504C53
-#: Register-map version (major, minor), read as ``major << 16 | minor``.
-MAP_VERSION = (1, 0)
+#: Register-map version (major, minor), read as ``major << 16 | minor``. 1.1 added the
+#: ``keep_all`` bit of ``CMD_START``.
+MAP_VERSION = (1, 1)
 
 ROUNDING_CODES = {"rtz": 0, "rne": 1, "chop": 2}
 MODE_CODES = {"paper": 0, "conservative": 1}
@@ -69,6 +72,7 @@ CMD_START_WORD = Record("cmd_start", [
     Field("count", 24, "spheres in the run"),
     Field("bank", 1, "bundle bank"),
     Field("indirect", 1, "the spheres come from the bank's run list"),
+    Field("keep_all", 1, "cull nothing (the command's keep_all bit)"),
 ], "CMD_START register")
 #: ``RES_INFO``: the one-bit fields of a popped result beat (:data:`RESULT`'s).
 RES_INFO_WORD = Record("res_info", [Field("valid", 1, "a beat was popped")] + [
@@ -85,10 +89,11 @@ RES_INFO_BITS = {f.name: f.offset for f in _RES_INFO}
 #: ``RES_IDS``: tri_id in bits 19:0, ray_id in bits 31:20.
 RES_TRI_BITS = _RES_IDS["tri_id"].width
 RES_RAY_SHIFT = _RES_IDS["ray_id"].offset
-#: ``CMD_START``: count in bits 23:0, bank bit 24, indirect bit 25.
+#: ``CMD_START``: count in bits 23:0, bank bit 24, indirect bit 25, keep_all bit 26.
 CMD_COUNT_BITS = _CMD_START["count"].width
 CMD_BANK_BIT = _CMD_START["bank"].offset
 CMD_INDIRECT_BIT = _CMD_START["indirect"].offset
+CMD_KEEP_ALL_BIT = _CMD_START["keep_all"].offset
 
 
 def _bits(layout) -> str:
@@ -199,18 +204,19 @@ def config_from_words(words: dict) -> dict:
 
 
 # -- command and result words ---------------------------------------------------------------
-def cmd_start_word(count: int, bank: int, indirect: bool) -> int:
-    """The ``CMD_START`` word of a run of ``count`` spheres on ``bank``."""
+def cmd_start_word(count: int, bank: int, indirect: bool, keep_all: bool = False) -> int:
+    """The ``CMD_START`` word of a run of ``count`` spheres on ``bank`` (``keep_all``: cull
+    nothing)."""
     if not 0 <= int(count) < (1 << CMD_COUNT_BITS):
         raise ValueError(f"count must be 0 .. {(1 << CMD_COUNT_BITS) - 1}, not {count}")
     if bank not in (0, 1):
         raise ValueError(f"bank must be 0 or 1, not {bank!r}")
     return _CMD_START.pack({"count": int(count), "bank": int(bank),
-                            "indirect": int(bool(indirect))})
+                            "indirect": int(bool(indirect)), "keep_all": int(bool(keep_all))})
 
 
-def decode_cmd_start(word: int) -> tuple[int, int, int]:
-    """(count, bank, indirect) of a ``CMD_START`` word."""
+def decode_cmd_start(word: int) -> tuple[int, int, int, int]:
+    """(count, bank, indirect, keep_all) of a ``CMD_START`` word."""
     w = _CMD_START.unpack(int(word) & ((1 << _CMD_START.size) - 1))
     return tuple(int(w[name]) for name in CMD_START_WORD.names)
 

@@ -10,7 +10,8 @@ Order of the result stream (the unit's, by construction):
 
 1. spheres in the order of the run (``sphere_ids``, default every sphere in memory order);
 2. for each sphere, the rays (i, j) whose row plane i and column plane j both flag it,
-   rows ascending, then columns ascending;
+   rows ascending, then columns ascending; in a *keep-all* run (the command's ``keep_all``
+   bit) every plane flags every sphere, so every ray of the bundle is taken;
 3. for each such ray, if its enable bit is set, the sphere's triangles in list order; a
    disabled ray issues no pair (its pairs are counted as skipped).
 
@@ -102,7 +103,7 @@ def enumerate_pairs(config: UnitConfig, row_mask, col_mask, tri_counts, tri_list
 
 
 def run_bundle(config: UnitConfig, scene: SceneMemory, bundle: BundleMemory,
-               sphere_ids=None):
+               sphere_ids=None, *, keep_all: bool = False):
     """Run the unit once: the spheres ``sphere_ids`` against the bundle.
 
     Parameters
@@ -113,6 +114,12 @@ def run_bundle(config: UnitConfig, scene: SceneMemory, bundle: BundleMemory,
     sphere_ids : 1-D integer array, optional
         Spheres of the run, in order (default: all, in memory order). Repeats are allowed
         and give repeated pairs, as in the unit.
+    keep_all : bool
+        The run command's ``keep_all`` bit: no sphere is culled (every row and column mask
+        is all ones), so every enabled ray meets every triangle of every sphere of the run.
+        For a bundle over the culling budget (``raplas_hdl.host.culling``: the host must not
+        cull with it, and the unit's testers would cull with the same ``r'``). The counters
+        count as usual (``plane_tests`` too: the testers still test).
 
     Returns
     -------
@@ -140,9 +147,13 @@ def run_bundle(config: UnitConfig, scene: SceneMemory, bundle: BundleMemory,
     counters["spheres"] = int(ids.size)
     counters["plane_tests"] = int(ids.size) * config.n_planes
     if ids.size:
-        row_mask, col_mask = sphere_masks(bundle.plane_n, bundle.plane_p, scene.centres[ids],
-                                          scene.radii[ids], config.rows, config.cols,
-                                          config.fmt)
+        if keep_all:
+            row_mask = np.ones((ids.size, config.rows), bool)
+            col_mask = np.ones((ids.size, config.cols), bool)
+        else:
+            row_mask, col_mask = sphere_masks(bundle.plane_n, bundle.plane_p,
+                                              scene.centres[ids], scene.radii[ids],
+                                              config.rows, config.cols, config.fmt)
         ray_ids, tri_ids, skipped = enumerate_pairs(
             config, np.asarray(row_mask, bool), np.asarray(col_mask, bool),
             scene.tri_counts[ids], scene.tri_lists[ids], bundle.enable)

@@ -33,18 +33,30 @@ region      name    bank   index                      field
 ==========  ======  =====  =========================  ==============================
 
 Writes to an index outside the memory's depth, or to an unused field, are ignored.
+
+Runs
+----
+A *run* (:class:`Run`) is what one command of the unit's ``cmd`` stream (the record
+:data:`raplas_hdl.model.records.CMD`) does: a bundle (already in a bank), the spheres to
+test against it, and the ``keep_all`` bit. ``keep_all`` belongs to the run, not to the
+:class:`BundleMemory`, because it is a bit of the command, not of the memories: the same
+bundle in the same bank can be run culled and unculled, and a keep-all run costs no memory
+write. Drivers take runs as ``Run`` or as plain ``(bundle, sphere_ids)`` and
+``(bundle, sphere_ids, keep_all)`` tuples (:func:`as_run`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from ..fp.format import FP24, FPFormat
 
 __all__ = ["UnitConfig", "SceneMemory", "BundleMemory", "REGIONS", "write_address",
-           "scene_writes", "bundle_writes", "run_list_writes", "COUNTER_NAMES", "MODES"]
+           "scene_writes", "bundle_writes", "run_list_writes", "COUNTER_NAMES", "MODES",
+           "Run", "as_run"]
 
 #: Ray-triangle modes (``mode`` of the ray-triangle unit).
 MODES = ("paper", "conservative")
@@ -324,6 +336,36 @@ class BundleMemory:
             a = getattr(self, name)
             if a.size and a.max() > config.fmt.mask:
                 raise ValueError(f"{name} holds patterns wider than {config.fmt}")
+
+
+class Run(NamedTuple):
+    """One run of the unit: ``bundle`` against ``sphere_ids`` (None: every sphere of the
+    scene, in memory order), with the command's ``keep_all`` bit (no culling)."""
+
+    bundle: BundleMemory
+    sphere_ids: object = None
+    keep_all: bool = False
+
+
+def as_run(run) -> Run:
+    """A :class:`Run` from a ``Run``, ``(bundle, sphere_ids)`` or
+    ``(bundle, sphere_ids, keep_all)``.
+
+    Raises
+    ------
+    ValueError
+        For anything else.
+    """
+    if isinstance(run, Run):
+        return run
+    if isinstance(run, tuple) and len(run) in (2, 3):
+        out = Run(*run)
+    else:
+        raise ValueError("a run is (bundle, sphere_ids) or (bundle, sphere_ids, keep_all), "
+                         f"not {run!r}")
+    if not isinstance(out.bundle, BundleMemory):
+        raise ValueError(f"a run's bundle must be a BundleMemory, not {out.bundle!r}")
+    return out._replace(keep_all=bool(out.keep_all))
 
 
 # -- address map ----------------------------------------------------------------------------

@@ -526,6 +526,8 @@ CMD = Record("cmd", [
     Field("count", "run_count_bits", "spheres in the run (0 allowed)"),
     Field("bank", 1, "bundle bank (Plane Memory, Ray Memory, run list)"),
     Field("indirect", 1, "the spheres come from the bank's run list"),
+    Field("keep_all", 1, "no culling: every sphere of the run passes the plane test (row and "
+                         "column masks all ones), for a bundle over the culling budget"),
 ], "intersection unit command stream (cmd)")
 
 _COUNTER_MEANINGS = {

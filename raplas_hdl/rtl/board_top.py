@@ -33,9 +33,9 @@ from amaranth.lib.cdc import ResetSynchronizer
 from amaranth.lib.wiring import In, Out
 
 from ..model.board_map import (ADDR_BITS, BOARD_ID, CMD_BANK_BIT, CMD_COUNT_BITS,
-                               CMD_INDIRECT_BIT, CONTROL_BITS, COUNTER_REGS, MAP_VERSION,
-                               REGISTERS, RES_INFO_BITS, RES_RAY_SHIFT, STATUS_BITS,
-                               config_words)
+                               CMD_INDIRECT_BIT, CMD_KEEP_ALL_BIT, CONTROL_BITS,
+                               COUNTER_REGS, MAP_VERSION, REGISTERS, RES_INFO_BITS,
+                               RES_RAY_SHIFT, STATUS_BITS, config_words)
 from ..model.memory_image import UnitConfig
 from .intersection import IntersectionUnit
 
@@ -120,6 +120,7 @@ class BoardTop(wiring.Component):
         cmd_count = Signal(CMD_COUNT_BITS)
         cmd_bank = Signal()
         cmd_ind = Signal()
+        cmd_keep = Signal()
         overrun = Signal()
         latch = Signal(unit.result_layout)
 
@@ -127,7 +128,8 @@ class BoardTop(wiring.Component):
                      unit.cmd.payload.first.eq(cmd_first),
                      unit.cmd.payload.count.eq(cmd_count),
                      unit.cmd.payload.bank.eq(cmd_bank),
-                     unit.cmd.payload.indirect.eq(cmd_ind)]
+                     unit.cmd.payload.indirect.eq(cmd_ind),
+                     unit.cmd.payload.keep_all.eq(cmd_keep)]
         with m.If(unit.cmd.valid & unit.cmd.ready):
             m.d.sync += cmd_valid.eq(0)
 
@@ -191,7 +193,8 @@ class BoardTop(wiring.Component):
                         w = self.wb_dat_w
                         m.d.sync += [cmd_valid.eq(1), cmd_count.eq(w[:CMD_COUNT_BITS]),
                                      cmd_bank.eq(w[CMD_BANK_BIT]),
-                                     cmd_ind.eq(w[CMD_INDIRECT_BIT])]
+                                     cmd_ind.eq(w[CMD_INDIRECT_BIT]),
+                                     cmd_keep.eq(w[CMD_KEEP_ALL_BIT])]
             with m.Case(regs["RES_INFO"]):
                 m.d.comb += mapped.eq(1)
                 with m.If(unit.o.valid):

@@ -3,8 +3,10 @@
 The host writes the memories through one write port (address map in
 :mod:`raplas_hdl.model.memory_image`) and starts *runs* through the ``cmd`` stream; each run
 tests a range (or a list) of spheres against the bundle in one of two banks, and its
-results leave through the ``o`` stream, the last beat of the run marked ``last``. The
-golden model is :func:`raplas_hdl.model.intersection.run_bundle`.
+results leave through the ``o`` stream, the last beat of the run marked ``last``. A run
+with the ``keep_all`` bit culls nothing: every sphere passes the plane test. The golden
+model is :func:`raplas_hdl.model.intersection.run_bundle`. The ports' payloads are the
+records ``CMD``, ``RESULT`` and ``COUNTERS`` of :mod:`raplas_hdl.model.records`.
 
 Stages, in data-flow order (every boundary is a stall pipeline or a FIFO; no ready signal
 reaches further back than the nearest FIFO's level):
@@ -19,12 +21,15 @@ reaches further back than the nearest FIFO's level):
    a run.
 2. **Sphere feeder** (2-stage stall pipeline): run position -> [run list read] ->
    [Sphere Memory read] -> array input, one sphere per cycle. After the run's spheres it
-   sends one *marker* sphere (an ID bit) that travels in order behind them.
+   sends one *marker* sphere (an ID bit) that travels in order behind them. The array's
+   sphere ID carries the sphere ID, the marker bit, the bank and the run's ``keep_all``
+   bit, from the low bits up.
 3. **Plane-sphere array** (:class:`~raplas_hdl.rtl.plane_sphere.PlaneSphereArray`): sphere ID,
-   row mask, column mask.
+   row mask, column mask. The array tests every sphere, ``keep_all`` or not.
 4. **Ray iterator**: for each sphere with a hit row, a hit column and triangles, one ray
    per cycle, rows ascending, columns ascending (priority encoders on the masks); one ray
-   job for a marker.
+   job for a marker. A sphere whose ``keep_all`` bit is set takes all-ones masks instead
+   of the array's: every ray of the bundle.
 5. **Enable lookup** (Ray Memory's enable bits): a disabled ray is dropped here and its
    ``tris_per_sphere``-or-fewer pairs are counted as skipped in one cycle; enabled rays go
    into a 4-deep job FIFO.
@@ -115,7 +120,8 @@ class IntersectionUnit(wiring.Component):
         :mod:`raplas_hdl.model.memory_image`).
     cmd : In(stream.Signature(cmd_layout))
         Start a run: ``first`` (sphere ID, or run-list position when ``indirect``),
-        ``count`` (spheres, 0 allowed), ``bank`` (bundle bank), ``indirect``.
+        ``count`` (spheres, 0 allowed), ``bank`` (bundle bank), ``indirect``, ``keep_all``
+        (cull nothing: the masks of every sphere of the run are all ones).
     o : Out(stream.Signature(result_layout))
         Results: ``ray_id``, ``tri_id``, ``hit``, ``t``, ``u``, ``v``, ``det``, ``flags``,
         ``last``, ``empty``.
@@ -189,7 +195,7 @@ class IntersectionUnit(wiring.Component):
 
         cfg = self._cfg
         psa = PlaneSphereArray(cfg.fmt, rows=cfg.rows, cols=cfg.cols, testers=cfg.n_testers,
-                               sphere_id_bits=cfg.sphere_id_bits + 2,
+                               sphere_id_bits=cfg.sphere_id_bits + 3,
                                multiplier=self._multiplier)
         rtu = RayTriangleUnit(cfg.fmt, mode=cfg.mode, margin_scale=cfg.margin_scale,
                               ray_id_bits=cfg.ray_id_bits + 1, tri_id_bits=cfg.tri_id_bits,
@@ -279,6 +285,7 @@ class IntersectionUnit(wiring.Component):
         run_count = Signal(cfg.run_count_bits)
         run_bank = Signal()
         run_ind = Signal()
+        run_keep = Signal()
         pos = Signal(cfg.run_count_bits)
         loaded_bank = Signal()
         ld_k = Signal(range(n_planes))
@@ -291,6 +298,8 @@ class IntersectionUnit(wiring.Component):
         f2_marker = Signal(name="f2_marker")
         f1_bank = Signal(name="f1_bank")
         f2_bank = Signal(name="f2_bank")
+        f1_keep = Signal(name="f1_keep")
+        f2_keep = Signal(name="f2_keep")
         f1_ind = Signal()
         f1_sid = Signal(sid_bits, name="f1_sid")
         f2_sid = Signal(sid_bits, name="f2_sid")
@@ -326,7 +335,8 @@ class IntersectionUnit(wiring.Component):
                 with m.If(self.cmd.valid):
                     p = self.cmd.payload
                     m.d.sync += [run_first.eq(p.first), run_count.eq(p.count),
-                                 run_bank.eq(p.bank), run_ind.eq(p.indirect), pos.eq(0)]
+                                 run_bank.eq(p.bank), run_ind.eq(p.indirect),
+                                 run_keep.eq(p.keep_all), pos.eq(0)]
                     stale = (p.bank != loaded_bank) | new_dirty.bit_select(p.bank, 1)
                     with m.If(stale):
                         m.next = "DRAIN"
@@ -363,11 +373,11 @@ class IntersectionUnit(wiring.Component):
                      sph_rp.addr.eq(f1_sid_eff), sph_rp.en.eq(f_adv)]
         with m.If(f_adv):
             m.d.sync += [f1_v.eq(issue), f1_marker.eq(issue_marker), f1_bank.eq(run_bank),
-                         f1_ind.eq(run_ind), f1_sid.eq(sid_direct),
+                         f1_keep.eq(run_keep), f1_ind.eq(run_ind), f1_sid.eq(sid_direct),
                          f2_v.eq(f1_v), f2_marker.eq(f1_marker), f2_bank.eq(f1_bank),
-                         f2_sid.eq(f1_sid_eff)]
+                         f2_keep.eq(f1_keep), f2_sid.eq(f1_sid_eff)]
         m.d.comb += [psa.i.valid.eq(f2_v),
-                     psa.i.payload.id.eq(Cat(f2_sid, f2_marker, f2_bank)),
+                     psa.i.payload.id.eq(Cat(f2_sid, f2_marker, f2_bank, f2_keep)),
                      psa.i.payload.c.eq(sph_rp.data[:3 * w]),
                      psa.i.payload.r.eq(sph_rp.data[3 * w:4 * w])]
         with m.If(f2_v & psa.i.ready & ~f2_marker):
@@ -403,10 +413,15 @@ class IntersectionUnit(wiring.Component):
         m.d.comb += [accept.eq(psa.o.valid & psa.o.ready),
                      psa.o.ready.eq(~it_busy | (it_done & it_adv)),
                      cnt_rp.en.eq(psa.o.ready)]
+        # keep_all: the array's masks are replaced by all ones (every ray of the bundle)
+        o_keep = o_id[sid_bits + 2]
+        row_mask = Signal(cfg.rows)
+        col_mask = Signal(cfg.cols)
+        m.d.comb += [row_mask.eq(Mux(o_keep, (1 << cfg.rows) - 1, psa.o.payload.row_mask)),
+                     col_mask.eq(Mux(o_keep, (1 << cfg.cols) - 1, psa.o.payload.col_mask))]
         with m.If(accept):
-            p = psa.o.payload
-            m.d.sync += [it_busy.eq(1), it_rows.eq(p.row_mask), it_colmask.eq(p.col_mask),
-                         it_cols.eq(p.col_mask), it_sid.eq(o_id[:sid_bits]),
+            m.d.sync += [it_busy.eq(1), it_rows.eq(row_mask), it_colmask.eq(col_mask),
+                         it_cols.eq(col_mask), it_sid.eq(o_id[:sid_bits]),
                          it_marker.eq(o_id[sid_bits]), it_bank.eq(o_id[sid_bits + 1])]
         with m.Elif(it_busy & it_adv):
             with m.If(it_done):

@@ -18,9 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from raplas_hdl.fp.format import FPFormat
 from raplas_hdl.model.intersection import RESULT_DTYPE
-from raplas_hdl.model.memory_image import BundleMemory, SceneMemory, UnitConfig
+from raplas_hdl.model.memory_image import BundleMemory, Run, SceneMemory, UnitConfig, as_run
 
 __all__ = ["board_verilog", "run_board", "encode_stimulus", "decode_stimulus", "TOPLEVEL"]
 
@@ -71,12 +70,14 @@ def board_verilog(config: UnitConfig) -> str:
 
 # -- stimulus ---------------------------------------------------------------------------------
 def encode_stimulus(scene: SceneMemory, runs) -> dict:
-    """Arrays (for ``np.savez``) holding the scene and every run's bundle and sphere IDs."""
+    """Arrays (for ``np.savez``) holding the scene and every run's bundle, sphere IDs and
+    ``keep_all`` bit (runs as :func:`~raplas_hdl.model.memory_image.as_run` takes them)."""
     stim = {f"scene_{f}": getattr(scene, f) for f in _SCENE_FIELDS}
-    for k, (bundle, ids) in enumerate(runs):
+    for k, (bundle, ids, keep_all) in enumerate(map(as_run, runs)):
         for f in _BUNDLE_FIELDS:
             stim[f"run{k}_{f}"] = getattr(bundle, f)
         stim[f"run{k}_all"] = np.array(int(ids is None))
+        stim[f"run{k}_keep_all"] = np.array(int(keep_all))
         stim[f"run{k}_ids"] = np.zeros(0, np.int64) if ids is None else \
             np.asarray(ids, np.int64).reshape(-1)
     stim["n_runs"] = np.array(len(runs))
@@ -84,30 +85,30 @@ def encode_stimulus(scene: SceneMemory, runs) -> dict:
 
 
 def decode_stimulus(meta: dict, stim: dict):
-    """``(config, scene, runs)`` from :func:`encode_stimulus` arrays and the run's meta."""
-    p = dict(meta["params"])
-    fmt = FPFormat(p.pop("exp_bits"), p.pop("man_bits"), p.pop("rounding"))
-    config = UnitConfig(fmt=fmt, **p)
+    """``(config, scene, runs)`` from :func:`encode_stimulus` arrays and the run's meta
+    (runs as :class:`~raplas_hdl.model.memory_image.Run`)."""
+    config = UnitConfig.from_params(meta["params"])
     scene = SceneMemory(*[stim[f"scene_{f}"] for f in _SCENE_FIELDS])
     runs = []
     for k in range(int(stim["n_runs"])):
         bundle = BundleMemory(*[stim[f"run{k}_{f}"] for f in _BUNDLE_FIELDS])
         ids = None if int(stim[f"run{k}_all"]) else stim[f"run{k}_ids"]
-        runs.append((bundle, ids))
+        runs.append(Run(bundle, ids, bool(int(stim[f"run{k}_keep_all"]))))
     return config, scene, runs
 
 
 def run_board(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
               seed: int = 1, gap_density: float = 0.3, prefetch: bool = True,
               build_key: str | None = None):
-    """Run ``runs`` (``[(BundleMemory, sphere_ids or None), ...]``) through the board top.
+    """Run ``runs`` through the board top.
 
     Parameters
     ----------
     simulator : {"icarus", "verilator"}
     config : UnitConfig
     scene : SceneMemory
-    runs : list of (BundleMemory, sphere_ids or None)
+    runs : list of Run, (BundleMemory, sphere_ids or None) or (..., keep_all)
+        See :class:`~raplas_hdl.model.memory_image.Run`.
     seed, gap_density : int, float
         The bus master's random idle cycles (see :mod:`raplas_hdl.sim.tb_board`).
     prefetch : bool

@@ -141,7 +141,8 @@ class UnitTB:
                 counters[k - 1] = await self.read_counters()
             dut.cmd__payload.value = self.cmd.pack(
                 {"first": stim["run_first"][k], "count": stim["run_count"][k],
-                 "bank": banks[k], "indirect": stim["run_indirect"][k]})
+                 "bank": banks[k], "indirect": stim["run_indirect"][k],
+                 "keep_all": stim["run_keep_all"][k]})
             dut.cmd__valid.value = 1
             while True:   # cmd.ready depends only on registers: stable at the falling edge
                 ready = int(dut.cmd__ready.value)

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from raplas_hdl.fp import model as fpm
-from raplas_hdl.model.memory_image import (BundleMemory, SceneMemory, UnitConfig,
+from raplas_hdl.model.memory_image import (BundleMemory, SceneMemory, UnitConfig, as_run,
                                            bundle_writes, run_list_writes, scene_writes)
 from raplas_hdl.model.records import COUNTERS, RESULT
 
@@ -191,17 +191,20 @@ def _same_geometry(a: BundleMemory, b: BundleMemory) -> bool:
 def encode_runs(config: UnitConfig, scene: SceneMemory, runs, *, overlap: bool = False):
     """Stimulus of a simulation as a dict of arrays (saved with ``np.savez``).
 
-    ``runs`` is a list of ``(bundle, sphere_ids)``; a run whose bundle has the previous
-    run's planes and rays reuses its bank and rewrites only the enable bits (the host's
-    early-out batches), otherwise the bundle goes into the other bank. Contiguous
-    ``sphere_ids`` start a range run, others a run-list run.
+    ``runs`` is a list of :class:`~raplas_hdl.model.memory_image.Run`,
+    ``(bundle, sphere_ids)`` or ``(bundle, sphere_ids, keep_all)``; a run whose bundle has
+    the previous run's planes and rays reuses its bank and rewrites only the enable bits
+    (the host's early-out batches), otherwise the bundle goes into the other bank.
+    Contiguous ``sphere_ids`` start a range run, others a run-list run. Each run's command
+    fields are ``run_first``, ``run_count``, ``run_bank``, ``run_indirect`` and
+    ``run_keep_all``.
     """
     wa, wd = scene_writes(config, scene)
     stim = {"scene_addr": wa, "scene_data": wd}
-    banks, firsts, counts, inds, offsets = [], [], [], [], [0]
+    banks, firsts, counts, inds, keeps, offsets = [], [], [], [], [], [0]
     addrs, datas = [], []
     bank, prev = 1, None
-    for bundle, ids in runs:
+    for bundle, ids, keep_all in map(as_run, runs):
         ids = (np.arange(scene.n_spheres) if ids is None
                else np.asarray(ids, dtype=np.int64).reshape(-1))
         if prev is not None and _same_geometry(bundle, prev):
@@ -220,11 +223,13 @@ def encode_runs(config: UnitConfig, scene: SceneMemory, runs, *, overlap: bool =
         firsts.append(first)
         counts.append(ids.size)
         inds.append(ind)
+        keeps.append(int(keep_all))
         addrs.append(a)
         datas.append(d)
         offsets.append(offsets[-1] + a.size)
     stim.update(run_bank=np.array(banks, np.uint32), run_first=np.array(firsts, np.uint32),
                 run_count=np.array(counts, np.uint32), run_indirect=np.array(inds, np.uint32),
+                run_keep_all=np.array(keeps, np.uint32),
                 run_addr=np.concatenate(addrs).astype(np.uint32) if addrs else
                 np.zeros(0, np.uint32),
                 run_data=np.concatenate(datas).astype(np.uint32) if datas else
@@ -244,14 +249,16 @@ def decode_results(config: UnitConfig, beats) -> np.ndarray:
 def run_runs(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
              seed: int = 1, ready_density: float = 1.0, overlap: bool = False,
              build_key: str | None = None):
-    """Run ``runs`` (``[(BundleMemory, sphere_ids), ...]``) through the unit's Verilog.
+    """Run ``runs`` through the unit's Verilog.
 
     Parameters
     ----------
     simulator : {"icarus", "verilator"}
     config : UnitConfig
     scene : SceneMemory
-    runs : list of (BundleMemory, sphere_ids or None)
+    runs : list of Run, (BundleMemory, sphere_ids or None) or (..., keep_all)
+        See :class:`~raplas_hdl.model.memory_image.Run` (``keep_all``: the run culls
+        nothing).
     seed : int
         Seed of the testbench's back-pressure.
     ready_density : float
@@ -274,7 +281,7 @@ def run_runs(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
     """
     from raplas_hdl.sim.runner import run_cocotb
 
-    runs = list(runs)
+    runs = [as_run(r) for r in runs]
     if not runs:
         return []
     scene.check(config)
@@ -286,7 +293,7 @@ def run_runs(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
         np.savez(stim_path, **stim)
         pairs_bound = sum(int(np.asarray(scene.tri_counts)[
             np.arange(scene.n_spheres) if ids is None else np.asarray(ids, np.int64)].sum())
-            for _, ids in runs) * config.n_rays
+            for _, ids, _ in runs) * config.n_rays
         max_cycles = int(4 * (stim["scene_addr"].size + stim["run_addr"].size)
                          + (pairs_bound + 64 * len(runs) + scene.n_spheres * len(runs)
                             * (1 + config.n_planes // config.n_testers)) * 4 / ready_density
