@@ -1,7 +1,7 @@
 """Scalar numba kernels of the FP contract (``shared/spec/fp-format.md``), bit for bit.
 
-Every kernel is an ``@njit(cache=True)`` function of plain integers,
-generic in the format: ``e`` (exponent bits), ``m`` (fraction bits) and ``rmode`` (:data:`RTZ`,
+Every kernel is an ``@njit(cache=True)`` function of plain integers, generic in the
+format: ``e`` (exponent bits), ``m`` (fraction bits) and ``rmode`` (:data:`RTZ`,
 :data:`RNE` or :data:`CHOP`, see :func:`rmode_code`) are runtime integers. They are
 meant to be called from other numba code (the unit models compose dozens of them per
 element inside one compiled loop) as well as from :mod:`raplas_hdl.fp.model`.
@@ -9,10 +9,16 @@ element inside one compiled loop) as well as from :mod:`raplas_hdl.fp.model`.
 Arithmetic kernels return ``(bits, flags)``: ``bits`` a ``uint32`` pattern of the
 format, ``flags`` a ``uint8`` mask of :data:`~raplas_hdl.fp.format.FLAG_OVERFLOW`,
 :data:`~raplas_hdl.fp.format.FLAG_UNDERFLOW` and :data:`~raplas_hdl.fp.format.FLAG_INVALID`.
-Kernels are inlined into their numba callers (``inline="always"``): a call costs no
-function call, and the caller's loop is optimised as a whole. Caveat of numba's disk
-cache: a caller's cache entry does not notice edits to these kernels; after changing
-this file delete the ``*.nbi``/``*.nbc`` files in the callers' ``__pycache__``.
+
+Compile cost: the kernels are *not* inlined at numba's IR level (``inline="always"``):
+numba would type and lower a kernel's whole body again at every call site (the
+ray-triangle loop's 33 operations took 165 s of CPU to compile that way). Each kernel is
+compiled once per signature (a fraction of a second) and LLVM inlines the calls in the
+optimised callers; callers that pass the format as compile-time constants get its shifts
+and masks folded (:mod:`raplas_hdl.fp.fast` has the branch-free common case for them).
+Caveat of numba's disk cache: a caller's cache entry does not notice edits to these
+kernels; :mod:`raplas_hdl.fp.numba_cache` drops the callers' entries when this file
+changes.
 
 Operands must be valid patterns of the format (at most ``1 + e + m`` bits); the
 NumPy API checks that, the kernels do not.

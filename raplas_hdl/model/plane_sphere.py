@@ -75,6 +75,20 @@ def plane_keep(nx, ny, nz, p, cx, cy, cz, r, E, M, R):
     return plane_exact(nx, ny, nz, p, cx, cy, cz, r, E, M, R)[1]
 
 
+@njit(nogil=True, cache=True)
+def _generic_loop(n, p, c, r, lo, hi, d_out, keep_out, fl_out, e, m, rmode):
+    """Every (sphere, plane) pair of spheres ``lo .. hi-1``, the format as runtime integers
+    (compiled once for every format; large calls take :func:`_flat_kernel`)."""
+    for s in range(lo, hi):
+        for k in range(n.shape[0]):
+            d_out[s, k], keep_out[s, k], fl_out[s, k] = plane_exact(
+                n[k, 0], n[k, 1], n[k, 2], p[k], c[s, 0], c[s, 1], c[s, 2], r[s], e, m, rmode)
+
+
+#: Calls with at least this many (sphere, plane) pairs use the loop specialised to their
+#: format.
+SPECIALISE_MIN = 1 << 18
+
 _FLAT = {}
 
 
@@ -132,9 +146,15 @@ def _run(planes_n, planes_p, centres, radii, fmt: FPFormat):
     d = np.empty(shape, np.uint32)
     keep = np.empty(shape, np.bool_)
     fl = np.empty(shape, np.uint8)
-    loop = _flat_kernel(fmt)
-    run_chunks(c.shape[0], lambda lo, hi: loop(n, p, c, r, lo, hi, d, keep, fl),
-               min_chunk=max(1, 8192 // max(1, n.shape[0])))
+    chunk = max(1, 8192 // max(1, n.shape[0]))
+    if d.size >= SPECIALISE_MIN:
+        loop = _flat_kernel(fmt)
+        run_chunks(c.shape[0], lambda lo, hi: loop(n, p, c, r, lo, hi, d, keep, fl),
+                   min_chunk=chunk)
+    else:
+        key = (fmt.exp_bits, fmt.man_bits, rmode_code(fmt))
+        run_chunks(c.shape[0], lambda lo, hi: _generic_loop(n, p, c, r, lo, hi, d, keep, fl,
+                                                            *key), min_chunk=chunk)
     return d, keep, fl
 
 

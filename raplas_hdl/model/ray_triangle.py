@@ -228,6 +228,31 @@ def pair_fast(o, oi, d, di, v0, e1, e2, nn, ti, E, M, R, cons, mc):
     return True, h, np.uint32(tp), np.uint32(up), np.uint32(vp), np.uint32(det)
 
 
+@njit(nogil=True, cache=True)
+def _generic_loop(o, d, v0, e1, e2, nn, mc, lo, hi, hit, t_o, u_o, v_o, det_o, cnt_o, e, m, r,
+                  cons):
+    """The per-pair loop of :func:`intersect` with the format as runtime integers: compiled
+    once for every format (small calls; large ones take :func:`_flat_kernel`)."""
+    for i in range(lo, hi):
+        ok, h, tp, up, vp, det = pair_fast(o, i, d, i, v0, e1, e2, nn, i, e, m, r, cons, mc)
+        cnt = np.int64(0)
+        if not ok:
+            h, tp, up, vp, det, cnt = pair_exact(o, i, d, i, v0, e1, e2, nn, i, e, m, r, cons,
+                                                 mc)
+        hit[i] = h
+        t_o[i] = tp
+        u_o[i] = up
+        v_o[i] = vp
+        det_o[i] = det
+        cnt_o[i, 0] = cnt & 0xFF
+        cnt_o[i, 1] = (cnt >> 8) & 0xFF
+        cnt_o[i, 2] = (cnt >> 16) & 0xFF
+
+
+#: Calls with at least this many pairs use the loop specialised to their format (a compile
+#: of about a second per format, once per machine, for about three times the speed).
+SPECIALISE_MIN = 1 << 18
+
 _FLAT = {}
 
 
@@ -319,8 +344,13 @@ def intersect(o, d, v0, e1, e2, n, fmt: FPFormat, mode: str = "paper",
     hit = np.empty(count, dtype=np.bool_)
     outs = [np.empty(count, dtype=np.uint32) for _ in range(4)]
     counts = np.empty((count, 3), dtype=np.uint8)
-    loop = _flat_kernel(fmt, mode)
-    run_chunks(count, lambda lo, hi: loop(*arrs, mc, lo, hi, hit, *outs, counts))
+    if count >= SPECIALISE_MIN:
+        loop = _flat_kernel(fmt, mode)
+        run_chunks(count, lambda lo, hi: loop(*arrs, mc, lo, hi, hit, *outs, counts))
+    else:
+        key = (fmt.exp_bits, fmt.man_bits, rmode_code(fmt), conservative)
+        run_chunks(count, lambda lo, hi: _generic_loop(*arrs, mc, lo, hi, hit, *outs, counts,
+                                                       *key))
     fl = ((counts[:, 0] != 0) * FLAG_OVERFLOW | (counts[:, 1] != 0) * FLAG_UNDERFLOW
           | (counts[:, 2] != 0) * FLAG_INVALID).astype(np.uint8)
     return {"hit": hit, "t": outs[0], "u": outs[1], "v": outs[2], "det": outs[3],
