@@ -130,6 +130,10 @@ def test_model_keep_all_over_budget(scene):
     assert ctr["spheres"] == 12 and ctr["plane_tests"] == 12 * CFG.n_planes
     assert ctr["pairs_issued"] == (CFG.n_rays - disabled) * tris
     assert ctr["pairs_skipped"] == disabled * tris
+    # a bundle marked keep_all runs the same without the argument
+    marked = BundleMemory(b.plane_n, b.plane_p, b.ray_o, b.ray_d, b.enable, keep_all=True)
+    out2, ctr2 = run_bundle(CFG, scene, marked, ids)
+    assert np.array_equal(out2, out) and ctr2 == ctr
     # the same run culled keeps fewer pairs: the bit is what lets them through
     _, culled = run_bundle(CFG, scene, b, ids)
     assert culled["pairs_issued"] < ctr["pairs_issued"]
@@ -152,6 +156,9 @@ def test_runs():
     assert as_run((b, None)) == Run(b, None, False)
     assert as_run((b, [1, 2], 1)).keep_all is True
     assert as_run(Run(b, keep_all=True)) == (b, None, True)
+    marked = BundleMemory(b.plane_n, b.plane_p, b.ray_o, b.ray_d, b.enable, keep_all=True)
+    assert as_run((marked, None)).keep_all is True          # the bundle's mark
+    assert as_run(Run(marked, [1], False)).keep_all is True
     with pytest.raises(ValueError, match="a run is"):
         as_run((b,))
     with pytest.raises(ValueError, match="BundleMemory"):

@@ -119,7 +119,9 @@ def run_bundle(config: UnitConfig, scene: SceneMemory, bundle: BundleMemory,
         is all ones), so every enabled ray meets every triangle of every sphere of the run.
         For a bundle over the culling budget (``raplas_hdl.host.culling``: the host must not
         cull with it, and the unit's testers would cull with the same ``r'``). The counters
-        count as usual (``plane_tests`` too: the testers still test).
+        count as usual (``plane_tests`` too: the testers still test). A bundle marked
+        :attr:`~raplas_hdl.model.memory_image.BundleMemory.keep_all` runs so whatever this
+        argument says.
 
     Returns
     -------
@@ -147,7 +149,7 @@ def run_bundle(config: UnitConfig, scene: SceneMemory, bundle: BundleMemory,
     counters["spheres"] = int(ids.size)
     counters["plane_tests"] = int(ids.size) * config.n_planes
     if ids.size:
-        if keep_all:
+        if keep_all or bundle.keep_all:
             row_mask = np.ones((ids.size, config.rows), bool)
             col_mask = np.ones((ids.size, config.cols), bool)
         else:

@@ -38,11 +38,14 @@ Runs
 ----
 A *run* (:class:`Run`) is what one command of the unit's ``cmd`` stream (the record
 :data:`raplas_hdl.model.records.CMD`) does: a bundle (already in a bank), the spheres to
-test against it, and the ``keep_all`` bit. ``keep_all`` belongs to the run, not to the
-:class:`BundleMemory`, because it is a bit of the command, not of the memories: the same
-bundle in the same bank can be run culled and unculled, and a keep-all run costs no memory
-write. Drivers take runs as ``Run`` or as plain ``(bundle, sphere_ids)`` and
-``(bundle, sphere_ids, keep_all)`` tuples (:func:`as_run`).
+test against it, and the ``keep_all`` bit (cull nothing). The bit is the command's, so it
+is per run: the same bundle in the same bank can be run culled and unculled, and a
+keep-all run writes no memory. A host that finds a bundle over the culling budget marks
+the bundle instead (:attr:`BundleMemory.keep_all`, not written into the unit): every run
+of a marked bundle is sent with the bit set. So a run culls nothing when its own
+``keep_all`` or its bundle's is set (:func:`as_run`, and ``run_bundle``). Drivers take runs
+as ``Run`` or as plain ``(bundle, sphere_ids)`` and ``(bundle, sphere_ids, keep_all)``
+tuples.
 """
 
 from __future__ import annotations
@@ -298,6 +301,9 @@ class BundleMemory:
         Ray origins and unit directions; ray (i, j) is row ``i*cols + j``.
     enable : (rows*cols,) bool, optional
         Enable bit of each ray (default: all enabled).
+    keep_all : bool
+        The host's mark for a bundle over the culling budget: every run of it is sent with
+        the command's ``keep_all`` bit (nothing culled). Not a memory of the unit.
     """
 
     plane_n: np.ndarray
@@ -305,6 +311,7 @@ class BundleMemory:
     ray_o: np.ndarray
     ray_d: np.ndarray
     enable: np.ndarray | None = None
+    keep_all: bool = False
 
     def __post_init__(self):
         self.plane_n = _u32("plane_n", self.plane_n, (3,))
@@ -323,6 +330,7 @@ class BundleMemory:
                 raise ValueError(f"enable must have shape ({self.ray_o.shape[0]},), "
                                  f"not {en.shape}")
             self.enable = en.astype(bool)
+        self.keep_all = bool(self.keep_all)
 
     def check(self, config: UnitConfig):
         """Raise ``ValueError`` if the bundle does not fit the unit ``config``."""
@@ -340,7 +348,8 @@ class BundleMemory:
 
 class Run(NamedTuple):
     """One run of the unit: ``bundle`` against ``sphere_ids`` (None: every sphere of the
-    scene, in memory order), with the command's ``keep_all`` bit (no culling)."""
+    scene, in memory order), with the command's ``keep_all`` bit (no culling; see
+    :func:`as_run` for the bundle's own mark)."""
 
     bundle: BundleMemory
     sphere_ids: object = None
@@ -349,7 +358,8 @@ class Run(NamedTuple):
 
 def as_run(run) -> Run:
     """A :class:`Run` from a ``Run``, ``(bundle, sphere_ids)`` or
-    ``(bundle, sphere_ids, keep_all)``.
+    ``(bundle, sphere_ids, keep_all)``; its ``keep_all`` is the command bit the run is sent
+    with: the run's own or its bundle's (:attr:`BundleMemory.keep_all`).
 
     Raises
     ------
@@ -357,15 +367,15 @@ def as_run(run) -> Run:
         For anything else.
     """
     if isinstance(run, Run):
-        return run
-    if isinstance(run, tuple) and len(run) in (2, 3):
+        out = run
+    elif isinstance(run, tuple) and len(run) in (2, 3):
         out = Run(*run)
     else:
         raise ValueError("a run is (bundle, sphere_ids) or (bundle, sphere_ids, keep_all), "
                          f"not {run!r}")
     if not isinstance(out.bundle, BundleMemory):
         raise ValueError(f"a run's bundle must be a BundleMemory, not {out.bundle!r}")
-    return out._replace(keep_all=bool(out.keep_all))
+    return out._replace(keep_all=bool(out.keep_all) or bool(out.bundle.keep_all))
 
 
 # -- address map ----------------------------------------------------------------------------
