@@ -139,6 +139,11 @@ def test_over_budget_bundle_is_never_culled(kind, fmt, mode):
     n_tris = int(be.scene.tcount.sum())
     assert ctr[1, 2] == 15 * n_tris                         # pairs issued: all of them
     assert ctr[1, 1] == tree.n_leaves * (rows + cols)       # plane tests still counted
+    # the unit's own side: the bundle's run carries the keep-all bit to the model (and RTL)
+    res = be.stream(batch, [(1, np.arange(tree.n_leaves))])[0]
+    assert res.counters["pairs_issued"] == 15 * n_tris
+    if kind == "model":
+        assert be.memory(batch, 1).keep_all and not be.memory(batch, 0).keep_all
 
 
 def _render(kind, fmt, mode, **kw):

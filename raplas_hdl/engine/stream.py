@@ -16,15 +16,16 @@ import numpy as np
 
 from ..model.intersection import (RESULT_DTYPE, _sphere_ids, empty_counters, enumerate_pairs,
                                   event_counters)
-from ..model.memory_image import BundleMemory, SceneMemory, UnitConfig
+from ..model.memory_image import BundleMemory, SceneMemory, UnitConfig, as_run
 from ..model.plane_sphere import tester_flags
 from ..model.ray_triangle import intersect
 
 __all__ = ["run_runs"]
 
 
-def _masks(config: UnitConfig, scene: SceneMemory, bundle: BundleMemory, ids: np.ndarray):
-    if getattr(bundle, "keep_all", False):
+def _masks(config: UnitConfig, scene: SceneMemory, bundle: BundleMemory, ids: np.ndarray,
+           keep_all: bool):
+    if keep_all:
         keep = np.ones((ids.size, config.n_planes), bool)
     else:
         keep = tester_flags(bundle.plane_n, bundle.plane_p, scene.centres[ids],
@@ -33,7 +34,9 @@ def _masks(config: UnitConfig, scene: SceneMemory, bundle: BundleMemory, ids: np
 
 
 def run_runs(config: UnitConfig, scene: SceneMemory, runs) -> list:
-    """Run the unit's model over ``runs = [(BundleMemory, sphere_ids), ...]`` in order.
+    """Run the unit's model over ``runs`` in order: each a
+    :class:`~raplas_hdl.model.memory_image.Run` or a tuple ``(bundle, sphere_ids)`` or
+    ``(bundle, sphere_ids, keep_all)`` (:func:`~raplas_hdl.model.memory_image.as_run`).
 
     Returns
     -------
@@ -47,14 +50,15 @@ def run_runs(config: UnitConfig, scene: SceneMemory, runs) -> list:
     """
     scene.check(config)
     parts = []
-    for bundle, ids in runs:
+    for run in runs:
+        bundle, ids, keep_all = as_run(run)
         bundle.check(config)
         ids = _sphere_ids(config, scene, ids)
         c = empty_counters()
         c["spheres"] = int(ids.size)
         c["plane_tests"] = int(ids.size) * config.n_planes
         if ids.size:
-            rm, cm = _masks(config, scene, bundle, ids)
+            rm, cm = _masks(config, scene, bundle, ids, keep_all)
             ray, tri, skipped = enumerate_pairs(config, rm, cm, scene.tri_counts[ids],
                                                 scene.tri_lists[ids], bundle.enable)
         else:

@@ -428,15 +428,9 @@ class ModelBackend(Backend):
         from ..model.memory_image import BundleMemory
 
         P, R = batch.n_planes, batch.n_rays
-        mem = BundleMemory(batch.pn[b * P:(b + 1) * P], batch.pp[b * P:(b + 1) * P],
-                           np.broadcast_to(batch.ro[b], (R, 3)), batch.rd[b * R:(b + 1) * R],
-                           batch.enable[b].copy())
-        if batch.keep_all[b]:
-            if "keep_all" not in getattr(BundleMemory, "__dataclass_fields__", {}):
-                raise ValueError("this unit model has no keep-all bit: an over-budget bundle "
-                                 "cannot run without culling")
-            mem.keep_all = True
-        return mem
+        return BundleMemory(batch.pn[b * P:(b + 1) * P], batch.pp[b * P:(b + 1) * P],
+                            np.broadcast_to(batch.ro[b], (R, 3)), batch.rd[b * R:(b + 1) * R],
+                            batch.enable[b].copy(), keep_all=bool(batch.keep_all[b]))
 
     def _convert(self, out, counters) -> RunResult:
         from ..fp import model as fpm
