@@ -137,8 +137,16 @@ def expected_beats(cases, rows, cols):
     return out
 
 
+def unpack_beat(v, rows, cols):
+    """One result payload -> ``(id, row_mask, col_mask)``."""
+    return tuple(int(x) for x in result_layout(rows, cols).unpack(v).item())
+
+
 def check_beats(got, want):
-    """``got``, ``want``: structured arrays of the record PS_RESULT (:func:`expected_beats`)."""
+    """``want``: :func:`expected_beats`; ``got``: the same, or ``(id, row_mask, col_mask)``
+    tuples."""
+    if not isinstance(got, np.ndarray):
+        got = np.array([tuple(g) for g in got], want.dtype)
     assert len(got) == len(want), f"{len(got)} results for {len(want)} spheres"
     bad = np.nonzero(got != want)[0]
     assert not bad.size, (f"{bad.size} of {len(want)} results differ; first (index, got (id, "
