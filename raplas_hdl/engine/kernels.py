@@ -14,7 +14,7 @@ Two arithmetics run the same passes:
 
 Each kernel takes a half-open range ``lo, hi`` of its independent items (candidate
 (bundle, node) pairs for the cull, runs for the unit) and releases the GIL, so
-:func:`raplas_hdl.model.parallel.run_chunks` spreads a pass over the cores; every item
+:func:`raplas_hdl.parallel.run_chunks` spreads a pass over the cores; every item
 writes only its own outputs, so the results do not depend on the thread count.
 
 Pass layout (``B`` bundles of ``rows`` x ``cols`` rays, ``P = rows + cols`` planes):

@@ -14,7 +14,7 @@ bundles; each early-out round) as arrays, never a bundle at a time:
    nearest accepted hit, with the unit's counters per run.
 
 The kernels (:mod:`raplas_hdl.engine.kernels`) take ranges of candidates or runs and are
-spread over the cores by :func:`raplas_hdl.model.parallel.run_chunks`; the results are the
+spread over the cores by :func:`raplas_hdl.parallel.run_chunks`; the results are the
 same whatever the thread count. Nothing here imports Amaranth or the host.
 """
 
@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..model.parallel import run_chunks
+from ..parallel import run_chunks
 from .kernels import N_COUNTERS
 
 __all__ = ["Arithmetic", "BundleBatch", "EngineScene", "CullResult", "cull_pass",

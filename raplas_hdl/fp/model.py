@@ -21,13 +21,14 @@ import os
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
-from numba import get_num_threads, njit, prange
+from numba import get_num_threads, njit
 
 from .format import FLAG_INVALID, FLAG_NAMES, FLAG_OVERFLOW, FLAG_UNDERFLOW, FPFormat
 from .kernels import (CHOP, DOWN, RNE, RTZ, UP, abs_le_k, add_int_k, add_k, decode_k,
                       encode_k, le_k, lt_k, mul_int_k, mul_k, neg_k, rmode_code)
 from .fast import common_add as _common_add
 from .fast import common_mul as _common_mul
+from ..parallel import run_chunks
 from .numba_cache import drop_stale_cache
 
 drop_stale_cache(__file__)
@@ -43,12 +44,14 @@ _OVF_I, _UNF_I, _INV_I = FLAG_OVERFLOW, FLAG_UNDERFLOW, FLAG_INVALID
 
 # -- compiled loops -----------------------------------------------------------------------
 # One tight loop per operation (a runtime switch inside the loop costs several times the
-# arithmetic). Each returns the number of operand patterns wider than the format.
-@njit(parallel=True, cache=True)
-def _add_loop(a, b, e, m, rmode, out, fl):
+# arithmetic), over the elements ``lo .. hi-1`` (:func:`_chunks` spreads a call over the
+# cores; no numba ``parallel=True``: its compile costs seconds per loop). Each returns the
+# number of operand patterns wider than the format.
+@njit(nogil=True, cache=True)
+def _add_loop(a, b, e, m, rmode, out, fl, lo, hi):
     lim = np.int64(1) << (1 + e + m)
     bad = 0
-    for i in prange(a.size):
+    for i in range(lo, hi):
         x = np.int64(a[i])
         y = np.int64(b[i])
         bad += np.int64(x >= lim) | np.int64(y >= lim)
@@ -56,11 +59,11 @@ def _add_loop(a, b, e, m, rmode, out, fl):
     return bad
 
 
-@njit(parallel=True, cache=True)
-def _sub_loop(a, b, e, m, rmode, out, fl):
+@njit(nogil=True, cache=True)
+def _sub_loop(a, b, e, m, rmode, out, fl, lo, hi):
     lim = np.int64(1) << (1 + e + m)
     bad = 0
-    for i in prange(a.size):
+    for i in range(lo, hi):
         x = np.int64(a[i])
         y = np.int64(b[i])
         bad += np.int64(x >= lim) | np.int64(y >= lim)
@@ -69,11 +72,11 @@ def _sub_loop(a, b, e, m, rmode, out, fl):
     return bad
 
 
-@njit(parallel=True, cache=True)
-def _mul_loop(a, b, e, m, rmode, out, fl):
+@njit(nogil=True, cache=True)
+def _mul_loop(a, b, e, m, rmode, out, fl, lo, hi):
     lim = np.int64(1) << (1 + e + m)
     bad = 0
-    for i in prange(a.size):
+    for i in range(lo, hi):
         x = np.int64(a[i])
         y = np.int64(b[i])
         bad += np.int64(x >= lim) | np.int64(y >= lim)
@@ -81,12 +84,12 @@ def _mul_loop(a, b, e, m, rmode, out, fl):
     return bad
 
 
-@njit(parallel=True, cache=True)
-def _int_loop(a, b, e, m, rmode, op, out, fl):
+@njit(nogil=True, cache=True)
+def _int_loop(a, b, e, m, rmode, op, out, fl, lo, hi):
     """The integer kernels whatever the format (for the tests: both paths, same bits)."""
     lim = np.int64(1) << (1 + e + m)
     bad = 0
-    for i in prange(a.size):
+    for i in range(lo, hi):
         x = np.int64(a[i])
         y = np.int64(b[i])
         bad += np.int64(x >= lim) | np.int64(y >= lim)
@@ -101,11 +104,11 @@ def _int_loop(a, b, e, m, rmode, op, out, fl):
     return bad
 
 
-@njit(parallel=True, cache=True)
-def _negop(a, e, m, out):
+@njit(nogil=True, cache=True)
+def _negop(a, e, m, out, lo, hi):
     lim = np.int64(1) << (1 + e + m)
     bad = 0
-    for i in prange(a.size):
+    for i in range(lo, hi):
         x = np.int64(a[i])
         if x >= lim:
             bad += 1
@@ -114,11 +117,11 @@ def _negop(a, e, m, out):
     return bad
 
 
-@njit(parallel=True, cache=True)
-def _cmpop(a, b, e, m, op, out):
+@njit(nogil=True, cache=True)
+def _cmpop(a, b, e, m, op, out, lo, hi):
     lim = np.int64(1) << (1 + e + m)
     bad = 0
-    for i in prange(a.size):
+    for i in range(lo, hi):
         x = np.int64(a[i])
         y = np.int64(b[i])
         if x >= lim or y >= lim:
@@ -134,25 +137,31 @@ def _cmpop(a, b, e, m, op, out):
     return bad
 
 
-@njit(parallel=True, cache=True)
-def _encode(x, e, m, mode, out, fl):
-    for i in prange(x.size):
+@njit(nogil=True, cache=True)
+def _encode(x, e, m, mode, out, fl, lo, hi):
+    for i in range(lo, hi):
         r, f = encode_k(x[i], e, m, mode)
         out[i] = r
         fl[i] = f
+    return 0
 
 
-@njit(parallel=True, cache=True)
-def _decode(a, e, m, out):
+@njit(nogil=True, cache=True)
+def _decode(a, e, m, out, lo, hi):
     lim = np.int64(1) << (1 + e + m)
     bad = 0
-    for i in prange(a.size):
+    for i in range(lo, hi):
         x = np.int64(a[i])
         if x >= lim:
             bad += 1
             x = 0
         out[i] = decode_k(x, e, m)
     return bad
+
+
+def _chunks(kernel, n, *args):
+    """Run ``kernel(*args, lo, hi)`` over ``0 .. n`` on the cores; the summed returns."""
+    return sum(run_chunks(n, lambda lo, hi: kernel(*args, lo, hi), min_chunk=1 << 15))
 
 
 # -- specialised loops --------------------------------------------------------------------
@@ -343,9 +352,9 @@ def _binary(a, b, fmt, op, flags, int_path=False, path="auto"):
     fl = np.empty(fa.size, dtype=np.uint8)
     args = (fa, fb, fmt.exp_bits, fmt.man_bits, rmode_code(fmt))
     if path == "int":
-        bad = _int_loop(*args, op, out, fl)
+        bad = _chunks(_int_loop, fa.size, *args, op, out, fl)
     else:
-        bad = (_add_loop, _sub_loop, _mul_loop)[op](*args, out, fl)
+        bad = _chunks((_add_loop, _sub_loop, _mul_loop)[op], fa.size, *args, out, fl)
     _raise_wide(bad, fmt, ("a", "b"))
     if flags:
         return _shape_out(out, shape), _shape_out(fl, shape)
@@ -394,7 +403,7 @@ def neg(a, fmt: FPFormat):
     a = _patterns(a, fmt, "a")
     shape, (fa,) = _flat(a)
     out = np.empty(fa.size, dtype=np.uint32)
-    _raise_wide(_negop(fa, fmt.exp_bits, fmt.man_bits, out), fmt, ("a",))
+    _raise_wide(_chunks(_negop, fa.size, fa, fmt.exp_bits, fmt.man_bits, out), fmt, ("a",))
     return _shape_out(out, shape)
 
 
@@ -404,7 +413,8 @@ def _compare(a, b, fmt, op):
     b = _patterns(b, fmt, "b")
     shape, (fa, fb) = _flat(a, b)
     out = np.empty(fa.size, dtype=np.bool_)
-    _raise_wide(_cmpop(fa, fb, fmt.exp_bits, fmt.man_bits, op, out), fmt, ("a", "b"))
+    _raise_wide(_chunks(_cmpop, fa.size, fa, fb, fmt.exp_bits, fmt.man_bits, op, out), fmt,
+                ("a", "b"))
     return _shape_out(out, shape)
 
 
@@ -468,7 +478,7 @@ def encode(x, fmt: FPFormat, direction: str | None = None, flags: bool = False):
     bits = arr.reshape(-1).view(np.int64)
     out = np.empty(bits.size, dtype=np.uint32)
     fl = np.empty(bits.size, dtype=np.uint8)
-    _encode(bits, fmt.exp_bits, fmt.man_bits, mode, out, fl)
+    _chunks(_encode, bits.size, bits, fmt.exp_bits, fmt.man_bits, mode, out, fl)
     if flags:
         return _shape_out(out, shape), _shape_out(fl, shape)
     return _shape_out(out, shape)
@@ -481,7 +491,8 @@ def decode(bits, fmt: FPFormat):
     a = _patterns(bits, fmt, "bits")
     shape, (fa,) = _flat(a)
     out = np.empty(fa.size, dtype=np.int64)
-    _raise_wide(_decode(fa, fmt.exp_bits, fmt.man_bits, out), fmt, ("bits",))
+    _raise_wide(_chunks(_decode, fa.size, fa, fmt.exp_bits, fmt.man_bits, out), fmt,
+                ("bits",))
     return _shape_out(out.view(np.float64), shape)
 
 

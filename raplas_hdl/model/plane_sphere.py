@@ -30,7 +30,7 @@ from raplas_hdl.fp import FPFormat
 from raplas_hdl.fp.fast import fast_add, fast_mul
 from raplas_hdl.fp.kernels import add_k, lt_k, mul_k, rmode_code
 from raplas_hdl.fp.numba_cache import drop_stale_cache
-from raplas_hdl.model.parallel import run_chunks
+from raplas_hdl.parallel import run_chunks
 
 drop_stale_cache(__file__)
 

@@ -53,7 +53,7 @@ from ..fp.fast import fast_add, fast_mul
 from ..fp.kernels import add_k, le_k, lt_k, mul_k, neg_k, rmode_code, sub_k
 from ..fp.numba_cache import drop_stale_cache
 from .conservative import margin_constants, margin_k, margin_table
-from .parallel import run_chunks
+from ..parallel import run_chunks
 
 __all__ = ["intersect", "MODES", "N_OPS", "EVENTS"]
 

@@ -557,6 +557,11 @@ def run_campaign(params: CampaignParams, out_dir="build/campaign", jobs=None,
                 if bar:
                     bar.update(1)
         else:
+            # compile the kernels the shards use once, here, so that the workers only load
+            # numba's disk cache (each would otherwise compile them again)
+            from ..engine.warm import default_lock, warm
+
+            warm(engine=False, lock=default_lock())
             # spawn, not fork: a fork after numba has started its thread pool (any earlier
             # parallel kernel in this process) gives children that crash (BrokenProcessPool)
             ctx = multiprocessing.get_context("spawn")
