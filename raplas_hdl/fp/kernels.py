@@ -41,7 +41,7 @@ from .format import FLAG_INVALID, FLAG_OVERFLOW, FLAG_UNDERFLOW
 
 __all__ = ["RTZ", "RNE", "CHOP", "UP", "DOWN", "rmode_code", "add_k", "sub_k", "mul_k",
            "add_int_k", "mul_int_k", "add_f64_k", "mul_f64_k", "fast_path_ok",
-           "neg_k", "le_k", "lt_k", "abs_le_k", "encode_k", "decode_k"]
+           "neg_k", "le_k", "lt_k", "abs_le_k", "is_nan_k", "encode_k", "decode_k"]
 
 #: Rounding codes of the kernels (``rmode``).
 RTZ = 0
@@ -189,8 +189,7 @@ def add_int_k(a, b, e, m, rmode):
 def neg_k(a, e, m):
     """``-a``: flips the sign of a non-NaN ``a``; a NaN gives the canonical NaN."""
     a = np.int64(a)
-    emf = (np.int64(1) << e) - 1
-    if ((a >> m) & emf) == emf and (a & ((np.int64(1) << m) - 1)) != 0:
+    if is_nan_k(a, e, m):
         return _nan(e, m)
     return np.uint32(a ^ (np.int64(1) << (e + m)))
 
@@ -315,18 +314,12 @@ def _round_f64(v, err, nan_in, e, m, rmode):
 
 
 @njit(cache=True)
-def _is_nan_pat(a, e, m):
-    emf = (np.int64(1) << e) - 1
-    return ((a >> m) & emf) == emf and (a & ((np.int64(1) << m) - 1)) != 0
-
-
-@njit(cache=True)
 def mul_f64_k(a, b, e, m, rmode):
     """``a * b`` by float64 (E <= 8, M <= 25 only); returns ``(bits, flags)``."""
     a = np.int64(a)
     b = np.int64(b)
     p = _to_f64(a, e, m) * _to_f64(b, e, m)          # exact
-    nan_in = _is_nan_pat(a, e, m) or _is_nan_pat(b, e, m)
+    nan_in = is_nan_k(a, e, m) or is_nan_k(b, e, m)
     return _round_f64(p, 0.0, nan_in, e, m, RTZ if rmode == CHOP else rmode)
 
 
@@ -338,7 +331,7 @@ def add_f64_k(a, b, e, m, rmode):
     b = np.int64(b)
     x = _to_f64(a, e, m)
     y = _to_f64(b, e, m)
-    nan_in = _is_nan_pat(a, e, m) or _is_nan_pat(b, e, m)
+    nan_in = is_nan_k(a, e, m) or is_nan_k(b, e, m)
     if rmode == CHOP and not nan_in:                 # (a NaN operand has no exponent to align to)
         swap = abs(y) > abs(x)
         hi = y if swap else x
@@ -396,7 +389,9 @@ def _key(a, e, m):
 
 
 @njit(cache=True)
-def _is_nan(a, e, m):
+def is_nan_k(a, e, m):
+    """True when ``a`` is a NaN pattern of the format (all-ones exponent, non-zero
+    fraction): the one NaN test of the kernels and the models."""
     a = np.int64(a)
     emf = (np.int64(1) << e) - 1
     return ((a >> m) & emf) == emf and (a & ((np.int64(1) << m) - 1)) != 0
@@ -405,7 +400,7 @@ def _is_nan(a, e, m):
 @njit(cache=True)
 def le_k(a, b, e, m):
     """``a <= b`` (ordered: any NaN gives False; -0 == +0; denormal patterns are zero)."""
-    if _is_nan(a, e, m) or _is_nan(b, e, m):
+    if is_nan_k(a, e, m) or is_nan_k(b, e, m):
         return False
     return _key(a, e, m) <= _key(b, e, m)
 
@@ -413,7 +408,7 @@ def le_k(a, b, e, m):
 @njit(cache=True)
 def lt_k(a, b, e, m):
     """``a < b`` (ordered: any NaN gives False; -0 == +0; denormal patterns are zero)."""
-    if _is_nan(a, e, m) or _is_nan(b, e, m):
+    if is_nan_k(a, e, m) or is_nan_k(b, e, m):
         return False
     return _key(a, e, m) < _key(b, e, m)
 
@@ -421,7 +416,7 @@ def lt_k(a, b, e, m):
 @njit(cache=True)
 def abs_le_k(a, b, e, m):
     """``|a| <= |b|`` (any NaN gives False; denormal patterns are zero)."""
-    if _is_nan(a, e, m) or _is_nan(b, e, m):
+    if is_nan_k(a, e, m) or is_nan_k(b, e, m):
         return False
     ka = _key(a, e, m)
     kb = _key(b, e, m)

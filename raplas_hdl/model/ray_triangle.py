@@ -50,7 +50,7 @@ from numba import njit
 
 from ..fp.format import FLAG_INVALID, FLAG_OVERFLOW, FLAG_UNDERFLOW, FPFormat
 from ..fp.fast import fast_add, fast_mul
-from ..fp.kernels import add_k, le_k, lt_k, mul_k, neg_k, rmode_code, sub_k
+from ..fp.kernels import add_k, is_nan_k, le_k, lt_k, mul_k, neg_k, rmode_code, sub_k
 from ..fp.numba_cache import drop_stale_cache
 from .conservative import margin_constants, margin_k, margin_table
 from ..parallel import run_chunks
@@ -95,13 +95,6 @@ def _cross_term(a, b, c, d, e, m, r):
     q, f1 = mul_k(c, d, e, m, r)
     x, f2 = sub_k(p, q, e, m, r)
     return x, _tally(f0) + _tally(f1) + _tally(f2)
-
-
-@njit(cache=True)
-def _is_nan(a, e, m):
-    a = np.int64(a)
-    emf = (1 << e) - 1
-    return ((a >> m) & emf) == emf and (a & ((1 << m) - 1)) != 0
 
 
 @njit(cache=True)
@@ -170,8 +163,8 @@ def pair_exact(o, oi, d, di, v0, e1, e2, nn, ti, e, m, r, cons, mc):
     if cons:
         w, f11 = sub_k(det, s, e, m, r)
         cnt += _tally(f11)
-        bad = (_is_nan(det, e, m) or _is_nan(tp, e, m) or _is_nan(up, e, m)
-               or _is_nan(vp, e, m) or _is_nan(w, e, m) or (cnt & 0xFF) != 0)
+        bad = (is_nan_k(det, e, m) or is_nan_k(tp, e, m) or is_nan_k(up, e, m)
+               or is_nan_k(vp, e, m) or is_nan_k(w, e, m) or (cnt & 0xFF) != 0)
         margins = _margins(o, oi, d, di, v0, e1, e2, nn, ti, e, m, mc)
     h = _decide(det, tp, up, vp, s, w, bad, cons, margins, e, m)
     return h, tp, up, vp, det, cnt
