@@ -100,3 +100,19 @@ def test_bad_scene_arrays():
     with pytest.raises(ValueError, match="NaN"):
         Scene("x", np.array([[0, 0, 0], [1, 0, 0], [0, np.nan, 0]]), [[0, 1, 2]], (1, 1, 1),
               cam, light)
+
+
+def test_shipped_meshes_load_by_name():
+    """The meshes travel with the package (nothing reads a path outside it) with their
+    licence notes, and load by name."""
+    import os
+
+    from raplas_hdl.host.scenes import MESH_DIR, MESHES
+
+    assert set(MESHES) == {"stanford-bunny", "teapot", "spot", "suzanne", "stanford-dragon-100k"}
+    assert all(os.path.dirname(p) == MESH_DIR for p in MESHES.values())
+    notes = open(os.path.join(MESH_DIR, "README.md")).read()
+    assert all(os.path.basename(p) in notes for p in MESHES.values())
+    assert "Stanford" in notes and "licen" in notes.lower()
+    scene = get_scene("teapot")
+    assert scene.n_triangles > 6000 and scene.name == "teapot"

@@ -27,7 +27,8 @@ def add_parser(subparsers):
         "demo", help="emit the Verilog, render the default scene with model and float64",
         description=__doc__.split("\n\n", 1)[1])
     p.add_argument("--scene", default="cornell", metavar="NAME|FILE",
-                   help="cornell | spheres | terrain | soup | path to .obj/.ply/.stl "
+                   help="cornell | spheres | terrain | soup | a shipped mesh (stanford-bunny, "
+                        "teapot, spot, suzanne, stanford-dragon-100k) | path to .obj/.ply/.stl "
                         "(default cornell)")
     p.add_argument("--size", type=g.size_type("--size"), default=(64, 64), metavar="WxH",
                    help=f"image size, sides 1 to {g.MAX_IMAGE} (default 64x64)")

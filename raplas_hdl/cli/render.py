@@ -84,7 +84,7 @@ def check_scene(spec: str) -> None:
     """A scene name or a mesh file that exists (its contents are read by the command)."""
     from ..host import scenes
 
-    if spec in scenes.SCENES:
+    if spec in scenes.SCENES or spec in scenes.MESHES:
         return
     suffixes = tuple(getattr(scenes, "SCENE_SUFFIXES", ())) + tuple(scenes.MESH_SUFFIXES)
     p = Path(spec)
@@ -98,8 +98,9 @@ def check_scene(spec: str) -> None:
                              f"{', '.join(suffixes)})")
         g.check_input_file(spec, "scene file")
         return
-    raise ValueError(f"unknown scene {spec!r}: use one of {', '.join(scenes.SCENES)} or a "
-                     f"path to an {'/'.join(s[1:].upper() for s in suffixes)} file")
+    raise ValueError(f"unknown scene {spec!r}: use one of "
+                     f"{', '.join([*scenes.SCENES, *scenes.MESHES])} or a path to an "
+                     f"{'/'.join(s[1:].upper() for s in suffixes)} file")
 
 
 def add_parser(subparsers):
@@ -110,7 +111,8 @@ def add_parser(subparsers):
                     "shadows, and print rays, bundles, spheres, plane tests, pairs against "
                     "brute force, hits, time per stage and arithmetic events.")
     p.add_argument("--scene", default="cornell", metavar="NAME|FILE",
-                   help="cornell | spheres | terrain | soup | path to .obj/.ply/.stl "
+                   help="cornell | spheres | terrain | soup | a shipped mesh (stanford-bunny, "
+                        "teapot, spot, suzanne, stanford-dragon-100k) | path to .obj/.ply/.stl "
                         "(default cornell)")
     p.add_argument("--size", type=g.size_type("--size"), default=(128, 128), metavar="WxH",
                    help=f"image size, sides 1 to {g.MAX_IMAGE} (default 128x128)")

@@ -31,6 +31,8 @@ from .camera import Camera
 
 __all__ = [
     "DEFAULT_BOUND",
+    "MESH_DIR",
+    "MESHES",
     "SCENES",
     "AreaLight",
     "Material",
@@ -50,6 +52,14 @@ __all__ = [
 DEFAULT_BOUND = 8.0
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl")
+
+#: The meshes shipped with the package (licence notes in its README.md).
+MESH_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data",
+                        "meshes")
+#: Shipped meshes by name (the file stem): ``stanford-bunny``, ``teapot``, ...
+MESHES = {os.path.splitext(f)[0]: os.path.join(MESH_DIR, f)
+          for f in sorted(os.listdir(MESH_DIR)) if os.path.splitext(f)[1] in MESH_SUFFIXES} \
+    if os.path.isdir(MESH_DIR) else {}
 
 
 @dataclass(frozen=True)
@@ -457,7 +467,8 @@ SCENES = {
 
 
 def get_scene(spec: str, bound: float | None = DEFAULT_BOUND, **options) -> Scene:
-    """A scene by name (``cornell``, ``spheres``, ``terrain``, ``soup``) or mesh path,
+    """A scene by name (``cornell``, ``spheres``, ``terrain``, ``soup``), the name of a
+    shipped mesh (:data:`MESHES`: ``stanford-bunny``, ``teapot``, ...) or a mesh path,
     normalised into ``[-bound, bound]`` (``bound=None`` leaves it in its own units).
 
     Raises
@@ -467,9 +478,12 @@ def get_scene(spec: str, bound: float | None = DEFAULT_BOUND, **options) -> Scen
     """
     if spec in SCENES:
         scene = SCENES[spec](**options)
+    elif spec in MESHES:
+        scene = mesh_scene(MESHES[spec], **options)
     elif os.path.splitext(spec)[1].lower() in MESH_SUFFIXES or os.path.exists(spec):
         scene = mesh_scene(spec, **options)
     else:
-        raise ValueError(f"unknown scene {spec!r}: use one of {', '.join(SCENES)} or a "
-                         f"path to an {'/'.join(s[1:].upper() for s in MESH_SUFFIXES)} file")
+        raise ValueError(f"unknown scene {spec!r}: use one of {', '.join([*SCENES, *MESHES])} "
+                         f"or a path to an {'/'.join(s[1:].upper() for s in MESH_SUFFIXES)} "
+                         "file")
     return scene if bound is None else scene.normalised(bound)

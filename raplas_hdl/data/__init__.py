@@ -1,0 +1,1 @@
+"""Data shipped with the package: test meshes (``meshes/``, licence notes in its README)."""
