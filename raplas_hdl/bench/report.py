@@ -106,9 +106,14 @@ def _floor(v, lo):
     return v if v > lo else lo
 
 
+PLOTS = {"time_s": "pareto_time.png", "hw_cost": "pareto_hw.png",
+         "device_s": "pareto_device.png"}
+
+
 def plot(results: dict, out_dir) -> list[Path]:
-    """``pareto_time.png``, ``pareto_hw.png`` (each: both errors against one cost, the front
-    marked) and ``error_by_format.png`` (per scene, error against the format)."""
+    """``pareto_time.png``, ``pareto_hw.png``, ``pareto_device.png`` (each: both errors
+    against one cost, the front marked) and ``error_by_format.png`` (per scene, error against
+    the format)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -119,12 +124,15 @@ def plot(results: dict, out_dir) -> list[Path]:
     fr = fronts(rows)
     paths = []
     floors = {"err_pixels": 1e-4, "err_t": 1e-9}
-    for cost, fname in (("time_s", "pareto_time.png"), ("hw_cost", "pareto_hw.png")):
+    for cost, fname in PLOTS.items():
         fig, axes = plt.subplots(1, 2, figsize=(12, 4.8))
+        left_out = sorted({r["config"] for r in rows if r.get(cost) is None
+                           or not math.isfinite(r[cost]) or r.get("capped")})
         for ax, err in zip(axes, ERRORS):
             lo = floors[err]
             for r in rows:
-                if r.get(cost) is None or not math.isfinite(r[err]):
+                if (r.get(cost) is None or not math.isfinite(r[cost])
+                        or not math.isfinite(r[err])):
                     continue
                 ax.scatter(r[cost], _floor(r[err], lo), marker=_MARK.get(r["format"], "x"),
                            color=_COL.get(r["rounding"], "k"),
@@ -140,9 +148,16 @@ def plot(results: dict, out_dir) -> list[Path]:
                     ax.annotate(rows[i]["config"], (rows[i][cost], _floor(rows[i][err], lo)),
                                 fontsize=7, xytext=(4, 4), textcoords="offset points")
             ax.set_yscale("log")
+            if cost == "device_s":
+                ax.set_xscale("log")
             ax.set_xlabel(COSTS[cost])
             ax.set_ylabel(_SHORT[err] + f" (0 drawn at {lo:g})")
-            ax.set_title(ERRORS[err], fontsize=9)
+            title = ERRORS[err]
+            if left_out:
+                title += "\nnot drawn (no unit fits, capped or no value): " + (
+                    ", ".join(left_out) if len(left_out) <= 6
+                    else f"{len(left_out)} configurations (see the report)")
+            ax.set_title(title, fontsize=8)
             ax.grid(alpha=0.3)
         handles = [plt.Line2D([], [], marker=m, ls="", color="gray", label=f)
                    for f, m in _MARK.items() if any(r["format"] == f for r in rows)]
@@ -260,6 +275,134 @@ def _rel(path, start=None):
         return str(path)
 
 
+def _ms(v):
+    """Seconds as milliseconds; ``inf`` (no unit fits) as such."""
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return "n/a"
+    if isinstance(v, float) and math.isinf(v):
+        return "no fit"
+    return f"{1e3 * v:.3g}"
+
+
+def _mega(v, unit=1e6):
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "n/a"
+    return f"{v / unit:.3g}"
+
+
+def _device_section(results: dict, rows: list) -> list[str]:
+    """``## Frame time on the device``: the model, the device unit per format, the figures
+    per configuration and per point, the capped points."""
+    from . import cost as dev
+
+    d = results.get("device") or {}
+    clocks = d.get("clocks_mhz") or dict(dev.CLOCKS_MHZ)
+    lat = d.get("rt_latency") or {m: dev.rt_latency(m) for m in ("paper", "conservative")}
+    t = d.get("testers", dev.DEVICE_TESTERS)
+    L = ["## Frame time on the device", "",
+         "What a hardware user decides on: the time one XC4VSX35 full of intersection units "
+         "would take for the frame, from the model's counters of the render (`device_*` "
+         "columns; `raplas_hdl/bench/cost.py`).", "",
+         f"- **The unit**: the synthesised intersection unit of `docs/results/synthesis.json` "
+         f"(`raplas-hdl synth intersection-unit`: a {d.get('rows', dev.DEVICE_ROWS)}x"
+         f"{d.get('cols', dev.DEVICE_COLS)} bundle, {t} plane-sphere testers, the memories, "
+         "selector, FIFOs and the ray-triangle unit). At FP24 its DSP48, slices~ and block "
+         "RAM are the synthesised row's; at another format they are *estimated*: the FP24 row "
+         "plus the difference of the composed operators between that format and FP24 (18 "
+         f"fp-mul + 15 fp-add of the ray-triangle unit, 3 + 3 per tester, x {t} testers), "
+         "block RAM scaled by the word width. The units that fit are the minimum over DSP48, "
+         "slices~ and block RAM (`raplas_hdl.synth.report.capacity`); 0 when one does not fit "
+         "(frame time `no fit`).",
+         "- **Cycles of a frame**: summed over the unit's runs (a run: one bundle of "
+         "P = rows + cols planes against its list of S leaf spheres, N pairs issued), "
+         f"`cycles = P + S * G + (G + {dev.TESTER_LATENCY} + 1) + N + L_rt` with "
+         f"G = ceil(P / {t}) clocks per sphere in the array (its passes), "
+         f"G + {dev.TESTER_LATENCY} + 1 the array's latency, one pair per clock into the "
+         f"ray-triangle unit and L_rt its latency ({lat['paper']} paper, "
+         f"{lat['conservative']} conservative). P clocks load the bundle's planes. The stages "
+         "are taken one after the other, within a run and between runs: an upper bound on "
+         "the RTL's time for the same runs (`device_cycles_overlap` replaces S * G + N by "
+         "max(S * G, N) per run: the bound the other way). A bundle larger than the unit's "
+         "is taken in G passes of the same testers (its Ray and Plane Memories deeper; the "
+         "resources are the synthesised unit's). The host's hierarchy cull is software and "
+         "not counted, nor are the cycles of disabled rays' skipped pairs.",
+         "- **Frame time** = cycles / units / clock, the runs spread evenly over the units; "
+         "clocks: " + ", ".join(f"{k} {v:g} MHz" for k, v in clocks.items())
+         + " (the `device_frame_s` column is at the first).",
+         "- **Result link**: one result beat per issued pair (`RESULT` of "
+         "`raplas_hdl.model.records` bound to the unit configuration of the point's largest "
+         "bundle: W, ray ID and triangle ID bits), so `link_bits` = pairs x beat bits per "
+         "frame and `link_bits_per_s` = link_bits x the device frame rate. The beat of a run "
+         "that issued no pair (`link_empty_beats`) is left out.", ""]
+    costs = results.get("costs", {})
+    units = [(k, c["device"]) for k, c in costs.items() if isinstance(c.get("device"), dict)]
+    if units:
+        L += ["**The device unit per format** (one XC4VSX35: 192 DSP48, 15,360 slices, 192 "
+              "block RAMs):", "",
+              _table(["format", "basis", "DSP48", "slices~", "BRAM", "units that fit",
+                      "binding", "units with slices x1.25"],
+                     [[k, u.get("basis", "-"), u.get("dsp48", "-"), u.get("slices_est", "-"),
+                       u.get("bram", "-"), u.get("units", "-"),
+                       ", ".join(u.get("binding", [])) or "-",
+                       u.get("units_with_margin", "-")] if "error" not in u else
+                      [k, "-", "-", "-", "-", "-", "-", u["error"]] for k, u in units]), ""]
+    names = list(clocks)
+    have = [r for r in rows if r.get("device_cycles") is not None
+            and math.isfinite(r.get("device_cycles", math.nan))]
+    if have:
+        def at(r, mhz):
+            u = r.get("device_units")
+            if u is None or (isinstance(u, float) and math.isnan(u)):
+                return math.nan
+            return math.inf if not u else r["device_cycles"] / u / (mhz * 1e6)
+
+        L += ["**Per configuration** (main grid, summed over its scenes):", "",
+              _table(["config", "scenes", "pairs (M)", "cycles (M)", "units"]
+                     + [f"frame ms @ {clocks[n]:g} MHz" for n in names]
+                     + [f"fps @ {clocks[names[0]]:g} MHz", "link Mbit/frame",
+                        "link Gbit/s", "software s", "CPU s", "capped"],
+                     [[r["config"], r["scenes"], _mega(r.get("pairs_issued")),
+                       _mega(r["device_cycles"]), _f(r.get("device_units"))]
+                      + [_ms(at(r, clocks[n])) for n in names]
+                      + [_f(1.0 / at(r, clocks[names[0]]) if 0 < at(r, clocks[names[0]])
+                            < math.inf else 0.0, "{:.3g}"),
+                         _mega(r.get("link_bits")),
+                         "no fit" if r.get("device_units") == 0
+                         else _mega(r.get("link_bits_per_s"), 1e9),
+                         _f(r.get("time_s"), "{:.1f}"), _f(r.get("cpu_s"), "{:.1f}"),
+                         r.get("capped", 0)]
+                      for r in sorted(have, key=lambda r: (r["format"], r["rounding"],
+                                                           r["mode"]))]), ""]
+    pts = [p for p in results["points"] if p.get("backend") != "float64"
+           and p.get("device_cycles") is not None]
+    if pts:
+        L += ["**Per point** (every model point; capped points marked, their figures "
+              "estimates or lower bounds):", "",
+              _table(["grid", "format", "mode", "scene", "bundle", "size", "pairs (M)",
+                      "cycles (M)", "overlapped (M)", "units", "frame ms", "fps",
+                      "beat bits", "link Mbit/frame", "link Gbit/s", "software s", "CPU s",
+                      "capped"],
+                     [[p["grid"], f"{p['format']}/{p['rounding']}", p["mode"], p["scene"],
+                       p["bundle"], p.get("size", "-"), _mega(p.get("pairs_issued")),
+                       _mega(p["device_cycles"]), _mega(p.get("device_cycles_overlap")),
+                       _f(p.get("device_units")), _ms(p.get("device_frame_s")),
+                       _f(p.get("device_fps"), "{:.3g}"), _f(p.get("link_beat_bits")),
+                       _mega(p.get("link_bits")),
+                       "no fit" if p.get("device_units") == 0
+                       else _mega(p.get("link_bits_per_s"), 1e9),
+                       _f(p.get("t_total"), "{:.2f}"), _f(p.get("cpu_total"), "{:.2f}"),
+                       "**capped**" if p.get("capped") else ""] for p in pts]), ""]
+    capped = [p for p in results["points"] if p.get("capped")]
+    if capped:
+        L += ["**Capped points** (not rendered to the end):", "",
+              _table(["grid", "format", "mode", "scene", "bundle", "cap (pairs)", "reason",
+                      "figures from"],
+                     [[p["grid"], f"{p['format']}/{p['rounding']}", p["mode"], p["scene"],
+                       p["bundle"], f"{p['max_pairs']:,}", p.get("capped_reason", ""),
+                       p.get("figures_from", "-")] for p in capped]), ""]
+    return L
+
+
 def render_markdown(results: dict, plots: list, md_path, *, command: str,
                     files: list) -> str:
     """The markdown report (paths of the plots relative to ``md_path``)."""
@@ -285,8 +428,14 @@ def render_markdown(results: dict, plots: list, md_path, *, command: str,
          "the timings",
          f"- **Images**: procedural scenes {spec['size'][0]}x{spec['size'][1]}, meshes "
          f"{spec['mesh_size'][0]}x{spec['mesh_size'][1]}, soft shadows "
-         f"{spec['shadow'][0]}x{spec['shadow'][1]} per point (sizes chosen to keep the "
-         "campaign in about 25 minutes on 2 shared cores)",
+         f"{spec['shadow'][0]}x{spec['shadow'][1]} per point"
+         + (f"; at most {spec['max_pairs']:,} pairs per point (the cap), per-pair errors on a "
+            f"sample of at most {spec.get('pair_sample', 0):,} pairs, "
+            f"{spec.get('threads', 1)} thread(s) per render" if "max_pairs" in spec else ""),
+         f"- **Time**: wall {results['wall_seconds']:.0f} s, CPU "
+         + (f"{results['cpu_seconds']:.0f} s" if "cpu_seconds" in results else "not recorded")
+         + (f", load average at the end {', '.join(f'{x:.1f}' for x in results['load_average'])}"
+            if results.get("load_average") else ""),
          f"- **Axes**: formats {', '.join(spec['formats'])}; roundings "
          f"{', '.join(spec['roundings'])}; modes {', '.join(spec['modes'])}; scenes "
          f"{', '.join(spec['scenes'] + results.get('meshes', []))}; bundles "
@@ -308,10 +457,13 @@ def render_markdown(results: dict, plots: list, md_path, *, command: str,
           "power-of-two scale, exact) into its format's domain: bound = min(2^P, 256) with P "
           "the domain's exponent (FP16: 4, the others: 256); the float64 reference is "
           "rendered at the same bound.", "",
-          "- **Error against float64, per pair**: every pair the model issues is evaluated "
-          "in float64 on the original geometry after the render; `t_rel` = |t - t64| / |t64| "
-          "over the *in-domain* pairs both hit (median, p99); `pair_hit_differs` counts "
-          "in-domain pairs whose hit bit differs. A pair is *out of the domain* when its "
+          "- **Error against float64, per pair**: the sweep's backend records a uniform "
+          "sample of the unit's runs as the render traces them (whole runs, at most "
+          "`pair_sample` pairs; `pairs_sampled` says how many), streams their pairs after the "
+          "render and evaluates each in float64 on the original geometry; `t_rel` = "
+          "|t - t64| / |t64| over the *in-domain* pairs both hit (median, p99; `t_pairs` "
+          "of them); `pair_hit_differs` counts in-domain pairs whose hit bit differs (scaled "
+          "from the sample to the issued pairs). A pair is *out of the domain* when its "
           "triangle is (a coordinate beyond 2^P or an edge below the minimum edge): the "
           "sweep loads such triangles (the host's `render` would drop them) and counts "
           "their pairs in `pairs_out_of_domain`.",
@@ -322,8 +474,19 @@ def render_markdown(results: dict, plots: list, md_path, *, command: str,
           "leaks of the model on the seeded stress families of `raplas_hdl.verify.stress`, once "
           "per format, rounding and mode (in-domain pairs only), and the relative error of "
           "t against R's.",
-          "- **Run time**: wall time per render stage (`t_*`), rays per second over the "
-          "render, pairs per second over the unit's stages (`primary unit` + `shadow unit`).",
+          "- **Run time** (software): wall time (`t_total`) and CPU time (`cpu_total`) of the "
+          "render, wall time per render stage (`t_*`), rays per second over the render, "
+          "pairs per second over the unit's stages (`primary unit` + `shadow unit`).",
+          "- **Frame time on the device** and **result-link traffic**: see "
+          "[below](#frame-time-on-the-device).",
+          "- **Cap**: a point may issue at most `max_pairs` pairs. When the brute-force bound "
+          "of its render is above the cap, a pre-pass at a quarter of the image side (under "
+          "the cap scaled by the pixel ratio) estimates its pairs; a point whose estimate is "
+          "over the cap, or whose pre-pass or render goes over its budget (the sweep's backend "
+          "counts the pairs as the runs go and stops there), is reported with `capped` set "
+          "and its reason, its figures those of the pre-pass scaled up (estimates, or lower "
+          "bounds when a budget stopped it); it has no pixel errors and takes no part in the "
+          "fronts.",
           "", "### What \"cost\" means", "",
           "Two costs. **Run time**: the model backend's wall time for the render (summed over "
           "the scenes of a configuration). **Hardware**: the Yosys resources "
@@ -333,7 +496,9 @@ def render_markdown(results: dict, plots: list, md_path, *, command: str,
           "format takes 3-6 minutes each; the comparators and delay lines are left out). The "
           "scalar hardware cost is the fraction of one XC4VSX35 the unit takes, "
           "max(DSP48/192, slices/15360): its binding resource (1/cost units fit). Slices are "
-          "Yosys-based estimates and no timing is implied.", ""]
+          "Yosys-based estimates and no timing is implied. **Device frame time**: the cycles "
+          "of the whole intersection unit for the frame, over the units that fit and the "
+          "clock (next section): the axis a hardware user decides on.", ""]
 
     L += ["## Pareto fronts", "",
           "Configurations of the `main` grid, aggregated over its scenes; a configuration is "
@@ -357,6 +522,8 @@ def render_markdown(results: dict, plots: list, md_path, *, command: str,
         L.append(f"![{p.stem}]({os.path.relpath(p.resolve(), md_dir)})")
         L.append("")
 
+    L += _device_section(results, rows)
+
     L += ["## Configurations (main grid, aggregated)", "",
           _table(["config", "bundle", "scenes", "pixels differ", "in domain", "t_rel median",
                   "t_rel p99 (max)", "min PSNR", "out-of-domain pairs", "time (s)",
@@ -373,8 +540,11 @@ def render_markdown(results: dict, plots: list, md_path, *, command: str,
     from .sweep import missing_metrics
 
     holes = [(p, missing_metrics(p)) for p in pts if missing_metrics(p)]
+    n_capped = sum(1 for p in model if p.get("capped"))
     L += ["## Points", "",
           "Every model point (all metrics are in `results.csv` / `results.json`). "
+          + (f"{n_capped} capped point(s) have only the figures of a capped point "
+             "(section above). " if n_capped else "")
           + ("Every point has every metric." if not holes else
              f"{len(holes)} points lack a value, because they have no in-domain hit pair or "
              "no in-domain pixel (their triangles are all outside the format's domain): "
@@ -384,12 +554,15 @@ def render_markdown(results: dict, plots: list, md_path, *, command: str,
                   "rays/s", "pairs/s", "t_rel med", "t_rel p99", "pixels differ",
                   "PSNR", "ood pairs", "events o/u/i (operations)"],
                  [[p["grid"], f"{p['format']}/{p['rounding']}", p["mode"], p["scene"],
-                   p["bundle"], _f(p["t_total"], "{:.2f}"),
-                   _f(p["t_primary_unit"] + p["t_shadow_unit"], "{:.2f}"),
-                   _f(p["rays_per_s"], "{:.3g}"), _f(p["pairs_per_s"], "{:.3g}"),
-                   _f(p["t_rel_median"]), _f(p["t_rel_p99"]), _pct(p["tri_differs"]),
-                   _f(p["psnr"], "{:.1f}"), _pct(p["pairs_out_of_domain_frac"]),
-                   f"{p['overflow']}/{p['underflow']}/{p['invalid']}"] for p in model]), ""]
+                   p["bundle"], _f(p.get("t_total"), "{:.2f}"),
+                   _f(p["t_primary_unit"] + p["t_shadow_unit"], "{:.2f}")
+                   if "t_primary_unit" in p else "-",
+                   _f(p.get("rays_per_s"), "{:.3g}"), _f(p.get("pairs_per_s"), "{:.3g}"),
+                   _f(p.get("t_rel_median")), _f(p.get("t_rel_p99")),
+                   "capped" if p.get("capped") else _pct(p.get("tri_differs")),
+                   _f(p.get("psnr"), "{:.1f}"), _pct(p.get("pairs_out_of_domain_frac")),
+                   f"{p['overflow']}/{p['underflow']}/{p['invalid']}" if "overflow" in p
+                   else "-"] for p in model]), ""]
     refs = [p for p in pts if p["backend"] == "float64"]
     L += ["### float64 reference renders", "",
           _table(["scene", "bundle", "bound", "size", "time (s)", "rays/s", "pairs/s"],

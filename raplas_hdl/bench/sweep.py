@@ -8,14 +8,16 @@ machine, so the points form three grids:
 
 ``main``     every format x rounding x mode on every procedural scene at the main bundle
              size (the grid of the Pareto fronts);
-``meshes``   every format on every mesh file, first rounding and mode, main bundle size
-             (the conservative mode at FP16 and FP20 on a 70k-triangle mesh issues nearly
-             the brute-force pairs: tens of GB, more than this machine has);
+``meshes``   every format x mode on every mesh file, first rounding, main bundle size (the
+             conservative mode at FP16 and FP20 on a 70k-triangle mesh issues nearly the
+             brute-force pairs: such points come out *capped*, below);
 ``bundles``  every format on every procedural scene at the other bundle sizes, first rounding,
              first mode;
 
-plus a ``float64`` reference point per scene, bundle size and bound, and an ``rtl`` point when
-asked (a 24-triangle soup at 16x16, no shadows, against the model: slow).
+plus a ``float64`` reference point per scene, bundle size and bound, an ``rtl`` point when
+asked (a 24-triangle soup at 16x16, no shadows, against the model: slow), and with
+``probe_cap`` a ``cap`` point (the first main point under a tiny cap, which must come out
+capped: ``--quick`` has one).
 
 Each scene is normalised into its format's domain (:func:`domain_bound`: the largest power
 of two inside :func:`raplas_hdl.model.conservative.domain`, at most :data:`BOUND_CAP`); the
@@ -24,13 +26,29 @@ triangle the record builder accepts, also those outside the domain (the host's
 ``check_domain`` drop would hide the error the format makes there); such triangles are
 counted and every pair with one of them is an *out-of-domain pair*, left out of the t errors.
 
-Per point (see :data:`MODEL_METRICS`): wall time per render stage, throughput (rays per
-second over the whole render, pairs per second over the unit's stages), and errors:
+**Cap.** A point may issue at most ``max_pairs`` pairs. When the brute-force bound of the
+render (every ray against every triangle) is above it, a pre-pass renders the point at
+1/:data:`PREPASS_DIVISOR` of the image side under the cap scaled down by the pixel ratio;
+its pairs scaled up by the pixel ratio are the point's estimate. A point whose estimate is
+over the cap (or whose pre-pass, or render, goes over its budget: the sweep's backend counts
+the pairs as the unit's runs go and stops the render there) is not rendered to the end: it
+is reported with ``capped`` set, its reason, and the figures of the pre-pass scaled up
+(estimates, or lower bounds when a budget stopped it).
 
-- against float64, per pair: every pair the model issues is also evaluated in float64 on the
-  original geometry (:func:`raplas_hdl.host.exact.float64_intersect`, after the render, so the
-  timings do not include it); median and 99th percentile of ``|t - t64| / |t64|`` over the
-  in-domain pairs both hit, and the in-domain pairs whose hit bit differs;
+Per point (see :data:`MODEL_METRICS`): wall and CPU time of the render and per stage,
+throughput (rays per second over the whole render, pairs per second over the unit's stages),
+the device figures (:mod:`.cost`: the cycles of the device unit for the frame from the unit's
+counters, the units that fit on one XC4VSX35, the frame time at the board clock, the result
+link's traffic: one ``RESULT`` beat per issued pair), and errors:
+
+- against float64, per pair: the sweep's backend records a uniform sample of the unit's runs
+  as the render traces them (whole runs, at most ``pair_sample`` pairs: the sampling rate
+  halves whenever the sample outgrows it); after the render (outside the timings) it streams
+  those runs' pairs (:meth:`~raplas_hdl.host.backends.Backend.stream`) and evaluates each in
+  float64 on the original geometry (:func:`raplas_hdl.host.exact.float64_intersect`);
+  median and 99th percentile of ``|t - t64| / |t64|`` over the in-domain pairs both hit, and
+  the in-domain pairs whose hit bit differs (counts scaled from the sample to the issued
+  pairs);
 - against float64, per pixel: PSNR of the 8-bit images, fraction of pixels whose nearest
   triangle differs (all pixels, and pixels whose triangles are all in the domain);
 - against R (:mod:`raplas_hdl.verify.stress`): false hits, false misses, edge leaks and the
@@ -43,11 +61,12 @@ from __future__ import annotations
 import math
 import os
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
+from ..engine.passes import BundleBatch
 from ..fp import ROUNDINGS, FPFormat, parse_format
 from ..host.backends import BackendUnavailable, ModelBackend, make_backend
 from ..host.exact import float64_intersect
@@ -55,35 +74,56 @@ from ..host.render import RenderSettings, compare, render
 from ..host.scenes import MESH_SUFFIXES, SCENES, get_scene
 from ..host.triangles import make_triangles
 from ..model.conservative import domain
+from ..model.plane_sphere import n_passes
+from ..model.records import RESULT
+from . import cost as dev
 
-__all__ = ["BOUND_CAP", "MODEL_METRICS", "REFERENCE_METRICS", "MODES", "BenchSpec",
-           "quick_spec", "full_spec", "domain_bound", "find_meshes", "plan", "stress_metrics",
-           "run_sweep", "missing_metrics", "DEFAULT_MESH_DIR"]
+__all__ = ["BOUND_CAP", "MODEL_METRICS", "REFERENCE_METRICS", "CAPPED_METRICS", "MODES",
+           "BenchSpec", "PairBudgetExceeded", "quick_spec", "full_spec", "domain_bound",
+           "find_meshes", "plan", "stress_metrics", "run_sweep", "missing_metrics",
+           "device_figures", "DEFAULT_MESH_DIR", "DEFAULT_MAX_PAIRS", "DEFAULT_PAIR_SAMPLE",
+           "PREPASS_DIVISOR"]
 
 MODES = ("paper", "conservative")
 #: Largest normalisation bound used (beyond it only the host's float64 shading changes).
 BOUND_CAP = 256.0
 #: ``../shared/meshes`` beside the repository.
 DEFAULT_MESH_DIR = Path(__file__).resolve().parents[3] / "shared" / "meshes"
+#: Pairs a point may issue (about a minute of the model on one core).
+DEFAULT_MAX_PAIRS = 100_000_000
+#: Pairs of the per-pair error sample of a point.
+DEFAULT_PAIR_SAMPLE = 200_000
+#: The pre-pass renders 1/PREPASS_DIVISOR of the image side.
+PREPASS_DIVISOR = 4
+#: Smallest slice of a pass (upper bound of its pairs) between two checks of the budget.
+MIN_SLICE_PAIRS = 1 << 20
 
-STAGES = ("spheres", "load", "primary cull", "primary unit", "shading", "shadow cull",
-          "shadow unit", "image")
+STAGES = ("spheres", "load", "compile", "primary cull", "primary unit", "shading",
+          "shadow cull", "shadow unit", "image")
 
+#: Device and link figures of a point.
+DEVICE_METRICS = ("device_cycles", "device_cycles_overlap", "device_units", "device_frame_s",
+                  "device_fps", "link_beat_bits", "link_bits", "link_bits_per_s")
 #: Metrics every model (or rtl) point must have (none may be None or NaN).
 MODEL_METRICS = (
-    "t_total", *(f"t_{s.replace(' ', '_')}" for s in STAGES), "rays", "pairs_issued",
-    "rays_per_s", "pairs_per_s",
+    "t_total", "cpu_total", *(f"t_{s.replace(' ', '_')}" for s in STAGES), "rays",
+    "pairs_issued", "rays_per_s", "pairs_per_s",
     "psnr", "tri_differs", "tri_differs_in_domain", "hit_differs",
     "t_rel_median", "t_rel_p99", "t_pairs", "pair_hit_differs", "pairs_out_of_domain",
-    "pairs_out_of_domain_frac", "tris_out_of_domain", "unguaranteed_bundles",
+    "pairs_out_of_domain_frac", "pairs_sampled", "tris_out_of_domain", "unguaranteed_bundles",
     "overflow", "underflow", "invalid",
     "r_pairs", "r_in_domain", "r_false_hits", "r_false_misses", "r_edge_rays", "r_leaks",
     "r_t_rel_median", "r_t_rel_p99",
     "hw_dsp48", "hw_luts", "hw_ffs", "hw_slices", "hw_cost",
+    *DEVICE_METRICS, "max_pairs", "capped",
 )
+#: Metrics a capped point must have (it was not rendered to the end).
+CAPPED_METRICS = ("t_total", "cpu_total", "pairs_issued", "max_pairs", "capped",
+                  "capped_reason", "r_pairs", "r_false_hits", "r_false_misses", "r_leaks",
+                  "hw_dsp48", "hw_slices", "hw_cost", *DEVICE_METRICS)
 #: Metrics of a float64 reference point.
-REFERENCE_METRICS = ("t_total", *(f"t_{s.replace(' ', '_')}" for s in STAGES), "rays",
-                     "pairs_issued", "rays_per_s", "pairs_per_s")
+REFERENCE_METRICS = ("t_total", "cpu_total", *(f"t_{s.replace(' ', '_')}" for s in STAGES),
+                     "rays", "pairs_issued", "rays_per_s", "pairs_per_s")
 
 
 @dataclass
@@ -111,6 +151,14 @@ class BenchSpec:
         Stress families for the R metrics.
     repeats : int
         Renders per point; the timings are the fastest run's.
+    max_pairs : int
+        Pairs a point may issue (the cap, module docstring).
+    probe_cap : int or None
+        Add a ``cap`` point: the first main point under this cap (it must come out capped).
+    pair_sample : int
+        Pairs of the per-pair error sample of a point.
+    threads : int
+        Threads of the compiled passes (1: the timings are per core).
     quick : bool
     """
 
@@ -120,13 +168,17 @@ class BenchSpec:
     scenes: list = field(default_factory=lambda: list(SCENES))
     mesh_dir: str | None = str(DEFAULT_MESH_DIR)
     bundles: list = field(default_factory=lambda: [(8, 8), (4, 4), (16, 16)])
-    size: tuple = (32, 32)
-    mesh_size: tuple = (32, 32)
-    shadow: tuple = (2, 2)
+    size: tuple = (128, 128)
+    mesh_size: tuple = (256, 256)
+    shadow: tuple = (3, 3)
     rtl: str | None = None
     per_family: int = 2000
     seed: int = 0
     repeats: int = 1
+    max_pairs: int = DEFAULT_MAX_PAIRS
+    probe_cap: int | None = None
+    pair_sample: int = DEFAULT_PAIR_SAMPLE
+    threads: int = 1
     quick: bool = False
 
     def __post_init__(self):
@@ -145,13 +197,19 @@ class BenchSpec:
             raise ValueError("formats, roundings, modes and bundles must not be empty")
         if self.repeats < 1 or self.per_family < 1:
             raise ValueError("repeats and per_family must be at least 1")
+        if self.max_pairs < 1 or self.pair_sample < 1 or self.threads < 1:
+            raise ValueError("max_pairs, pair_sample and threads must be at least 1")
+        if self.probe_cap is not None and self.probe_cap < 1:
+            raise ValueError("probe_cap must be at least 1")
 
 
 def quick_spec(**overrides) -> BenchSpec:
-    """``--quick``: FP16, FP24, FP32; rtz; paper; cornell and spheres; 8x8; 32x32; no meshes."""
+    """``--quick``: FP16, FP24, FP32; rtz; paper; cornell and spheres; 8x8; 32x32 with 2x2
+    shadows; no meshes; a ``cap`` point under a cap of 1000 pairs."""
     kw = dict(formats=["FP16", "FP24", "FP32"], roundings=["rtz"], modes=["paper"],
               scenes=["cornell", "spheres"], mesh_dir=None, bundles=[(8, 8)], size=(32, 32),
-              mesh_size=(32, 32), shadow=(2, 2), per_family=300, quick=True)
+              mesh_size=(32, 32), shadow=(2, 2), per_family=300, probe_cap=1000,
+              quick=True)
     kw.update(overrides)
     return BenchSpec(**kw)
 
@@ -182,13 +240,13 @@ def _fmt(name: str, rounding: str) -> FPFormat:
 
 
 def plan(spec: BenchSpec, meshes) -> list[dict]:
-    """The model points of the three grids (see the module docstring), in run order."""
+    """The model points of the grids (see the module docstring), in run order."""
     main = spec.bundles[0]
     pts = []
 
-    def add(grid, f, r, m, scene, b):
+    def add(grid, f, r, m, scene, b, cap=spec.max_pairs):
         pts.append({"grid": grid, "format": f, "rounding": r, "mode": m, "scene": scene,
-                    "bundle": b})
+                    "bundle": b, "max_pairs": int(cap)})
 
     for f in spec.formats:
         for r in spec.roundings:
@@ -196,25 +254,70 @@ def plan(spec: BenchSpec, meshes) -> list[dict]:
                 for s in spec.scenes:
                     add("main", f, r, m, s, main)
     for f in spec.formats:
-        for s in meshes:
-            add("meshes", f, spec.roundings[0], spec.modes[0], s, main)
+        for m in spec.modes:
+            for s in meshes:
+                add("meshes", f, spec.roundings[0], m, s, main)
     for b in spec.bundles[1:]:
         for f in spec.formats:
             for s in spec.scenes:
                 add("bundles", f, spec.roundings[0], spec.modes[0], s, b)
+    if spec.probe_cap is not None:
+        first = spec.scenes[0] if spec.scenes else (meshes[0] if meshes else None)
+        if first is not None:
+            add("cap", spec.formats[0], spec.roundings[0], spec.modes[0], first, main,
+                spec.probe_cap)
     return pts
 
 
 # -- the model backend of the sweep --------------------------------------------------------
 
-class _SweepModel(ModelBackend):
-    """The model backend, loading out-of-domain triangles too, and keeping every run's pairs
-    (references only: the analysis runs after the render, outside its timings)."""
+class PairBudgetExceeded(RuntimeError):
+    """A render issued more pairs than its budget (the sweep's backend stops it)."""
 
-    def __init__(self, fmt, mode):
+    def __init__(self, pairs: int, budget: int):
+        super().__init__(f"{pairs:,} pairs issued, over the budget of {budget:,}")
+        self.pairs, self.budget = pairs, budget
+
+
+def _sub_batch(batch: BundleBatch, bs: np.ndarray) -> BundleBatch:
+    """Bundles ``bs`` of a batch as a batch of their own, enable bits copied (the host
+    clears them between early-out rounds) and the float64 rays kept."""
+    P, R = batch.n_planes, batch.n_rays
+    pi = (bs[:, None] * P + np.arange(P)).ravel()
+    ri = (bs[:, None] * R + np.arange(R)).ravel()
+    g = batch.geometry
+    return BundleBatch(batch.rows, batch.cols, batch.pn[pi], batch.pp[pi], batch.ro[bs],
+                       batch.rd[ri], batch.enable[bs].copy(), batch.keep_all[bs].copy(),
+                       batch.origin[bs], batch.directions[bs],
+                       {"origins": g["origins"][bs], "directions": g["directions"][bs]})
+
+
+class _SweepModel(ModelBackend):
+    """The model backend of the sweep.
+
+    - loads out-of-domain triangles too (:meth:`usable`);
+    - counts, per bundle size, the runs, spheres and pairs of the unit's runs (the device
+      figures; the warm-up pass is left out);
+    - stops the render when its pairs go over ``pair_budget`` (:class:`PairBudgetExceeded`;
+      the runs of a pass are traced in slices so that it stops near the budget);
+    - records a uniform sample of whole runs (at most ``sample_pairs`` pairs; the rate
+      halves whenever the sample outgrows that), each with its bundle's enable bits as
+      they were, for :func:`_pair_errors` after the render.
+    """
+
+    def __init__(self, fmt, mode, *, pair_budget=None, sample_pairs=DEFAULT_PAIR_SAMPLE,
+                 seed=0, testers=dev.DEVICE_TESTERS):
         super().__init__(fmt, mode)
-        self.log = []
         self.out_of_domain = None
+        self.pair_budget = pair_budget
+        self.sample_pairs = int(sample_pairs)
+        self.device_testers = testers
+        self.passes = {}
+        self.pairs_issued = 0
+        self.samples = []
+        self._rate = 1.0
+        self._rng = np.random.default_rng(seed)
+        self._warming = False
 
     def usable(self, tris):
         tris = np.asarray(tris, dtype=np.float64)
@@ -225,12 +328,94 @@ class _SweepModel(ModelBackend):
         self.out_of_domain = _out_of_domain(tris, self.fmt)
         return ok, dict(rec.skipped)
 
-    def run_many(self, runs):
-        runs = list(runs)
-        out = super().run_many(runs)
-        for (job, _), res in zip(runs, out):
-            if res.ray_id.size:
-                self.log.append((job.bundle.origin, job.bundle.directions, res))
+    def batch(self, origins, centres, col_axes, row_axes, rows, cols, enable=None):
+        out = super().batch(origins, centres, col_axes, row_axes, rows, cols, enable)
+        out.geometry["origins"] = np.asarray(origins, np.float64).reshape(-1, 3)
+        return out
+
+    def warm_pass(self, *args, **kwargs):
+        self._warming = True
+        try:
+            return super().warm_pass(*args, **kwargs)
+        finally:
+            self._warming = False
+
+    def trace(self, batch, run_b, run_start, run_sph, best_t, best_tri, tmin=0.0, tmax=None,
+              exclude=None):
+        if self._warming:
+            return super().trace(batch, run_b, run_start, run_sph, best_t, best_tri, tmin,
+                                 tmax, exclude)
+        run_b = np.ascontiguousarray(run_b, np.int64)
+        run_start = np.ascontiguousarray(run_start, np.int64)
+        run_sph = np.ascontiguousarray(run_sph, np.int64)
+        U = run_b.size
+        counters = np.zeros((U, 8), np.int64)
+        if U == 0:
+            return counters
+        cut = [0, U]
+        if self.pair_budget is not None:
+            # slices of about ``step`` pairs (upper bound: every ray against every triangle
+            # of the run's spheres) between two checks of the budget
+            cs = np.concatenate([[0], np.cumsum(self.scene.tcount[run_sph])])
+            ub = (cs[run_start[1:]] - cs[run_start[:-1]]) * batch.n_rays
+            step = max(MIN_SLICE_PAIRS, int(self.pair_budget) // 8)
+            sid = (np.cumsum(ub) - ub) // step
+            cut = [0, *(np.flatnonzero(np.diff(sid)) + 1).tolist(), U]
+        for lo, hi in zip(cut[:-1], cut[1:]):
+            rs = run_start[lo:hi + 1]
+            c = super().trace(batch, run_b[lo:hi], rs - rs[0], run_sph[rs[0]:rs[-1]], best_t,
+                              best_tri, tmin, tmax, exclude)
+            counters[lo:hi] = c
+            self._account(batch, c)
+            if self.pair_budget is not None and self.pairs_issued > self.pair_budget:
+                raise PairBudgetExceeded(self.pairs_issued, int(self.pair_budget))
+        self._sample(batch, run_b, run_start, run_sph, counters)
+        return counters
+
+    def _account(self, batch, c):
+        rows, cols = batch.rows, batch.cols
+        g = n_passes(rows, cols, self.device_testers)
+        p = self.passes.setdefault((rows, cols), {
+            "rows": rows, "cols": cols, "testers": self.device_testers, "passes": g,
+            "runs": 0, "spheres": 0, "pairs": 0, "empty_runs": 0, "overlap_core": 0})
+        p["runs"] += int(c.shape[0])
+        p["spheres"] += int(c[:, 0].sum())
+        p["pairs"] += int(c[:, 2].sum())
+        p["empty_runs"] += int(np.count_nonzero(c[:, 2] == 0))
+        p["overlap_core"] += int(np.maximum(c[:, 0] * g, c[:, 2]).sum())
+        self.pairs_issued += int(c[:, 2].sum())
+
+    def _sample(self, batch, run_b, run_start, run_sph, counters):
+        keys = self._rng.random(run_b.size)
+        sel = np.flatnonzero(keys < self._rate)
+        if sel.size == 0:
+            return
+        self.samples.append({
+            "batch": _sub_batch(batch, run_b[sel]), "k": np.arange(sel.size),
+            "ids": [run_sph[run_start[u]:run_start[u + 1]].copy() for u in sel],
+            "key": keys[sel], "n": counters[sel, 2].copy()})
+        while self.sampled_pairs > self.sample_pairs and self._rate > 1e-12:
+            self._rate /= 2
+            for rec in self.samples:
+                keep = rec["key"] < self._rate
+                rec["ids"] = [x for x, k in zip(rec["ids"], keep) if k]
+                for name in ("k", "key", "n"):
+                    rec[name] = rec[name][keep]
+            self.samples = [r for r in self.samples if r["k"].size]
+
+    @property
+    def sampled_pairs(self) -> int:
+        return int(sum(int(r["n"].sum()) for r in self.samples))
+
+    def device_passes(self, scale: float = 1.0) -> list[dict]:
+        """The per-bundle-size counters (scaled by ``scale``, rounded)."""
+        out = []
+        for p in self.passes.values():
+            q = dict(p)
+            if scale != 1.0:
+                for k in ("runs", "spheres", "pairs", "empty_runs", "overlap_core"):
+                    q[k] = int(round(q[k] * scale))
+            out.append(q)
         return out
 
 
@@ -252,18 +437,33 @@ def _quantiles(rel: np.ndarray) -> tuple[float, float]:
 
 
 def _pair_errors(backend: _SweepModel, tris: np.ndarray) -> dict:
-    """Errors of the issued pairs against float64 on the same pairs (original geometry)."""
+    """Errors of the sampled runs' pairs against float64 on the same pairs (original
+    geometry); counts scaled from the sample to the pairs the backend issued."""
     ood = backend.out_of_domain
-    if not backend.log:
-        return {"t_rel_median": math.nan, "t_rel_p99": math.nan, "t_pairs": 0,
-                "pair_hit_differs": 0, "pairs_out_of_domain": 0, "in_domain_pairs": 0}
-    ray = np.concatenate([r.ray_id for _, _, r in backend.log])
-    tri = np.concatenate([r.tri_id for _, _, r in backend.log])
-    hit = np.concatenate([r.hit for _, _, r in backend.log])
-    t = np.concatenate([r.t for _, _, r in backend.log])
-    o = np.concatenate([np.broadcast_to(np.asarray(org, float), (r.ray_id.size, 3))
-                        for org, _, r in backend.log])
-    d = np.concatenate([np.asarray(dirs, float)[r.ray_id] for _, dirs, r in backend.log])
+    total = int(backend.pairs_issued)
+    ray, tri, hit, t, o, d = [], [], [], [], [], []
+    mismatch = 0
+    for rec in backend.samples:
+        sub = rec["batch"]
+        res = backend.stream(sub, [(int(k), ids) for k, ids in zip(rec["k"], rec["ids"])])
+        for k, n, r in zip(rec["k"], rec["n"], res):
+            mismatch += int(r.ray_id.size != n)
+            if not r.ray_id.size:
+                continue
+            ray.append(r.ray_id)
+            tri.append(r.tri_id)
+            hit.append(r.hit)
+            t.append(r.t)
+            o.append(np.broadcast_to(sub.geometry["origins"][k], (r.ray_id.size, 3)))
+            d.append(sub.geometry["directions"][k][r.ray_id])
+    out = {"pairs_total": total, "pairs_sampled": 0, "pair_sample_frac": 0.0,
+           "sample_stream_mismatch": mismatch}
+    if not ray:
+        out.update(t_rel_median=math.nan, t_rel_p99=math.nan, t_pairs=0, pair_hit_differs=0,
+                   pairs_out_of_domain=0, in_domain_pairs=0, pairs_out_of_domain_frac=0.0)
+        return out
+    tri, hit, t = np.concatenate(tri), np.concatenate(hit), np.concatenate(t)
+    o, d = np.concatenate(o), np.concatenate(d)
     tv = tris[tri]
     ref = float64_intersect(o, d, tv[:, 0], tv[:, 1], tv[:, 2])
     ind = ~ood[tri]
@@ -271,10 +471,15 @@ def _pair_errors(backend: _SweepModel, tris: np.ndarray) -> dict:
     both = ind & hit & ref["hit"] & np.isfinite(t) & np.isfinite(t64) & (t64 != 0)
     rel = np.abs(t[both] - t64[both]) / np.abs(t64[both])
     med, p99 = _quantiles(rel)
-    return {"t_rel_median": med, "t_rel_p99": p99, "t_pairs": int(both.sum()),
-            "pair_hit_differs": int((ind & (hit != ref["hit"])).sum()),
-            "pairs_out_of_domain": int((~ind).sum()), "in_domain_pairs": int(ind.sum()),
-            "pairs_total": int(ray.size)}
+    n = int(tri.size)
+    scale = total / n if total else 1.0
+    out.update(t_rel_median=med, t_rel_p99=p99, t_pairs=int(both.sum()),
+               pair_hit_differs=int(round((ind & (hit != ref["hit"])).sum() * scale)),
+               pairs_out_of_domain=int(round((~ind).sum() * scale)),
+               in_domain_pairs=int(round(ind.sum() * scale)),
+               pairs_out_of_domain_frac=float((~ind).mean()),
+               pairs_sampled=n, pair_sample_frac=n / total if total else 0.0)
+    return out
 
 
 def _pixel_errors(res, ref, ood) -> dict:
@@ -290,32 +495,75 @@ def _pixel_errors(res, ref, ood) -> dict:
 
 
 def _timed_render(scene, make, settings, repeats):
+    """The fastest of ``repeats`` renders: ``(backend, result, wall, cpu)``."""
     best = None
     for _ in range(repeats):
         backend = make()
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         res = render(scene, backend, settings)
-        wall = time.perf_counter() - t0
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         if best is None or wall < best[2]:
-            best = (backend, res, wall)
+            best = (backend, res, wall, cpu)
     return best
 
 
-def _run_figures(res, wall) -> dict:
+def _run_figures(res, wall, cpu) -> dict:
     st, tm = res.stats, res.timings
-    out = {"t_total": wall}
+    out = {"t_total": wall, "cpu_total": cpu}
     for s in STAGES:
         out[f"t_{s.replace(' ', '_')}"] = float(tm.get(s, 0.0))
     unit_t = tm.get("primary unit", 0.0) + tm.get("shadow unit", 0.0)
     out.update(rays=int(st["rays"]), bundles=int(st["bundles"]),
                pairs_issued=int(st["pairs_issued"]),
                brute_force_pairs=int(st["brute_force_pairs"]),
+               pair_fraction=float(st["pair_fraction"]),
                rays_per_s=st["rays"] / wall if wall > 0 else math.nan,
                pairs_per_s=st["pairs_issued"] / unit_t if unit_t > 0 else math.nan,
                hits=int(st["hits"]), triangles=int(st["triangles"]),
+               unit_spheres=int(st["unit"].get("spheres", 0)),
+               unit_plane_tests=int(st["unit"].get("plane_tests", 0)),
+               host_plane_tests=int(st["host_plane_tests"]),
                unguaranteed_bundles=int(st["unguaranteed_bundles"]),
                **{k: int(v) for k, v in st["events"].items()})
     return out
+
+
+def _link_layout(backend: _SweepModel):
+    """The result record bound to the unit configuration of the point's largest bundle."""
+    rows, cols = max(backend.passes, key=lambda rc: (rc[0] * rc[1], rc)) if backend.passes \
+        else (1, 1)
+    return RESULT.bind(backend.config(rows, cols))
+
+
+def _device_counts(backend: _SweepModel, mode: str, scale: float = 1.0) -> dict:
+    """The device figures that do not need the resources: cycles and link bits."""
+    passes = backend.device_passes(scale)
+    pairs = sum(p["pairs"] for p in passes)
+    lay = _link_layout(backend)
+    return {"device_passes": passes, "device_runs": sum(p["runs"] for p in passes),
+            "device_cycles": dev.device_cycles(passes, mode),
+            "device_cycles_overlap": dev.device_cycles(passes, mode, overlap=True),
+            "device_pairs": pairs, "link_beat_bits": int(lay.size),
+            "link_params": dict(lay.params), "link_bits": int(pairs * lay.size),
+            "link_empty_beats": sum(p["empty_runs"] for p in passes)}
+
+
+def device_figures(point: dict, unit: dict | None, clock_mhz: float) -> dict:
+    """Frame time and link rate of a point from its cycles and the device unit (``unit``:
+    :func:`raplas_hdl.bench.cost.device_unit`; None or an error: NaN figures)."""
+    if not unit or "error" in unit or point.get("device_cycles") is None:
+        return {"device_units": math.nan, "device_basis": None, "device_frame_s": math.nan,
+                "device_fps": math.nan, "link_bits_per_s": math.nan,
+                "device_clock_mhz": clock_mhz}
+    units = int(unit["units"])
+    hz = clock_mhz * 1e6
+    frame = point["device_cycles"] / units / hz if units else math.inf
+    fps = 1.0 / frame if frame > 0 and math.isfinite(frame) else 0.0
+    return {"device_units": units, "device_basis": unit["basis"], "device_frame_s": frame,
+            "device_frame_s_overlap": (point["device_cycles_overlap"] / units / hz
+                                       if units else math.inf),
+            "device_unit_s": point["device_cycles"] / hz, "device_fps": fps,
+            "link_bits_per_s": point["link_bits"] * fps, "device_clock_mhz": clock_mhz}
 
 
 # -- R: the stress families ----------------------------------------------------------------
@@ -374,13 +622,91 @@ def _scene_name(spec: str) -> str:
 
 def missing_metrics(point: dict) -> list[str]:
     """The required metrics of ``point`` that are absent, None or NaN."""
-    need = REFERENCE_METRICS if point.get("backend") == "float64" else MODEL_METRICS
+    if point.get("backend") == "float64":
+        need = REFERENCE_METRICS
+    elif point.get("capped"):
+        need = CAPPED_METRICS
+    else:
+        need = MODEL_METRICS
     bad = []
     for k in need:
         v = point.get(k)
         if v is None or (isinstance(v, float) and math.isnan(v)) or v == "nan":
             bad.append(k)
     return bad
+
+
+def _measure_point(p, fmt, scene, settings, spec, ref) -> dict:
+    """Render one model point under its cap (module docstring) and measure it."""
+    cap = int(p["max_pairs"])
+    mode = p["mode"]
+    W, H = settings.width, settings.height
+    rays_max = W * H * (1 + settings.shadow_rows * settings.shadow_cols)
+    out = {"max_pairs": cap, "capped": False, "capped_reason": "",
+           "brute_force_bound": int(rays_max * scene.n_triangles)}
+    pre, pre_ratio, t_pre, c_pre = None, 1.0, 0.0, 0.0
+
+    def model(budget):
+        return _SweepModel(fmt, mode, pair_budget=budget, sample_pairs=spec.pair_sample,
+                           seed=spec.seed)
+
+    if out["brute_force_bound"] > cap:
+        w, h = -(-W // PREPASS_DIVISOR), -(-H // PREPASS_DIVISOR)
+        pre_ratio = (W * H) / (w * h)
+        pre = model(max(1, int(cap / pre_ratio)))
+        t0, c0 = time.perf_counter(), time.process_time()
+        try:
+            render(scene, pre, replace(settings, width=w, height=h))
+            estimate = int(pre.pairs_issued * pre_ratio)
+            out.update(pairs_estimate=estimate, prepass_size=f"{w}x{h}")
+            if estimate > cap:
+                out.update(capped=True, capped_reason=f"pre-pass estimate {estimate:,} pairs "
+                                                      f"over the cap")
+        except PairBudgetExceeded as exc:
+            out.update(capped=True, prepass_size=f"{w}x{h}",
+                       capped_reason=f"pre-pass {w}x{h} over its budget of {exc.budget:,} "
+                                     f"pairs: lower bounds")
+        t_pre, c_pre = time.perf_counter() - t0, time.process_time() - c0
+        out.update(prepass_seconds=t_pre)
+    res, src, src_scale = None, pre, pre_ratio
+    if not out["capped"]:
+        made = []
+
+        def make():
+            made.append(model(cap))
+            return made[-1]
+
+        t0, c0 = time.perf_counter(), time.process_time()
+        try:
+            backend, res, wall, cpu = _timed_render(scene, make, settings, spec.repeats)
+        except PairBudgetExceeded as exc:
+            src, src_scale = made[-1], 1.0
+            out.update(capped=True, capped_reason=f"render over the cap at {exc.pairs:,} "
+                                                  "pairs: lower bounds",
+                       t_total=t_pre + time.perf_counter() - t0,
+                       cpu_total=c_pre + time.process_time() - c0)
+    if res is not None:
+        out.update(_run_figures(res, wall, cpu))
+        out["tris_out_of_domain"] = int(backend.out_of_domain.sum())
+        out.update(_pixel_errors(res, ref, backend.out_of_domain))
+        out.update(_pair_errors(backend, scene.triangles))
+        out.update(_device_counts(backend, mode))
+        return out
+    # capped: the pre-pass's figures scaled to the point's size (estimates, or lower bounds
+    # when a budget stopped it), or those of the render that went over the cap
+    out.setdefault("t_total", t_pre)
+    out.setdefault("cpu_total", c_pre)
+    if src is not None and src.passes:
+        out["figures_from"] = "pre-pass, scaled" if src is pre else "render, up to the cap"
+        out.update(_device_counts(src, mode, src_scale))
+        out["pairs_issued"] = out["device_pairs"]
+        errs = _pair_errors(src, scene.triangles)
+        out.update({k: v for k, v in errs.items() if k != "pairs_total"})
+        out["tris_out_of_domain"] = int(src.out_of_domain.sum())
+    else:
+        out["figures_from"] = "none"
+        out["pairs_issued"] = cap
+    return out
 
 
 def run_sweep(spec: BenchSpec, progress=print, cost_thread: bool = True) -> dict:
@@ -393,16 +719,17 @@ def run_sweep(spec: BenchSpec, progress=print, cost_thread: bool = True) -> dict
     -------
     dict
         ``spec``, ``points`` (one flat dict per point), ``stress`` (R metrics per format,
-        rounding and mode), ``costs`` (per format and rounding), ``synth_checks``, ``notes``,
-        ``rtl`` (or None), ``wall_seconds``, ``started``.
+        rounding and mode), ``costs`` (per format and rounding, with the ``device`` unit),
+        ``device`` (the device model's constants), ``synth_checks``, ``notes``, ``rtl`` (or
+        None), ``wall_seconds``, ``cpu_seconds``, ``started``, ``load_average``.
     """
     from concurrent.futures import ThreadPoolExecutor
     from datetime import datetime, timezone
 
-    from . import cost
+    from ..fp import FP24
 
     say = progress or (lambda *_: None)
-    t_start = time.perf_counter()
+    t_start, c_start = time.perf_counter(), time.process_time()
     started = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
     notes = []
     meshes, note = find_meshes(spec.mesh_dir)
@@ -414,11 +741,19 @@ def run_sweep(spec: BenchSpec, progress=print, cost_thread: bool = True) -> dict
     def costs_job():
         out = {}
         for (f, r), fmt in fmts.items():
+            key = f"{_label(fmt)}/{r}"
             try:
-                out[f"{_label(fmt)}/{r}"] = cost.format_cost(fmt, allow_json=spec.quick)
+                out[key] = dev.format_cost(fmt, allow_json=spec.quick)
             except (RuntimeError, LookupError, OSError) as exc:
-                out[f"{_label(fmt)}/{r}"] = {"error": str(exc)}
-        checks = cost.synth_checks(spec.roundings[0], full=not spec.quick)
+                out[key] = {"error": str(exc)}
+                continue
+            try:
+                ref = (out[key] if _label(fmt) == "FP24" else
+                       dev.format_cost(FP24.with_rounding(r), allow_json=True))
+                out[key]["device"] = dev.device_unit(fmt, out[key], fp24_cost=ref)
+            except (RuntimeError, LookupError, OSError) as exc:
+                out[key]["device"] = {"error": str(exc)}
+        checks = dev.synth_checks(spec.roundings[0], full=not spec.quick)
         return out, checks
 
     pool = ThreadPoolExecutor(max_workers=1)
@@ -444,26 +779,27 @@ def run_sweep(spec: BenchSpec, progress=print, cost_thread: bool = True) -> dict
     def settings_for(name, bundle, bound):
         w, h = spec.mesh_size if name not in SCENES else spec.size
         return RenderSettings(w, h, bundle[0], bundle[1], spec.shadow[0], spec.shadow[1],
-                              bound=bound, progress=False, threads=1)
+                              bound=bound, progress=False, threads=spec.threads)
 
     def reference(name, bundle, bound):
         key = (name, bundle, bound)
         if key not in refs:
             scene = scene_for(name, bound)
-            _, res, wall = _timed_render(scene, lambda: make_backend("float64"),
-                                         settings_for(name, bundle, bound), spec.repeats)
+            _, res, wall, cpu = _timed_render(scene, lambda: make_backend("float64"),
+                                              settings_for(name, bundle, bound), spec.repeats)
             row = {"grid": "reference", "backend": "float64", "format": "float64",
                    "rounding": "-", "mode": "-", "scene": _scene_name(name),
                    "bundle": f"{bundle[0]}x{bundle[1]}", "size": res.stats["size"],
-                   "bound": bound, **_run_figures(res, wall)}
+                   "bound": bound, **_run_figures(res, wall, cpu)}
             rows.append(row)
             refs[key] = res
             say(f"float64      {_scene_name(name):18s} {row['bundle']:>5s} bound {bound:g}: "
-                f"{wall:6.2f} s")
+                f"{wall:6.2f} s (CPU {cpu:.2f} s)")
         return refs[key]
 
     t0 = time.perf_counter()
-    _warm_up(spec, next(iter(fmts.values())))
+    _warm_up(spec)
+    warm = set()
     say(f"warm-up (numba compile, excluded from the timings): {time.perf_counter() - t0:.1f} s")
 
     bad_scenes = set()
@@ -479,30 +815,33 @@ def run_sweep(spec: BenchSpec, progress=print, cost_thread: bool = True) -> dict
             notes.append(f"scene {name} skipped: {exc}")
             bad_scenes.add(name)
             continue
+        if (str(fmt), p["mode"]) not in warm:
+            _warm_model(fmt, p["mode"], spec)
+            warm.add((str(fmt), p["mode"]))
         scene = scene_for(name, bound)
+        settings = settings_for(name, p["bundle"], bound)
         try:
-            backend, res, wall = _timed_render(scene, lambda: _SweepModel(fmt, p["mode"]),
-                                               settings_for(name, p["bundle"], bound),
-                                               spec.repeats)
+            fig = _measure_point(p, fmt, scene, settings, spec, ref)
         except ValueError as exc:
             notes.append(f"point {_label(fmt)}/{fmt.rounding} {p['mode']} {name} skipped: {exc}")
             continue
         row = {"grid": p["grid"], "backend": "model", "format": _label(fmt),
                "rounding": fmt.rounding, "mode": p["mode"], "scene": _scene_name(name),
-               "bundle": f"{p['bundle'][0]}x{p['bundle'][1]}", "size": res.stats["size"],
-               "bound": bound, **_run_figures(res, wall)}
-        ood = backend.out_of_domain
-        row["tris_out_of_domain"] = int(ood.sum())
-        row.update(_pixel_errors(res, ref, ood))
-        row.update(_pair_errors(backend, scene.triangles))
-        row["pairs_out_of_domain_frac"] = (row["pairs_out_of_domain"] / row["pairs_total"]
-                                           if row.get("pairs_total") else 0.0)
+               "bundle": f"{p['bundle'][0]}x{p['bundle'][1]}",
+               "size": f"{settings.width}x{settings.height}", "bound": bound,
+               "shadow": f"{spec.shadow[0]}x{spec.shadow[1]}", **fig}
         row.update(stress[f"{_label(fmt)}/{fmt.rounding}"][p["mode"]])
         rows.append(row)
-        say(f"[{k + 1:3d}/{len(points)}] {p['grid']:7s} {_label(fmt)}/{fmt.rounding:4s} "
-            f"{p['mode']:12s} {row['scene']:18s} {row['bundle']:>5s}: {wall:6.2f} s  "
-            f"t_rel {row['t_rel_median']:.2e}  pixels {100 * row['tri_differs']:.2f} %  "
-            f"PSNR {row['psnr']:.1f}")
+        head = (f"[{k + 1:3d}/{len(points)}] {p['grid']:7s} {_label(fmt)}/{fmt.rounding:4s} "
+                f"{p['mode']:12s} {row['scene']:18s} {row['bundle']:>5s}: ")
+        if row["capped"]:
+            say(head + f"CAPPED ({row['capped_reason']}), {row['t_total']:.2f} s")
+        else:
+            say(head + f"{row['t_total']:6.2f} s (CPU {row['cpu_total']:.2f})  "
+                f"{row['pairs_issued'] / 1e6:7.2f} M pairs  device "
+                f"{row['device_cycles'] / 1e6:8.2f} M cycles  t_rel "
+                f"{row['t_rel_median']:.2e}  pixels {100 * row['tri_differs']:.2f} %  "
+                f"PSNR {row['psnr']:.1f}")
 
     rtl = None
     if spec.rtl:
@@ -513,28 +852,51 @@ def run_sweep(spec: BenchSpec, progress=print, cost_thread: bool = True) -> dict
     if fut is not None:
         costs, checks = fut.result()
     pool.shutdown()
+    clock = dev.CLOCKS_MHZ["board"]
     for row in rows:
         if row["backend"] == "float64":
             continue
         c = costs.get(f"{row['format']}/{row['rounding']}", {})
         row.update(hw_dsp48=c.get("dsp48"), hw_luts=c.get("luts"), hw_ffs=c.get("ffs"),
                    hw_slices=c.get("slices_est"), hw_cost=c.get("device_fraction"))
+        row.update(device_figures(row, c.get("device"), clock))
     spec_d = asdict(spec)
     return {"spec": spec_d, "points": rows, "stress": stress, "costs": costs,
+            "device": {"name": "XC4VSX35", "rows": dev.DEVICE_ROWS, "cols": dev.DEVICE_COLS,
+                       "testers": dev.DEVICE_TESTERS, "tester_latency": dev.TESTER_LATENCY,
+                       "rt_latency": {m: dev.rt_latency(m) for m in MODES},
+                       "clocks_mhz": dict(dev.CLOCKS_MHZ), "clock_mhz": clock},
             "synth_checks": checks, "notes": notes, "meshes": [_scene_name(m) for m in meshes],
-            "rtl": rtl, "started": started, "wall_seconds": time.perf_counter() - t_start}
+            "rtl": rtl, "started": started, "wall_seconds": time.perf_counter() - t_start,
+            "cpu_seconds": time.process_time() - c_start,
+            "load_average": list(os.getloadavg())}
 
 
-def _warm_up(spec: BenchSpec, fmt: FPFormat):
-    """Render a tiny scene once per backend, mode and bundle size so that numba's compile
-    (or the load of its cache) is not in the first point's timings."""
-    scene = get_scene("cornell", bound=8.0)
+_WARM_SCENE = ("cornell", 8.0)
+
+
+def _warm_settings(rows, cols, spec):
+    return RenderSettings(max(16, cols), max(16, rows), rows, cols, spec.shadow[0],
+                          spec.shadow[1], bound=_WARM_SCENE[1], progress=False,
+                          threads=spec.threads)
+
+
+def _warm_up(spec: BenchSpec):
+    """Render a tiny scene once per bundle size with float64 so that numba's compile (or the
+    load of its cache) is not in the first point's timings (the model's kernels: per format,
+    rounding and mode, :func:`_warm_model`)."""
+    scene = get_scene(_WARM_SCENE[0], bound=_WARM_SCENE[1])
     for rows, cols in spec.bundles:
-        st = RenderSettings(max(16, cols), max(16, rows), rows, cols, spec.shadow[0],
-                            spec.shadow[1], bound=8.0, progress=False, threads=1)
-        render(scene, make_backend("float64"), st)
-        for mode in spec.modes:
-            render(scene, _SweepModel(fmt, mode), st)
+        render(scene, make_backend("float64"), _warm_settings(rows, cols, spec))
+
+
+def _warm_model(fmt: FPFormat, mode: str, spec: BenchSpec):
+    """A tiny render and pair analysis of the model at ``fmt`` and ``mode``, untimed."""
+    scene = get_scene(_WARM_SCENE[0], bound=_WARM_SCENE[1])
+    for rows, cols in spec.bundles:
+        b = _SweepModel(fmt, mode, sample_pairs=1000)
+        render(scene, b, _warm_settings(rows, cols, spec))
+        _pair_errors(b, scene.triangles)
 
 
 def _rtl_point(spec: BenchSpec, fmt: FPFormat, say) -> dict:
@@ -565,4 +927,3 @@ def _rtl_point(spec: BenchSpec, fmt: FPFormat, say) -> dict:
     say(f"rtl ({spec.rtl}) tiny point: {t_rtl:.1f} s, model {t_mod:.2f} s, equal to model: "
         f"{out['equal_to_model']}")
     return out
-

@@ -1,11 +1,17 @@
 """``raplas-hdl bench``: run time against error over formats, roundings, modes, scenes, bundle
 sizes and backends, with hardware cost from Yosys and the Pareto fronts (issue 6, point 1).
 
+Renders procedural scenes at 128x128 and meshes at 256x256 with 3x3 soft shadows; beside
+the software time, each point gets its frame time on one XC4VSX35 (the synthesised
+intersection unit's cycles for the frame from the model's counters, over the units that fit
+and the clock) and the result link's traffic. A point may issue at most --max-pairs pairs:
+a point estimated (by a low-resolution pre-pass) to issue more is reported as capped.
+
 Writes results.csv, results.json and PNG plots under --out (default build/bench, with
 --quick build/bench-quick) and a markdown report at --report (default <out>/bench.md).
 Nothing goes to docs/ unless asked: to regenerate the committed report give
---out docs/results/bench --report docs/bench.md. The default campaign takes about 20
-minutes on 2 cores; --quick about 3 (cold caches).
+--out docs/results/bench --report docs/bench.md. The default campaign takes about 50-60
+minutes on 2 shared cores; --quick under a minute with warm caches.
 """
 
 from __future__ import annotations
@@ -22,13 +28,14 @@ BENCH_OUT = os.path.join("build", "bench")
 QUICK_OUT = os.path.join("build", "bench-quick")
 MAX_PER_FAMILY = 1_000_000
 MAX_REPEAT = 100
+MAX_MAX_PAIRS = 10**12
 SCENE_NAMES = ("cornell", "spheres", "terrain", "soup")
 MODES = ("paper", "conservative")
 
 #: The options of a sweep (none applies with --from-json).
 SWEEP_OPTIONS = ("quick", "format", "rounding", "modes", "scenes", "meshes", "bundles",
                  "size", "mesh_size", "shadow", "rtl", "per_family", "seed", "repeat",
-                 "waves")
+                 "max_pairs", "waves")
 
 
 def add_parser(subparsers):
@@ -37,7 +44,8 @@ def add_parser(subparsers):
         description=__doc__.split("\n\n", 1)[1])
     p.add_argument("--quick", action="store_true",
                    help="small sweep (FP16, FP24, FP32; rtz; paper; cornell, spheres; 8x8; "
-                        "32x32): about 3 minutes")
+                        "32x32, 2x2 shadows; one point under a cap of 1000 pairs, which comes "
+                        "out capped): under a minute with warm caches")
     g.add_format_option(p, multiple=True, plural=True, default="FP16,FP20,FP24,FP32; quick "
                         "FP16,FP24,FP32", rounding_default="rtz,rne,chop; quick rtz")
     p.add_argument("--modes", default=None, metavar="LIST",
@@ -54,13 +62,17 @@ def add_parser(subparsers):
                         "first is the main one (default 8x8,4x4,16x16; quick 8x8)")
     p.add_argument("--size", type=g.size_type("--size"), default=None, metavar="WxH",
                    help=f"image size of procedural scenes, sides 1 to {g.MAX_IMAGE} "
-                        "(default 32x32)")
+                        "(default 128x128; quick 32x32)")
     p.add_argument("--mesh-size", type=g.size_type("--mesh-size"), default=None,
                    metavar="WxH", help=f"image size of mesh scenes, sides 1 to {g.MAX_IMAGE} "
-                                       "(default 32x32)")
+                                       "(default 256x256; quick 32x32)")
     p.add_argument("--shadow", type=g.lattice_type("--shadow"), default=None, metavar="RxC",
                    help=f"shadow lattice per point, sides 1 to {g.MAX_LATTICE}, or 0 for no "
-                        "shadows (default 2x2)")
+                        "shadows (default 3x3; quick 2x2)")
+    p.add_argument("--max-pairs", type=g.int_range(1, MAX_MAX_PAIRS), default=None,
+                   metavar="N", help=f"pairs a point may issue, 1 to {MAX_MAX_PAIRS:.0e}; a "
+                                     "point estimated to issue more is reported as capped "
+                                     "(default 100,000,000)")
     p.add_argument("--rtl", default=None, type=g.choice("icarus", "verilator", what="simulator"),
                    metavar="{icarus,verilator}",
                    help="also run one tiny point through the RTL under this simulator (slow)")
@@ -119,6 +131,8 @@ def spec_from_args(args):
         kw["shadow"] = args.shadow
     if args.per_family is not None:
         kw["per_family"] = args.per_family
+    if args.max_pairs is not None:
+        kw["max_pairs"] = args.max_pairs
     kw.update(rtl=args.rtl, seed=args.seed or 0, repeats=args.repeat or 1)
     return quick_spec(**kw) if args.quick else full_spec(**kw)
 
@@ -181,7 +195,8 @@ def _command(args) -> str:
         parts += ["--rounding", ",".join(g.roundings_of(args, ()))]
     for opt, dest in (("--modes", "modes"), ("--scenes", "scenes"), ("--meshes", "meshes"),
                       ("--bundles", "bundles"), ("--rtl", "rtl"),
-                      ("--per-family", "per_family"), ("--out", "out"),
+                      ("--per-family", "per_family"), ("--max-pairs", "max_pairs"),
+                      ("--out", "out"),
                       ("--report", "report"), ("--from-json", "from_json")):
         v = getattr(args, dest)
         if v is not None:
