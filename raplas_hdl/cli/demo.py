@@ -1,7 +1,8 @@
 """``raplas-hdl demo``: the README's main job.
 
 1. Emit the Verilog of every unit into build/verilog/ (one file and JSON manifest each; a
-   unit that fails is reported, the render still runs, and the exit status is 1);
+   unit that fails is reported, the render still runs, and the exit status is 1), in a
+   second process while the renders run;
 2. render the default scene (the Cornell box) with the bit-accurate model backend (FP24)
    and with the float64 reference;
 3. write both PNGs and the difference image, and print the summary with the image error
@@ -42,7 +43,9 @@ def add_parser(subparsers):
 
 
 def emit_verilog(outdir: Path, fmt) -> tuple[list, list]:
-    """Emit every registered unit; returns (written paths, (unit, reason) failures)."""
+    """Emit every registered unit; returns (written paths, (unit, reason) failures).
+    Runs in a worker process of :func:`run` (arguments and results are plain data)."""
+    outdir = Path(outdir)
     try:
         from ..rtl.units import UNITS, emit_all
     except ImportError as exc:
@@ -87,21 +90,33 @@ def run(args) -> int:
     settings = settings_from_args(args, size)
     scene = scene.normalised(settings.bound)
     failed = []
+    emission = pool = None
     if not args.no_verilog:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
         vdir = Path(args.verilog_dir)
-        written, failed = emit_verilog(vdir, fmt)
-        print(f"[1/3] Verilog ({fmt}): {len(written)} unit(s) written to {vdir}/")
-        for path in written:
-            print(f"      {path}")
-        for name, why in failed:
-            print(f"      {name}: FAILED: {why}", file=sys.stderr)
+        print(f"[1/3] Verilog ({fmt}): emitting every unit into {vdir}/ in a second process")
+        pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+        emission = pool.submit(emit_verilog, str(vdir), fmt)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     shadow = "off" if args.shadow == (0, 0) else f"{args.shadow[0]}x{args.shadow[1]}"
     print(f"[2/3] rendering {scene.name} ({scene.n_triangles} triangles) at "
           f"{size[0]}x{size[1]}, shadows {shadow}: model {fmt} {args.mode}, then float64")
-    model = render(scene, make_backend("model", fmt, mode=args.mode), settings)
-    ref = render(scene, make_backend("float64"), settings)
+    try:
+        model = render(scene, make_backend("model", fmt, mode=args.mode), settings)
+        ref = render(scene, make_backend("float64"), settings)
+        if emission is not None:
+            written, failed = emission.result()
+            print(f"[1/3] Verilog ({fmt}): {len(written)} unit(s) written to {vdir}/")
+            for path in written:
+                print(f"      {path}")
+            for name, why in failed:
+                print(f"      {name}: FAILED: {why}", file=sys.stderr)
+    finally:
+        if pool is not None:
+            pool.shutdown(cancel_futures=True)
     cmp = compare(model, ref)
     paths = {"model": out / f"{scene.name}_model.png", "float64": out / f"{scene.name}_float64.png",
              "diff": out / f"{scene.name}_diff.png"}
