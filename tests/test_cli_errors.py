@@ -157,6 +157,8 @@ CASES = [
     ("render-same-output-twice", "render -o {t}/x.png --diff {t}/x.png",
      ["-o and --diff name the same file"]),
     ("scene-unknown", "render --scene bogus -o {t}/x.png", ["unknown scene 'bogus'"]),
+    ("scene-misspelled-shipped-mesh", "render --scene stanford-bunnny -o {t}/x.png",
+     ["unknown scene 'stanford-bunnny'"]),
     ("scene-file-missing", "render --scene {t}/nothing.obj -o {t}/x.png", ["does not exist"]),
     ("scene-is-directory", "render --scene {t}/dir.obj -o {t}/x.png", ["is a directory"]),
     ("scene-unsupported-type", "render --scene {t}/mesh.xyz -o {t}/x.png", ["unsupported type"]),
@@ -284,6 +286,8 @@ CASES = [
     ("bench-out-is-a-file", "bench --quick --out {t}/file.txt", ["is a file, not a directory"]),
     ("bench-report-extension", "bench --quick --out {t}/b --report {t}/b.txt",
      ["must end in .md"]),
+    ("bench-max-pairs-range", "bench --quick --max-pairs 0 --out {t}/b",
+     ["--max-pairs", "must be 1 to"]),
     # -- constraints
     ("constraints-frequency", "constraints --freq 0 -o {t}/c", ["--freq"]),
     ("constraints-delay-above-period", "constraints --freq 100 --in-delay 20 -o {t}/c",
@@ -535,3 +539,11 @@ def test_campaign_and_ray_triangle_take_the_format_given(tmp_path, monkeypatch):
     args = parser.parse_args(["bench", "--quick", "--format", "FP16,e6m17"])
     args._check(args)
     assert args.spec.formats == ["FP16", "E6M17"]
+
+
+def test_shipped_meshes_and_procedural_scenes_pass_the_scene_check():
+    from raplas_hdl.cli.render import check_scene
+    from raplas_hdl.host import scenes
+
+    for name in [*scenes.SCENES, *getattr(scenes, "MESHES", {})]:
+        check_scene(name)
