@@ -3,7 +3,6 @@ naming the problem, exit code 2, before any work: nothing is written, no traceba
 --debug. One case per bad-input class; all of them run in-process and need no simulator
 build, no numba compile and no render (about 10 s in all)."""
 
-import json
 import os
 from pathlib import Path
 

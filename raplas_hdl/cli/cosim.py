@@ -18,7 +18,6 @@ instead.
 from __future__ import annotations
 
 import re
-import sys
 import time
 
 from . import grammar as g
