@@ -39,11 +39,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..fp.fast import common_add, common_mul
 from ..fp.kernels import decode_k
 from ..fp.numba_cache import drop_stale_cache
 from ..model.plane_sphere import plane_keep
-from ..model.ray_triangle import _margins, pair_exact, pair_fast
+from ..model.ray_triangle import BLOCK, _margins, hit_common, pair_exact, pair_fast, vpair
 
 drop_stale_cache(__file__)
 
@@ -173,114 +172,11 @@ def trace_f64(pn, pp, ro, rd, enable, keep_all, rows, cols, run_b, run_start, ru
 
 
 
-# -- the model's pairs, a block at a time ---------------------------------------------------
-# The trace enumerates a run's pairs into a block of BLOCK lanes, gathers their operands
-# structure-of-arrays, and runs each of the 33 (34) operations over the block as one loop of
-# the branch-free common case of :mod:`raplas_hdl.fp.fast` (LLVM vectorises these loops);
-# ``acc`` collects the OR of every intermediate pattern, so a lane with any sentinel (a zero,
-# infinite or NaN operand, overflow, underflow) is recomputed alone, by
-# :func:`~raplas_hdl.model.ray_triangle.pair_fast` (zeros) or
-# :func:`~raplas_hdl.model.ray_triangle.pair_exact` (everything, with the event flags).
-BLOCK = 128
-
-
-@njit(cache=True)
-def _vsub(a, b, out, acc, n, E, M, R):
-    sb = np.int64(1) << (E + M)
-    for k in range(n):
-        r = common_add(a[k], b[k] ^ sb, E, M, R)
-        out[k] = r
-        acc[k] |= r
-
-
-@njit(cache=True)
-def _vdot(a0, a1, a2, b0, b1, b2, out, acc, n, E, M, R):
-    for k in range(n):
-        p0 = common_mul(a0[k], b0[k], E, M, R)
-        p1 = common_mul(a1[k], b1[k], E, M, R)
-        p2 = common_mul(a2[k], b2[k], E, M, R)
-        s = common_add(p0, p1, E, M, R)
-        r = common_add(s, p2, E, M, R)
-        out[k] = r
-        acc[k] |= p0 | p1 | p2 | s | r
-
-
-@njit(cache=True)
-def _vcross(a, b, c, d, out, acc, n, E, M, R):
-    """``a*b - c*d``."""
-    sb = np.int64(1) << (E + M)
-    for k in range(n):
-        p = common_mul(a[k], b[k], E, M, R)
-        q = common_mul(c[k], d[k], E, M, R)
-        r = common_add(p, q ^ sb, E, M, R)
-        out[k] = r
-        acc[k] |= p | q | r
-
-
-@njit(cache=True)
-def _vpair(g, w, n, cons, E, M, R):
-    """The pair's operations over a block: ``g`` (18, BLOCK) the operands (O, D, V0, E1,
-    E2, N, three rows each), ``w`` (13, BLOCK) out: t', u', v', det, s, w in rows 0-5, and
-    row 11 the OR of every intermediate (negative: a lane to recompute)."""
-    acc = w[11]
-    for k in range(n):
-        acc[k] = 0
-    tx, ty, tz = w[6], w[7], w[8]
-    _vsub(g[6], g[0], tx, acc, n, E, M, R)
-    _vsub(g[7], g[1], ty, acc, n, E, M, R)
-    _vsub(g[8], g[2], tz, acc, n, E, M, R)
-    det, tp, up, vp, s, ww = w[3], w[0], w[1], w[2], w[4], w[5]
-    _vdot(g[15], g[16], g[17], g[3], g[4], g[5], det, acc, n, E, M, R)
-    _vdot(g[15], g[16], g[17], tx, ty, tz, tp, acc, n, E, M, R)
-    qx, qy, qz = w[9], w[10], w[12]
-    _vcross(g[4], tz, g[5], ty, qx, acc, n, E, M, R)
-    _vcross(g[5], tx, g[3], tz, qy, acc, n, E, M, R)
-    _vcross(g[3], ty, g[4], tx, qz, acc, n, E, M, R)
-    _vdot(qx, qy, qz, g[12], g[13], g[14], up, acc, n, E, M, R)
-    _vdot(qx, qy, qz, g[9], g[10], g[11], vp, acc, n, E, M, R)
-    sb = np.int64(1) << (E + M)
-    for k in range(n):
-        up[k] ^= sb                                            # u' = neg(Q.E2)
-    for k in range(n):
-        s[k] = common_add(up[k], vp[k], E, M, R)               # s = u' + v' (not minus)
-        acc[k] |= s[k]
-    if cons:
-        _vsub(det, s, ww, acc, n, E, M, R)
-
-
-@njit(cache=True)
-def _key(x, sb):
-    """Order key of a finite pattern from the common case (normal or zero)."""
-    mag = x & (sb - 1)
-    return -mag if (x & sb) != 0 else mag
-
-
-@njit(cache=True)
-def _hit_common(det, tp, up, vp, s, ww, cons, margins, sb):
-    """The hit decision of a lane whose every operation took the common case (all values
-    finite and normal or zero, no flag): the contract's comparisons as integer keys."""
-    kd, kt, ku, kv, ks = _key(det, sb), _key(tp, sb), _key(up, sb), _key(vp, sb), _key(s, sb)
-    if not cons:
-        if kd > 0:
-            return ku >= 0 and kv >= 0 and ks <= kd and kt >= 0
-        if kd < 0:
-            return ku <= 0 and kv <= 0 and ks >= kd and kt <= 0
-        return False
-    m_det, m_t, m_u, m_v, m_w = margins
-    kmd, kmt, kmu, kmv, kmw = (_key(np.int64(m_det), sb), _key(np.int64(m_t), sb),
-                               _key(np.int64(m_u), sb), _key(np.int64(m_v), sb),
-                               _key(np.int64(m_w), sb))
-    kw = _key(ww, sb)
-    pos = -kmu <= ku and -kmv <= kv and -kmw <= kw and -kmt <= kt
-    neg = ku <= kmu and kv <= kmv and kw <= kmw and kt <= kmt
-    return (-kmd <= kd and pos) or (kd <= kmd and neg)
-
-
 @njit(nogil=True, cache=True, error_model="numpy")
 def _flush(g, w, lane_b, lane_ray, lane_di, lane_tid, lane_u, n, ro, rd, v0, e1, e2, nn, mc,
            tmin, tmax, excl, best_t, best_tri, counters, E, M, R, CONS):
     """The block's pairs: operations, recomputed lanes, decisions, nearest hits."""
-    _vpair(g, w, n, CONS, E, M, R)
+    vpair(g, w, n, CONS, E, M, R)
     sb = np.int64(1) << (E + M)
     zero = np.uint32(0)
     for k in range(n):
@@ -291,7 +187,7 @@ def _flush(g, w, lane_b, lane_ray, lane_di, lane_tid, lane_u, n, ro, rd, v0, e1,
             margins = (zero, zero, zero, zero, zero)
             if CONS:
                 margins = _margins(ro, b, rd, di, v0, e1, e2, nn, tid, E, M, mc)
-            h = _hit_common(w[3, k], w[0, k], w[1, k], w[2, k], w[4, k], w[5, k], CONS,
+            h = hit_common(w[3, k], w[0, k], w[1, k], w[2, k], w[4, k], w[5, k], CONS,
                             margins, sb)
             tp = np.uint32(w[0, k])
             det = np.uint32(w[3, k])

@@ -49,7 +49,7 @@ import numpy as np
 from numba import njit
 
 from ..fp.format import FLAG_INVALID, FLAG_OVERFLOW, FLAG_UNDERFLOW, FPFormat
-from ..fp.fast import fast_add, fast_mul
+from ..fp.fast import common_add, common_mul, fast_add, fast_mul
 from ..fp.kernels import add_k, is_nan_k, le_k, lt_k, mul_k, neg_k, rmode_code, sub_k
 from ..fp.numba_cache import drop_stale_cache
 from .conservative import margin_constants, margin_k, margin_table
@@ -221,6 +221,109 @@ def pair_fast(o, oi, d, di, v0, e1, e2, nn, ti, E, M, R, cons, mc):
     return True, h, np.uint32(tp), np.uint32(up), np.uint32(vp), np.uint32(det)
 
 
+# -- pairs a block at a time ----------------------------------------------------------------
+# Callers gather BLOCK pairs' operands structure-of-arrays and :func:`vpair` runs each of the
+# 33 (34) operations over the block as one loop of the branch-free common case of
+# :mod:`raplas_hdl.fp.fast` (LLVM vectorises these loops); ``acc`` collects the OR of every
+# intermediate pattern, so a lane with any sentinel (a zero, infinite or NaN operand,
+# overflow, underflow) is recomputed alone, by :func:`pair_fast` (zeros) or
+# :func:`pair_exact` (everything, with the event flags); the other lanes decide with
+# :func:`hit_common`.
+BLOCK = 128
+
+
+@njit(cache=True)
+def _vsub(a, b, out, acc, n, E, M, R):
+    sb = np.int64(1) << (E + M)
+    for k in range(n):
+        r = common_add(a[k], b[k] ^ sb, E, M, R)
+        out[k] = r
+        acc[k] |= r
+
+
+@njit(cache=True)
+def _vdot(a0, a1, a2, b0, b1, b2, out, acc, n, E, M, R):
+    for k in range(n):
+        p0 = common_mul(a0[k], b0[k], E, M, R)
+        p1 = common_mul(a1[k], b1[k], E, M, R)
+        p2 = common_mul(a2[k], b2[k], E, M, R)
+        s = common_add(p0, p1, E, M, R)
+        r = common_add(s, p2, E, M, R)
+        out[k] = r
+        acc[k] |= p0 | p1 | p2 | s | r
+
+
+@njit(cache=True)
+def _vcross(a, b, c, d, out, acc, n, E, M, R):
+    """``a*b - c*d``."""
+    sb = np.int64(1) << (E + M)
+    for k in range(n):
+        p = common_mul(a[k], b[k], E, M, R)
+        q = common_mul(c[k], d[k], E, M, R)
+        r = common_add(p, q ^ sb, E, M, R)
+        out[k] = r
+        acc[k] |= p | q | r
+
+
+@njit(cache=True)
+def vpair(g, w, n, cons, E, M, R):
+    """The pair's operations over a block: ``g`` (18, BLOCK) the operands (O, D, V0, E1,
+    E2, N, three rows each), ``w`` (13, BLOCK) out: t', u', v', det, s, w in rows 0-5, and
+    row 11 the OR of every intermediate (negative: a lane to recompute)."""
+    acc = w[11]
+    for k in range(n):
+        acc[k] = 0
+    tx, ty, tz = w[6], w[7], w[8]
+    _vsub(g[6], g[0], tx, acc, n, E, M, R)
+    _vsub(g[7], g[1], ty, acc, n, E, M, R)
+    _vsub(g[8], g[2], tz, acc, n, E, M, R)
+    det, tp, up, vp, s, ww = w[3], w[0], w[1], w[2], w[4], w[5]
+    _vdot(g[15], g[16], g[17], g[3], g[4], g[5], det, acc, n, E, M, R)
+    _vdot(g[15], g[16], g[17], tx, ty, tz, tp, acc, n, E, M, R)
+    qx, qy, qz = w[9], w[10], w[12]
+    _vcross(g[4], tz, g[5], ty, qx, acc, n, E, M, R)
+    _vcross(g[5], tx, g[3], tz, qy, acc, n, E, M, R)
+    _vcross(g[3], ty, g[4], tx, qz, acc, n, E, M, R)
+    _vdot(qx, qy, qz, g[12], g[13], g[14], up, acc, n, E, M, R)
+    _vdot(qx, qy, qz, g[9], g[10], g[11], vp, acc, n, E, M, R)
+    sb = np.int64(1) << (E + M)
+    for k in range(n):
+        up[k] ^= sb                                            # u' = neg(Q.E2)
+    for k in range(n):
+        s[k] = common_add(up[k], vp[k], E, M, R)               # s = u' + v' (not minus)
+        acc[k] |= s[k]
+    if cons:
+        _vsub(det, s, ww, acc, n, E, M, R)
+
+
+@njit(cache=True)
+def _key(x, sb):
+    """Order key of a finite pattern from the common case (normal or zero)."""
+    mag = x & (sb - 1)
+    return -mag if (x & sb) != 0 else mag
+
+
+@njit(cache=True)
+def hit_common(det, tp, up, vp, s, ww, cons, margins, sb):
+    """The hit decision of a lane whose every operation took the common case (all values
+    finite and normal or zero, no flag): the contract's comparisons as integer keys."""
+    kd, kt, ku, kv, ks = _key(det, sb), _key(tp, sb), _key(up, sb), _key(vp, sb), _key(s, sb)
+    if not cons:
+        if kd > 0:
+            return ku >= 0 and kv >= 0 and ks <= kd and kt >= 0
+        if kd < 0:
+            return ku <= 0 and kv <= 0 and ks >= kd and kt <= 0
+        return False
+    m_det, m_t, m_u, m_v, m_w = margins
+    kmd, kmt, kmu, kmv, kmw = (_key(np.int64(m_det), sb), _key(np.int64(m_t), sb),
+                               _key(np.int64(m_u), sb), _key(np.int64(m_v), sb),
+                               _key(np.int64(m_w), sb))
+    kw = _key(ww, sb)
+    pos = -kmu <= ku and -kmv <= kv and -kmw <= kw and -kmt <= kt
+    neg = ku <= kmu and kv <= kmv and kw <= kmw and kt <= kmt
+    return (-kmd <= kd and pos) or (kd <= kmd and neg)
+
+
 @njit(nogil=True, cache=True)
 def _generic_loop(o, d, v0, e1, e2, nn, mc, lo, hi, hit, t_o, u_o, v_o, det_o, cnt_o, e, m, r,
                   cons):
@@ -250,8 +353,9 @@ _FLAT = {}
 
 
 def _flat_kernel(fmt: FPFormat, mode: str):
-    """The per-pair loop of :func:`intersect` for one format, rounding and mode: the format
-    is a compile-time constant (cached on disk per format by numba)."""
+    """The loop of :func:`intersect` for one format, rounding and mode, a block of pairs at a
+    time (:func:`vpair`); the format is a compile-time constant (cached on disk per format
+    by numba)."""
     E, M, R, CONS = fmt.exp_bits, fmt.man_bits, rmode_code(fmt), mode == "conservative"
     key = (E, M, R, CONS)
     if key in _FLAT:
@@ -259,21 +363,47 @@ def _flat_kernel(fmt: FPFormat, mode: str):
 
     @njit(nogil=True, cache=True)
     def loop(o, d, v0, e1, e2, nn, mc, lo, hi, hit, t_o, u_o, v_o, det_o, cnt_o):
-        for i in range(lo, hi):
-            ok, h, tp, up, vp, det = pair_fast(o, i, d, i, v0, e1, e2, nn, i, E, M, R, CONS,
-                                               mc)
-            cnt = np.int64(0)
-            if not ok:
-                h, tp, up, vp, det, cnt = pair_exact(o, i, d, i, v0, e1, e2, nn, i, E, M, R,
-                                                     CONS, mc)
-            hit[i] = h
-            t_o[i] = tp
-            u_o[i] = up
-            v_o[i] = vp
-            det_o[i] = det
-            cnt_o[i, 0] = cnt & 0xFF
-            cnt_o[i, 1] = (cnt >> 8) & 0xFF
-            cnt_o[i, 2] = (cnt >> 16) & 0xFF
+        g = np.empty((18, BLOCK), np.int64)
+        w = np.empty((13, BLOCK), np.int64)
+        sb = np.int64(1) << (E + M)
+        zero = np.uint32(0)
+        for start in range(lo, hi, BLOCK):
+            n = min(BLOCK, hi - start)
+            for k in range(n):
+                i = start + k
+                for c in range(3):
+                    g[c, k] = o[i, c]
+                    g[3 + c, k] = d[i, c]
+                    g[6 + c, k] = v0[i, c]
+                    g[9 + c, k] = e1[i, c]
+                    g[12 + c, k] = e2[i, c]
+                    g[15 + c, k] = nn[i, c]
+            vpair(g, w, n, CONS, E, M, R)
+            for k in range(n):
+                i = start + k
+                cnt = np.int64(0)
+                if w[11, k] >= 0:
+                    margins = (zero, zero, zero, zero, zero)
+                    if CONS:
+                        margins = _margins(o, i, d, i, v0, e1, e2, nn, i, E, M, mc)
+                    h = hit_common(w[3, k], w[0, k], w[1, k], w[2, k], w[4, k], w[5, k], CONS,
+                                   margins, sb)
+                    tp, up, vp, det = (np.uint32(w[0, k]), np.uint32(w[1, k]),
+                                       np.uint32(w[2, k]), np.uint32(w[3, k]))
+                else:
+                    ok, h, tp, up, vp, det = pair_fast(o, i, d, i, v0, e1, e2, nn, i, E, M, R,
+                                                       CONS, mc)
+                    if not ok:
+                        h, tp, up, vp, det, cnt = pair_exact(o, i, d, i, v0, e1, e2, nn, i, E,
+                                                             M, R, CONS, mc)
+                hit[i] = h
+                t_o[i] = tp
+                u_o[i] = up
+                v_o[i] = vp
+                det_o[i] = det
+                cnt_o[i, 0] = cnt & 0xFF
+                cnt_o[i, 1] = (cnt >> 8) & 0xFF
+                cnt_o[i, 2] = (cnt >> 16) & 0xFF
 
     _FLAT[key] = loop
     return loop
