@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Install the system tools the Makefile needs: make, g++, iverilog.
+"""Install the system tools the Makefile needs: make, g++, iverilog, and the lz4 library
+that Verilator's FST waveform writer links (``--waves --sim verilator``).
 
 Run with the system Python on a fresh machine, before ``make``. As root it installs what is
 missing with apt; otherwise it names what to install. It changes nothing when all is there.
@@ -11,6 +12,8 @@ import subprocess
 import sys
 
 NEEDED = {"make": "make", "g++": "g++", "iverilog": "iverilog"}
+#: Files (any of each tuple) standing for a library package.
+NEEDED_FILES = {"liblz4-dev": ("/usr/include/lz4.h",)}
 
 
 def main() -> int:
@@ -19,6 +22,8 @@ def main() -> int:
               file=sys.stderr)
         return 1
     missing = [pkg for tool, pkg in NEEDED.items() if shutil.which(tool) is None]
+    missing += [pkg for pkg, files in NEEDED_FILES.items()
+                if not any(os.path.exists(f) for f in files)]
     if not missing:
         return 0
     if os.geteuid() != 0 or shutil.which("apt-get") is None:
@@ -30,6 +35,8 @@ def main() -> int:
     subprocess.run(["apt-get", "update", "-qq"], check=True, env=env)
     subprocess.run(["apt-get", "install", "-y", "-qq", *missing], check=True, env=env)
     still = [tool for tool in NEEDED if shutil.which(tool) is None]
+    still += [pkg for pkg, files in NEEDED_FILES.items()
+              if not any(os.path.exists(f) for f in files)]
     if still:
         print("bootstrap: still missing after apt-get: " + ", ".join(still), file=sys.stderr)
         return 1
