@@ -20,6 +20,7 @@ import os
 import shlex
 from pathlib import Path
 
+from ..model.modes import MODES
 from . import grammar as g
 
 __all__ = ["add_parser", "check", "run", "spec_from_args"]
@@ -30,7 +31,6 @@ MAX_PER_FAMILY = 1_000_000
 MAX_REPEAT = 100
 MAX_MAX_PAIRS = 10**12
 SCENE_NAMES = ("cornell", "spheres", "terrain", "soup")
-MODES = ("paper", "conservative")
 
 #: The options of a sweep (none applies with --from-json).
 SWEEP_OPTIONS = ("quick", "format", "rounding", "modes", "scenes", "meshes", "bundles",
@@ -72,7 +72,7 @@ def add_parser(subparsers):
     p.add_argument("--max-pairs", type=g.int_range(1, MAX_MAX_PAIRS), default=None,
                    metavar="N", help=f"pairs a point may issue, 1 to {MAX_MAX_PAIRS:.0e}; a "
                                      "point estimated to issue more is reported as capped "
-                                     "(default 100,000,000)")
+                                     "(default 500,000,000)")
     p.add_argument("--rtl", default=None, type=g.choice("icarus", "verilator", what="simulator"),
                    metavar="{icarus,verilator}",
                    help="also run one tiny point through the RTL under this simulator (slow)")

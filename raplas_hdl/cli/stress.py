@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import os
 
+from ..model.modes import MODES
 from . import grammar as g
 
 __all__ = ["add_parser", "check", "run", "format_table"]
@@ -54,7 +55,7 @@ def add_parser(subparsers):
         description="The seeded stress families of the ray-triangle unit (golden model) "
                     "against the exact reference R: a table per format and mode.")
     g.add_format_option(r, multiple=True, default="FP24/rtz")
-    r.add_argument("--mode", type=g.choice("paper", "conservative", "both", what="mode"),
+    r.add_argument("--mode", type=g.choice(*MODES, "both", what="mode"),
                    default="both", metavar="{paper,conservative,both}",
                    help="ray-triangle mode(s) (default both)")
     r.add_argument("--per-family", type=g.int_range(1, MAX_PER_FAMILY), default=1000,
@@ -152,7 +153,7 @@ def run_ray_triangle(args) -> int:
     from ..verify import stress
 
     families = stress.FAMILIES if args.family_list is None else args.family_list
-    modes = ("paper", "conservative") if args.mode == "both" else (args.mode,)
+    modes = MODES if args.mode == "both" else (args.mode,)
     results = []
     status = 0
     for fmt in args.fmts:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 
+from ..model.modes import MODES
 from . import grammar as g
 
 #: The units and their options as the command line states them: option -> (argparse
@@ -27,7 +28,7 @@ UNIT_LIMITS = {
     "fifo_depth": {"board-top": (2, 1024, 16)},
 }
 CHOICE_OPTIONS = {
-    "mode": (("paper", "conservative"), "paper",
+    "mode": (MODES, "paper",
              ("ray-triangle", "intersection-unit", "board-top")),
     "target": (("generic", "virtex4"), "generic",
                ("fp-mul", "plane-sphere-tester", "plane-sphere", "ray-triangle",

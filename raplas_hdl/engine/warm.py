@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..model.modes import MODES
+
 __all__ = ["warm", "warm_lock", "default_lock"]
 
 
@@ -75,7 +77,7 @@ def _engine(fmt, mode):
                           progress=False))
 
 
-def warm(formats=("FP24/rtz",), modes=("paper", "conservative"), float64: bool = True,
+def warm(formats=("FP24/rtz",), modes=MODES, float64: bool = True,
          generic: bool = True, engine: bool = True, lock=None) -> dict:
     """Compile (or load) the kernels of the groups chosen; seconds per group.
 

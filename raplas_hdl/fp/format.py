@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-__all__ = ["FPFormat", "ROUNDINGS", "FP16", "FP20", "FP24", "FP32", "FLAG_OVERFLOW",
+__all__ = ["FPFormat", "check_format", "ROUNDINGS", "FP16", "FP20", "FP24", "FP32", "FLAG_OVERFLOW",
            "FLAG_UNDERFLOW", "FLAG_INVALID", "FLAG_NAMES", "PRESETS", "parse_format"]
 
 #: Roundings of the contract: ``rtz`` (correct, toward zero: the default), ``rne``
@@ -159,6 +159,19 @@ FP20 = FPFormat(6, 13)
 FP24 = FPFormat(7, 16)
 FP32 = FPFormat(8, 23)
 PRESETS = {"FP16": FP16, "FP20": FP20, "FP24": FP24, "FP32": FP32}
+
+
+def check_format(fmt, name: str = "fmt") -> FPFormat:
+    """``fmt`` if it is an :class:`FPFormat` (the one type check of every API).
+
+    Raises
+    ------
+    ValueError
+        Naming the argument and what it got.
+    """
+    if not isinstance(fmt, FPFormat):
+        raise ValueError(f"{name} must be an FPFormat, not {fmt!r}")
+    return fmt
 
 
 def parse_format(text: str, rounding: str | None = None) -> FPFormat:

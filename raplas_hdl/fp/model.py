@@ -23,7 +23,8 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from numba import get_num_threads, njit
 
-from .format import FLAG_INVALID, FLAG_NAMES, FLAG_OVERFLOW, FLAG_UNDERFLOW, FPFormat
+from .format import (FLAG_INVALID, FLAG_NAMES, FLAG_OVERFLOW, FLAG_UNDERFLOW, FPFormat,
+                     check_format)
 from .kernels import (CHOP, DOWN, RNE, RTZ, UP, abs_le_k, add_int_k, add_k, decode_k,
                       encode_k, le_k, lt_k, mul_int_k, mul_k, neg_k, rmode_code)
 from .fast import common_add as _common_add
@@ -280,9 +281,7 @@ def _run_fast(fa, fb, fmt, op, want_flags):
 
 
 # -- argument handling --------------------------------------------------------------------
-def _check_fmt(fmt):
-    if not isinstance(fmt, FPFormat):
-        raise ValueError(f"fmt must be an FPFormat, not {fmt!r}")
+_check_fmt = check_format
 
 
 def _patterns(x, fmt, name):

@@ -46,9 +46,9 @@ import numpy as np
 from ..engine.kernels import F64_SLACK, cull_f64, model_kernels, trace_f64
 from ..engine.passes import (COUNTER_NAMES, Arithmetic, BundleBatch, EngineScene,
                              cull_pass, round_runs, trace_pass)
-from ..fp.format import FP24, FPFormat
+from ..fp.format import FP24, FPFormat, check_format
 from ..fp.kernels import rmode_code
-from ..model.ray_triangle import MODES
+from ..model.modes import check_mode
 from .bundles import RayBundle, bundle_geometry, encode_bundle_arrays
 from .shading import nearest_hits
 from .spheres import SphereTree
@@ -324,10 +324,8 @@ class ModelBackend(Backend):
     def __init__(self, fmt: FPFormat = FP24, mode: str = "conservative", testers=None,
                  margin_scale: int = 1):
         super().__init__()
-        if not isinstance(fmt, FPFormat):
-            raise ValueError(f"fmt must be an FPFormat, not {fmt!r}")  # noqa: TRY004
-        if mode not in MODES:
-            raise ValueError(f"mode must be one of {', '.join(MODES)}, not {mode!r}")
+        check_format(fmt)
+        check_mode(mode)
         self.fmt, self.mode, self.testers, self.margin_scale = fmt, mode, testers, margin_scale
         self._configs = {}
 

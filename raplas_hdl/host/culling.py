@@ -72,7 +72,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from raplas_hdl.fp import FPFormat
+from raplas_hdl.fp import FPFormat, check_format
 from raplas_hdl.fp import model as fpm
 
 __all__ = ["CullingBudget", "BundleSlack", "bundle_slack", "bundle_slacks", "slack_arrays",
@@ -136,8 +136,7 @@ class CullingBudget:
     """
 
     def __init__(self, fmt: FPFormat, o_max: float, margin: float = 0.0):
-        if not isinstance(fmt, FPFormat):
-            raise ValueError(f"fmt must be an FPFormat, not {fmt!r}")
+        check_format(fmt)
         self.fmt = fmt
         self.limit = 2.0 ** (fmt.emax - 3)
         if not (math.isfinite(o_max) and 0 <= o_max <= self.limit):

@@ -99,7 +99,7 @@ from fractions import Fraction
 import numpy as np
 from numba import njit
 
-from ..fp.format import FPFormat
+from ..fp.format import FPFormat, check_format
 
 __all__ = ["Domain", "domain", "MarginConstants", "margin_constants", "margin_exponents",
            "margins", "MARGIN_NAMES", "SAFETY", "GUARD_EXP", "C_DET", "C_T", "C_UV", "C_W",
@@ -220,8 +220,7 @@ def margin_constants(fmt: FPFormat, margin_scale: float = 1.0) -> MarginConstant
     ValueError
         If ``fmt`` has fewer than 8 fraction bits or ``margin_scale`` is not positive.
     """
-    if not isinstance(fmt, FPFormat):
-        raise ValueError(f"fmt must be an FPFormat, not {fmt!r}")
+    check_format(fmt)
     if fmt.man_bits < MIN_MAN_BITS:
         raise ValueError(f"the conservative mode needs man_bits >= {MIN_MAN_BITS}, "
                          f"not {fmt.man_bits}")

@@ -55,14 +55,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..fp.format import FP24, FPFormat
+from ..fp.format import FP24, FPFormat, check_format
+from .modes import MODES, check_mode
 
 __all__ = ["UnitConfig", "SceneMemory", "BundleMemory", "REGIONS", "write_address",
            "scene_writes", "bundle_writes", "run_list_writes", "COUNTER_NAMES", "MODES",
            "Run", "as_run"]
 
-#: Ray-triangle modes (``mode`` of the ray-triangle unit).
-MODES = ("paper", "conservative")
 
 #: Regions of the write-port address map.
 REGIONS = {"tri": 0, "sphere": 1, "tlist": 2, "plane": 3, "ray": 4, "rlist": 5}
@@ -131,8 +130,7 @@ class UnitConfig:
     fifo_depth: int = 16
 
     def __post_init__(self):
-        if not isinstance(self.fmt, FPFormat):
-            raise ValueError(f"fmt must be an FPFormat, not {self.fmt!r}")
+        check_format(self.fmt)
         _check_int("rows", self.rows, 1, 64)
         _check_int("cols", self.cols, 1, 64)
         if self.testers is not None:
@@ -140,8 +138,7 @@ class UnitConfig:
         _check_int("tris_per_sphere", self.tris_per_sphere, 1, 4096)
         _check_int("max_triangles", self.max_triangles, 1, 1 << 20)
         _check_int("max_spheres", self.max_spheres, 1, 1 << 20)
-        if self.mode not in MODES:
-            raise ValueError(f"mode must be one of {', '.join(MODES)}, not {self.mode!r}")
+        check_mode(self.mode)
         _check_int("margin_scale", self.margin_scale, 1)
         _check_int("fifo_depth", self.fifo_depth, 2, 1024)
         if self.max_spheres * self.tris_per_sphere > _MAX_INDEX + 1:

@@ -26,7 +26,7 @@ import math
 import numpy as np
 from numba import njit
 
-from raplas_hdl.fp import FPFormat
+from raplas_hdl.fp import FPFormat, check_format
 from raplas_hdl.fp.fast import fast_add, fast_mul
 from raplas_hdl.fp.kernels import add_k, lt_k, mul_k, rmode_code
 from raplas_hdl.fp.numba_cache import drop_stale_cache
@@ -132,8 +132,7 @@ def _as_bits(x, shape_tail, name, fmt):
 
 
 def _run(planes_n, planes_p, centres, radii, fmt: FPFormat):
-    if not isinstance(fmt, FPFormat):
-        raise ValueError(f"fmt must be an FPFormat, not {fmt!r}")
+    check_format(fmt)
     n = _as_bits(planes_n, (3,), "planes_n", fmt)
     p = _as_bits(planes_p, (), "planes_p", fmt)
     c = _as_bits(centres, (3,), "centres", fmt)

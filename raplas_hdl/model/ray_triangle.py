@@ -48,16 +48,16 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..fp.format import FLAG_INVALID, FLAG_OVERFLOW, FLAG_UNDERFLOW, FPFormat
+from ..fp.format import FLAG_INVALID, FLAG_OVERFLOW, FLAG_UNDERFLOW, FPFormat, check_format
 from ..fp.fast import common_add, common_mul, fast_add, fast_mul
 from ..fp.kernels import add_k, is_nan_k, le_k, lt_k, mul_k, neg_k, rmode_code, sub_k
 from ..fp.numba_cache import drop_stale_cache
 from .conservative import margin_constants, margin_k, margin_table
+from .modes import MODES, check_mode
 from ..parallel import run_chunks
 
 __all__ = ["intersect", "MODES", "N_OPS", "EVENTS"]
 
-MODES = ("paper", "conservative")
 #: Arithmetic operations per pair, by mode.
 N_OPS = {"paper": 33, "conservative": 34}
 
@@ -452,10 +452,8 @@ def intersect(o, d, v0, e1, e2, n, fmt: FPFormat, mode: str = "paper",
         For a wrong shape, a pattern wider than the format, an unknown mode, or a format
         the conservative mode does not support.
     """
-    if not isinstance(fmt, FPFormat):
-        raise ValueError(f"fmt must be an FPFormat, not {fmt!r}")
-    if mode not in MODES:
-        raise ValueError(f"mode must be one of {', '.join(MODES)}, not {mode!r}")
+    check_format(fmt)
+    check_mode(mode)
     arrs = [_vec(x, fmt, name) for x, name in zip((o, d, v0, e1, e2, n),
                                                    ("o", "d", "v0", "e1", "e2", "n"))]
     count = arrs[0].shape[0]

@@ -21,17 +21,10 @@ from typing import NamedTuple
 
 from amaranth.hdl import Cat, Const, Mux, Value
 
-from ..fp.format import FLAG_INVALID, FLAG_OVERFLOW, FLAG_UNDERFLOW, FPFormat
+from ..fp.format import FLAG_INVALID, FLAG_OVERFLOW, FLAG_UNDERFLOW, FPFormat, check_format
 
 __all__ = ["Unpacked", "check_format", "unpack", "leading_zeros",
            "shift_right_sticky", "round_significand", "pack"]
-
-
-def check_format(fmt) -> FPFormat:
-    """Return ``fmt`` if it is an :class:`FPFormat`, else raise ``ValueError``."""
-    if not isinstance(fmt, FPFormat):
-        raise ValueError(f"fmt must be an FPFormat, not {fmt!r}")
-    return fmt
 
 
 class Unpacked(NamedTuple):

@@ -42,7 +42,8 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.fifo import SyncFIFO
 from amaranth.lib.wiring import In, Out
 
-from ..fp.format import FLAG_OVERFLOW, FPFormat
+from ..fp.format import FLAG_OVERFLOW, FPFormat, check_format
+from ..model.modes import MODES, check_mode
 from ..model.conservative import MARGIN_NAMES, margin_constants
 from ..model.records import EVENT_COUNT_BITS, PAIR, RT_RESULT
 from .fp_add import FPAdd
@@ -53,7 +54,6 @@ from .records import struct_layout
 __all__ = ["RayTriangleUnit", "vec3_layout", "input_layout", "output_layout", "MODES",
            "EVENTS", "EVENT_COUNT_BITS"]
 
-MODES = ("paper", "conservative")
 #: The events counted per pair (``n_overflow``, ``n_underflow``, ``n_invalid``).
 EVENTS = ("overflow", "underflow", "invalid")
 EVENT_COUNT_MAX = (1 << EVENT_COUNT_BITS) - 1
@@ -127,10 +127,8 @@ class RayTriangleUnit(wiring.Component):
     def __init__(self, fmt, *, mode: str = "paper", margin_scale: float = 1,
                  ray_id_bits: int = 16, tri_id_bits: int = 16, add_stages: int = 4,
                  mul_stages: int = 3, multiplier: str = "generic"):
-        if not isinstance(fmt, FPFormat):
-            raise ValueError(f"fmt must be an FPFormat, not {fmt!r}")
-        if mode not in MODES:
-            raise ValueError(f"mode must be one of {', '.join(MODES)}, not {mode!r}")
+        check_format(fmt)
+        check_mode(mode)
         for name, bits in (("ray_id_bits", ray_id_bits), ("tri_id_bits", tri_id_bits)):
             if not isinstance(bits, int) or isinstance(bits, bool) or not 1 <= bits <= 64:
                 raise ValueError(f"{name} must be an integer from 1 to 64, not {bits!r}")

@@ -100,6 +100,7 @@ from pathlib import Path
 import numpy as np
 
 from ..fp.format import ROUNDINGS, FPFormat, parse_format
+from ..model.modes import MODES
 
 __all__ = ["VERSION", "RUN_KEYS", "MODES", "KINDS", "CampaignParams", "Shard", "plan",
            "shard_path", "run_shard", "run_campaign", "merge", "markdown", "culling_shard",
@@ -111,7 +112,6 @@ __all__ = ["VERSION", "RUN_KEYS", "MODES", "KINDS", "CampaignParams", "Shard", "
 RUN_KEYS = ("command", "machine", "date", "run", "cpu_s", "shard_wall_s")
 #: Version of the shard computations: bump it when a change alters any shard's result.
 VERSION = 1
-MODES = ("paper", "conservative")
 #: Sphere kinds of the culling proof.
 KINDS = ("random", "adversarial")
 #: Bound on ``|O|`` of the culling proof's bundles (scene units), as in the test.
