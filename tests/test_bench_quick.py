@@ -202,6 +202,33 @@ def test_bench_quick_pair_sample_streams_match_the_trace(quick):
         assert 0 < p["pairs_sampled"] <= results["spec"]["pair_sample"] + 20000, name
 
 
+def test_bench_report_handles_capped_points_in_every_grid(quick, tmp_path):
+    """A capped point in the main grid (the real sizes have them: conservative FP16 on a
+    mesh) has no pixel errors: the report, plots and fronts still come out, and its
+    configuration takes no part in the fronts."""
+    import copy
+
+    from raplas_hdl.bench.pareto import aggregate, fronts
+    from raplas_hdl.bench.report import write_outputs
+    from raplas_hdl.bench.sweep import CAPPED_METRICS
+
+    _, _, results = quick
+    res = copy.deepcopy(results)
+    victim = next(p for p in res["points"] if p["backend"] == "model" and p["grid"] == "main"
+                  and p["format"] == "FP16")
+    keep = set(CAPPED_METRICS) | {"grid", "backend", "format", "rounding", "mode", "scene",
+                                  "bundle", "size", "bound", "device_passes", "link_params"}
+    for k in [k for k in victim if k not in keep]:
+        del victim[k]
+    victim.update(capped=True, capped_reason="synthetic")
+    files = write_outputs(res, tmp_path, tmp_path / "bench.md", command="test")
+    assert all(f.exists() for f in files)
+    assert "synthetic" in (tmp_path / "bench.md").read_text()
+    rows = aggregate(res["points"])
+    capped = [i for i, r in enumerate(rows) if r["capped"]]
+    assert capped and not any(i in idx for idx in fronts(rows).values() for i in capped)
+
+
 def test_device_model_latencies_match_the_rtl():
     from raplas_hdl.bench import cost
     from raplas_hdl.fp import FP24

@@ -1,10 +1,14 @@
 """``raplas-hdl bench``: run time against error, with hardware cost and the Pareto front.
 
 - :mod:`.sweep`: the sweep's points (format x rounding x mode x scene x bundle x backend) and
-  their measurement (render timings and throughput, error against float64 per pair and per
-  pixel, error against the exact reference R from the stress families);
+  their measurement (render timings and throughput, the device's cycles and result-link
+  bits from the unit's counters, error against float64 per pair and per pixel, error
+  against the exact reference R from the stress families), under a cap on the pairs a
+  point may issue;
 - :mod:`.cost`: the hardware cost of each format and rounding from Yosys (through
-  :mod:`raplas_hdl.synth`, cached), and the synthesis checks of the FP24 units;
+  :mod:`raplas_hdl.synth`, cached), the synthesis checks of the FP24 units, and the device
+  model (the synthesised intersection unit's resources per format, units per XC4VSX35,
+  cycles of a frame);
 - :mod:`.pareto`: configurations aggregated over scenes, and their Pareto fronts;
 - :mod:`.report`: CSV, JSON, PNG plots and the markdown report.
 

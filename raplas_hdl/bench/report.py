@@ -188,7 +188,8 @@ def plot(results: dict, out_dir) -> list[Path]:
         for s in scenes:
             ys = []
             for f in fmts:
-                v = next((p[key] for p in sel if p["scene"] == s and p["format"] == f), math.nan)
+                v = next((p.get(key) for p in sel if p["scene"] == s and p["format"] == f
+                          and not p.get("capped")), math.nan)
                 v = float(v) if v is not None else math.nan
                 if key == "psnr":
                     v = 100.0 if math.isinf(v) else v
@@ -449,11 +450,12 @@ def render_markdown(results: dict, plots: list, md_path, *, command: str,
         L.append("")
     L += ["## What is measured", "",
           "Grids: `main` = every format x rounding x mode on every procedural scene at the main "
-          "bundle size (the Pareto fronts use it); `meshes` = every format on the mesh "
-          "files at the first rounding and mode (the conservative mode's wide margins at "
-          "FP16/FP20 make a 70k-triangle mesh issue nearly the brute-force pairs: more memory "
-          "than this machine has); `bundles` = every format on the procedural scenes at "
-          "the other bundle sizes (first rounding and mode). Each scene is normalised (a "
+          "bundle size (the Pareto fronts use it); `meshes` = every format and mode on the "
+          "mesh files at the first rounding (the conservative mode's wide margins at "
+          "FP16/FP20 make a 70k-triangle mesh issue nearly the brute-force pairs: such "
+          "points come out capped); `bundles` = every format on the procedural scenes at "
+          "the other bundle sizes (first rounding and mode); `cap` = a point under a tiny "
+          "cap that must come out capped (with `--quick`). Each scene is normalised (a "
           "power-of-two scale, exact) into its format's domain: bound = min(2^P, 256) with P "
           "the domain's exponent (FP16: 4, the others: 256); the float64 reference is "
           "rendered at the same bound.", "",
@@ -632,12 +634,13 @@ def write_outputs(results: dict, out_dir, md_path, *, command: str) -> list[Path
     results.setdefault("command", command)
     if results["command"] != command:
         results["report_command"] = command
-    csv_p = write_csv(results["points"], out_dir / "results.csv")
-    plots = plot(results, out_dir)
+    # the JSON first: a long run's results survive a failure further on
     results["aggregate"] = aggregate(results["points"])
     results["fronts"] = {f"{e} vs {c}": [results["aggregate"][i]["config"] for i in idx]
                          for (e, c), idx in fronts(results["aggregate"]).items()}
     json_p = write_json(results, out_dir / "results.json")
+    csv_p = write_csv(results["points"], out_dir / "results.csv")
+    plots = plot(results, out_dir)
     md_path = Path(md_path)
     md_path.parent.mkdir(parents=True, exist_ok=True)
     files = [csv_p, json_p, *plots, md_path]

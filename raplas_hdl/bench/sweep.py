@@ -79,7 +79,7 @@ from ..model.records import RESULT
 from . import cost as dev
 
 __all__ = ["BOUND_CAP", "MODEL_METRICS", "REFERENCE_METRICS", "CAPPED_METRICS", "MODES",
-           "BenchSpec", "PairBudgetExceeded", "quick_spec", "full_spec", "domain_bound",
+           "BenchSpec", "PairBudgetExceeded", "RunSampler", "quick_spec", "full_spec", "domain_bound",
            "find_meshes", "plan", "stress_metrics", "run_sweep", "missing_metrics",
            "device_figures", "DEFAULT_MESH_DIR", "DEFAULT_MAX_PAIRS", "DEFAULT_PAIR_SAMPLE",
            "PREPASS_DIVISOR"]
@@ -89,8 +89,9 @@ MODES = ("paper", "conservative")
 BOUND_CAP = 256.0
 #: ``../shared/meshes`` beside the repository.
 DEFAULT_MESH_DIR = Path(__file__).resolve().parents[3] / "shared" / "meshes"
-#: Pairs a point may issue (about a minute of the model on one core).
-DEFAULT_MAX_PAIRS = 100_000_000
+#: Pairs a point may issue (2 % of the brute-force pairs of a 70k-triangle mesh at 256x256
+#: with 3x3 shadows; 1-15 minutes of the model on one core, by format and mode).
+DEFAULT_MAX_PAIRS = 500_000_000
 #: Pairs of the per-pair error sample of a point.
 DEFAULT_PAIR_SAMPLE = 200_000
 #: The pre-pass renders 1/PREPASS_DIVISOR of the image side.
@@ -281,7 +282,8 @@ class PairBudgetExceeded(RuntimeError):
 
 def _sub_batch(batch: BundleBatch, bs: np.ndarray) -> BundleBatch:
     """Bundles ``bs`` of a batch as a batch of their own, enable bits copied (the host
-    clears them between early-out rounds) and the float64 rays kept."""
+    clears them between early-out rounds) and the float64 rays kept (the original origins
+    when the batch's geometry has them, as the sweep's backend records them)."""
     P, R = batch.n_planes, batch.n_rays
     pi = (bs[:, None] * P + np.arange(P)).ravel()
     ri = (bs[:, None] * R + np.arange(R)).ravel()
@@ -289,7 +291,57 @@ def _sub_batch(batch: BundleBatch, bs: np.ndarray) -> BundleBatch:
     return BundleBatch(batch.rows, batch.cols, batch.pn[pi], batch.pp[pi], batch.ro[bs],
                        batch.rd[ri], batch.enable[bs].copy(), batch.keep_all[bs].copy(),
                        batch.origin[bs], batch.directions[bs],
-                       {"origins": g["origins"][bs], "directions": g["directions"][bs]})
+                       {"origins": (g["origins"] if "origins" in g else batch.origin)[bs],
+                        "directions": g["directions"][bs]})
+
+
+class RunSampler:
+    """A uniform sample of whole runs of the unit, at most ``max_pairs`` pairs.
+
+    :meth:`add` takes the runs of a traced pass with their counters; each run is kept with
+    probability ``rate`` (1 at first), with its bundle as a batch of its own
+    (:func:`_sub_batch`: enable bits as they were when the runs went). Whenever the sample
+    holds more than ``max_pairs`` pairs the rate halves and the runs whose random key is
+    over it are dropped: the sample stays a Bernoulli sample of the runs at the final rate.
+    :meth:`streams` gives the sampled runs' pair streams after the render.
+    """
+
+    def __init__(self, max_pairs: int = DEFAULT_PAIR_SAMPLE, seed: int = 0):
+        self.max_pairs = int(max_pairs)
+        self.rate = 1.0
+        self.records = []
+        self._rng = np.random.default_rng(seed)
+
+    @property
+    def pairs(self) -> int:
+        return int(sum(int(r["n"].sum()) for r in self.records))
+
+    def add(self, batch, run_b, run_start, run_sph, counters):
+        keys = self._rng.random(run_b.size)
+        sel = np.flatnonzero(keys < self.rate)
+        if sel.size == 0:
+            return
+        self.records.append({
+            "batch": _sub_batch(batch, run_b[sel]), "k": np.arange(sel.size),
+            "ids": [run_sph[run_start[u]:run_start[u + 1]].copy() for u in sel],
+            "key": keys[sel], "n": counters[sel, 2].copy()})
+        while self.pairs > self.max_pairs and self.rate > 1e-12:
+            self.rate /= 2
+            for rec in self.records:
+                keep = rec["key"] < self.rate
+                rec["ids"] = [x for x, k in zip(rec["ids"], keep) if k]
+                for name in ("k", "key", "n"):
+                    rec[name] = rec[name][keep]
+            self.records = [r for r in self.records if r["k"].size]
+
+    def streams(self, backend):
+        """``(sub-batch, bundle index in it, pairs the trace counted, RunResult)`` of every
+        sampled run, through ``backend.stream``."""
+        for rec in self.records:
+            sub = rec["batch"]
+            res = backend.stream(sub, [(int(k), ids) for k, ids in zip(rec["k"], rec["ids"])])
+            for k, n, r in zip(rec["k"], rec["n"], res):
+                yield sub, int(k), int(n), r
 
 
 class _SweepModel(ModelBackend):
@@ -300,9 +352,8 @@ class _SweepModel(ModelBackend):
       figures; the warm-up pass is left out);
     - stops the render when its pairs go over ``pair_budget`` (:class:`PairBudgetExceeded`;
       the runs of a pass are traced in slices so that it stops near the budget);
-    - records a uniform sample of whole runs (at most ``sample_pairs`` pairs; the rate
-      halves whenever the sample outgrows that), each with its bundle's enable bits as
-      they were, for :func:`_pair_errors` after the render.
+    - records a uniform sample of whole runs (:class:`RunSampler`, at most ``sample_pairs``
+      pairs) for :func:`_pair_errors` after the render.
     """
 
     def __init__(self, fmt, mode, *, pair_budget=None, sample_pairs=DEFAULT_PAIR_SAMPLE,
@@ -314,9 +365,7 @@ class _SweepModel(ModelBackend):
         self.device_testers = testers
         self.passes = {}
         self.pairs_issued = 0
-        self.samples = []
-        self._rate = 1.0
-        self._rng = np.random.default_rng(seed)
+        self.sampler = RunSampler(sample_pairs, seed)
         self._warming = False
 
     def usable(self, tris):
@@ -369,7 +418,7 @@ class _SweepModel(ModelBackend):
             self._account(batch, c)
             if self.pair_budget is not None and self.pairs_issued > self.pair_budget:
                 raise PairBudgetExceeded(self.pairs_issued, int(self.pair_budget))
-        self._sample(batch, run_b, run_start, run_sph, counters)
+        self.sampler.add(batch, run_b, run_start, run_sph, counters)
         return counters
 
     def _account(self, batch, c):
@@ -384,28 +433,6 @@ class _SweepModel(ModelBackend):
         p["empty_runs"] += int(np.count_nonzero(c[:, 2] == 0))
         p["overlap_core"] += int(np.maximum(c[:, 0] * g, c[:, 2]).sum())
         self.pairs_issued += int(c[:, 2].sum())
-
-    def _sample(self, batch, run_b, run_start, run_sph, counters):
-        keys = self._rng.random(run_b.size)
-        sel = np.flatnonzero(keys < self._rate)
-        if sel.size == 0:
-            return
-        self.samples.append({
-            "batch": _sub_batch(batch, run_b[sel]), "k": np.arange(sel.size),
-            "ids": [run_sph[run_start[u]:run_start[u + 1]].copy() for u in sel],
-            "key": keys[sel], "n": counters[sel, 2].copy()})
-        while self.sampled_pairs > self.sample_pairs and self._rate > 1e-12:
-            self._rate /= 2
-            for rec in self.samples:
-                keep = rec["key"] < self._rate
-                rec["ids"] = [x for x, k in zip(rec["ids"], keep) if k]
-                for name in ("k", "key", "n"):
-                    rec[name] = rec[name][keep]
-            self.samples = [r for r in self.samples if r["k"].size]
-
-    @property
-    def sampled_pairs(self) -> int:
-        return int(sum(int(r["n"].sum()) for r in self.samples))
 
     def device_passes(self, scale: float = 1.0) -> list[dict]:
         """The per-bundle-size counters (scaled by ``scale``, rounded)."""
@@ -443,19 +470,16 @@ def _pair_errors(backend: _SweepModel, tris: np.ndarray) -> dict:
     total = int(backend.pairs_issued)
     ray, tri, hit, t, o, d = [], [], [], [], [], []
     mismatch = 0
-    for rec in backend.samples:
-        sub = rec["batch"]
-        res = backend.stream(sub, [(int(k), ids) for k, ids in zip(rec["k"], rec["ids"])])
-        for k, n, r in zip(rec["k"], rec["n"], res):
-            mismatch += int(r.ray_id.size != n)
-            if not r.ray_id.size:
-                continue
-            ray.append(r.ray_id)
-            tri.append(r.tri_id)
-            hit.append(r.hit)
-            t.append(r.t)
-            o.append(np.broadcast_to(sub.geometry["origins"][k], (r.ray_id.size, 3)))
-            d.append(sub.geometry["directions"][k][r.ray_id])
+    for sub, k, n, r in backend.sampler.streams(backend):
+        mismatch += int(r.ray_id.size != n)
+        if not r.ray_id.size:
+            continue
+        ray.append(r.ray_id)
+        tri.append(r.tri_id)
+        hit.append(r.hit)
+        t.append(r.t)
+        o.append(np.broadcast_to(sub.geometry["origins"][k], (r.ray_id.size, 3)))
+        d.append(sub.geometry["directions"][k][r.ray_id])
     out = {"pairs_total": total, "pairs_sampled": 0, "pair_sample_frac": 0.0,
            "sample_stream_mismatch": mismatch}
     if not ray:
@@ -701,6 +725,8 @@ def _measure_point(p, fmt, scene, settings, spec, ref) -> dict:
         out.update(_device_counts(src, mode, src_scale))
         out["pairs_issued"] = out["device_pairs"]
         errs = _pair_errors(src, scene.triangles)
+        for k in ("pair_hit_differs", "pairs_out_of_domain", "in_domain_pairs"):
+            errs[k] = int(round(errs[k] * src_scale))
         out.update({k: v for k, v in errs.items() if k != "pairs_total"})
         out["tris_out_of_domain"] = int(src.out_of_domain.sum())
     else:
