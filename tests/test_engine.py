@@ -1,7 +1,8 @@
 """The engine's whole passes against the per-run model and the per-bundle cull.
 
-- :func:`raplas_hdl.engine.stream.run_runs` (the model's side of the driver interface) gives
-  :func:`~raplas_hdl.model.intersection.run_bundle`'s streams and counters run by run;
+- :func:`raplas_hdl.model.intersection.run_runs` (the model's side of the driver interface)
+  gives :func:`~raplas_hdl.model.intersection.run_bundle`'s streams and counters run by run
+  (one call of the ray-triangle model for all runs);
 - :func:`~raplas_hdl.engine.passes.cull_pass` gives :func:`~raplas_hdl.host.spheres.cull_tree`'s
   leaves and statistics bundle by bundle;
 - the compiled trace (nearest hit per ray and counters) equals the pair stream of the same
@@ -17,14 +18,13 @@ import numpy as np
 import pytest
 
 from raplas_hdl.engine.passes import round_runs, select_runs
-from raplas_hdl.engine.stream import run_runs
 from raplas_hdl.fp import FP24, FP32
 from raplas_hdl.host.backends import make_backend
 from raplas_hdl.host.render import RenderSettings, render
 from raplas_hdl.host.scenes import get_scene
 from raplas_hdl.host.shading import nearest_hits
 from raplas_hdl.host.spheres import build_sphere_tree, cull_tree
-from raplas_hdl.model.intersection import run_bundle
+from raplas_hdl.model.intersection import run_bundle, run_runs
 
 BACKENDS = [("model", FP24, "paper"), ("model", FP24.with_rounding("chop"), "conservative"),
             ("model", FP32.with_rounding("rne"), "paper"), ("float64", None, None)]

@@ -4,8 +4,6 @@
   to nearest hits), one set per format, rounding and mode for the model, one for float64;
 - :mod:`raplas_hdl.engine.passes`: a pass as arrays (:class:`~.passes.BundleBatch`), the cull
   of a whole batch, the early-out rounds, the runs of a pass;
-- :mod:`raplas_hdl.engine.stream`: the model's side of the unit interface the RTL driver has
-  (``run_runs(config, scene, runs)``: result streams and counters);
 - :mod:`raplas_hdl.engine.warm`: compile every kernel a render needs, once per machine.
 
 The host's backends (:mod:`raplas_hdl.host.backends`) drive it; nothing here imports

@@ -26,7 +26,7 @@ Backends:
   rounding and ray-triangle mode, with the radius inflation of
   :mod:`raplas_hdl.host.culling`. Its passes run in the compiled kernels of
   :mod:`raplas_hdl.engine`; its streams come from
-  :func:`raplas_hdl.engine.stream.run_runs`, the model's side of the interface the RTL
+  :func:`raplas_hdl.model.intersection.run_runs`, the model's side of the interface the RTL
   driver has (``config, scene, runs``).
 - ``rtl``: the same memories run through the Verilog of the unit under cocotb (Icarus or
   Verilator) with the driver's ``run_runs``; it raises :class:`BackendUnavailable` with what
@@ -444,7 +444,7 @@ class ModelBackend(Backend):
                          t, u, v, out["flags"].astype(np.uint8), counters)
 
     def _run_runs(self, config, runs):
-        from ..engine.stream import run_runs
+        from ..model.intersection import run_runs
 
         return run_runs(config, self.scene_memory, runs)
 

@@ -24,10 +24,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .memory_image import COUNTER_NAMES, BundleMemory, SceneMemory, UnitConfig
+from .memory_image import COUNTER_NAMES, BundleMemory, Run, SceneMemory, UnitConfig, as_run
 from .records import RESULT
 
-__all__ = ["RESULT_DTYPE", "run_bundle", "enumerate_pairs", "empty_counters",
+__all__ = ["RESULT_DTYPE", "run_bundle", "run_runs", "enumerate_pairs", "empty_counters",
            "event_counters"]
 
 #: One beat of the unit's result stream: the dtype of the record
@@ -139,52 +139,88 @@ def run_bundle(config: UnitConfig, scene: SceneMemory, bundle: BundleMemory,
     ValueError
         When the scene or the bundle does not fit ``config``, or ``sphere_ids`` is invalid.
     """
-    from .plane_sphere import sphere_masks
+    return run_runs(config, scene, [Run(bundle, sphere_ids, keep_all)])[0]
+
+
+def run_runs(config: UnitConfig, scene: SceneMemory, runs) -> list:
+    """Run the unit over ``runs`` in order: the model's side of the interface the RTL driver
+    has (:func:`raplas_hdl.sim.unit_driver.run_runs`, without the simulator).
+
+    Parameters
+    ----------
+    config : UnitConfig
+    scene : SceneMemory
+    runs : iterable
+        Each a :class:`~raplas_hdl.model.memory_image.Run`, ``(bundle, sphere_ids)`` or
+        ``(bundle, sphere_ids, keep_all)`` (:func:`~raplas_hdl.model.memory_image.as_run`).
+
+    Returns
+    -------
+    list of (results, counters)
+        Per run, as :func:`run_bundle` describes them. The pairs of all runs go through one
+        call of the ray-triangle model (a pair's arithmetic does not depend on the others).
+
+    Raises
+    ------
+    ValueError
+        When the scene or a bundle does not fit ``config``, or sphere IDs are invalid.
+    """
+    from .plane_sphere import tester_flags
     from .ray_triangle import intersect
 
     scene.check(config)
-    bundle.check(config)
-    ids = _sphere_ids(config, scene, sphere_ids)
-    counters = empty_counters()
-    counters["spheres"] = int(ids.size)
-    counters["plane_tests"] = int(ids.size) * config.n_planes
-    if ids.size:
-        if keep_all or bundle.keep_all:
-            row_mask = np.ones((ids.size, config.rows), bool)
-            col_mask = np.ones((ids.size, config.cols), bool)
+    parts = []
+    for run in runs:
+        bundle, ids, keep_all = as_run(run)
+        bundle.check(config)
+        ids = _sphere_ids(config, scene, ids)
+        c = empty_counters()
+        c["spheres"] = int(ids.size)
+        c["plane_tests"] = int(ids.size) * config.n_planes
+        if ids.size:
+            if keep_all:
+                keep = np.ones((ids.size, config.n_planes), bool)
+            else:
+                keep = tester_flags(bundle.plane_n, bundle.plane_p, scene.centres[ids],
+                                    scene.radii[ids], config.fmt)
+            ray, tri, skipped = enumerate_pairs(config, keep[:, :config.rows],
+                                                keep[:, config.rows:], scene.tri_counts[ids],
+                                                scene.tri_lists[ids], bundle.enable)
         else:
-            row_mask, col_mask = sphere_masks(bundle.plane_n, bundle.plane_p,
-                                              scene.centres[ids], scene.radii[ids],
-                                              config.rows, config.cols, config.fmt)
-        ray_ids, tri_ids, skipped = enumerate_pairs(
-            config, np.asarray(row_mask, bool), np.asarray(col_mask, bool),
-            scene.tri_counts[ids], scene.tri_lists[ids], bundle.enable)
-    else:
-        ray_ids = tri_ids = np.zeros(0, np.int64)
-        skipped = 0
-    counters["pairs_skipped"] = skipped
-    n = ray_ids.size
-    counters["pairs_issued"] = int(n)
-    if n == 0:
-        out = np.zeros(1, RESULT_DTYPE)
-        out["last"] = 1
-        out["empty"] = 1
-        return out, counters
-    res = intersect(bundle.ray_o[ray_ids], bundle.ray_d[ray_ids], scene.v0[tri_ids],
-                    scene.e1[tri_ids], scene.e2[tri_ids], scene.n[tri_ids], config.fmt,
-                    mode=config.mode, margin_scale=config.margin_scale)
-    out = np.zeros(n, RESULT_DTYPE)
-    out["ray_id"] = ray_ids
-    out["tri_id"] = tri_ids
-    out["hit"] = np.asarray(res["hit"]).astype(np.uint8)
-    for key in ("t", "u", "v", "det"):
-        out[key] = res[key]
-    flags = np.asarray(res["flags"]).astype(np.uint8)
-    out["flags"] = flags
-    out["last"][-1] = 1
-    counters["hits"] = int(out["hit"].sum())
-    counters.update(event_counters(res["event_counts"]))
-    return out, counters
+            ray = tri = np.zeros(0, np.int64)
+            skipped = 0
+        c["pairs_skipped"] = skipped
+        c["pairs_issued"] = int(ray.size)
+        parts.append((bundle, ray, tri, c))
+    if sum(p[1].size for p in parts):
+        o = np.concatenate([b.ray_o[r] for b, r, _, _ in parts])
+        d = np.concatenate([b.ray_d[r] for b, r, _, _ in parts])
+        tri_all = np.concatenate([t for _, _, t, _ in parts])
+        res = intersect(o, d, scene.v0[tri_all], scene.e1[tri_all], scene.e2[tri_all],
+                        scene.n[tri_all], config.fmt, mode=config.mode,
+                        margin_scale=config.margin_scale)
+    out, pos = [], 0
+    for _, ray, tri, c in parts:
+        n = ray.size
+        if n == 0:
+            beats = np.zeros(1, RESULT_DTYPE)
+            beats["last"] = 1
+            beats["empty"] = 1
+            out.append((beats, c))
+            continue
+        sl = slice(pos, pos + n)
+        beats = np.zeros(n, RESULT_DTYPE)
+        beats["ray_id"], beats["tri_id"] = ray, tri
+        beats["hit"] = res["hit"][sl]
+        for key in ("t", "u", "v", "det"):
+            beats[key] = res[key][sl]
+        beats["flags"] = res["flags"][sl]
+        beats["last"][-1] = 1
+        c["hits"] = int(beats["hit"].sum())
+        c.update(event_counters(res["event_counts"][sl]))
+        out.append((beats, c))
+        pos += n
+    return out
 
 
 def event_counters(event_counts) -> dict:
