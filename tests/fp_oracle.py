@@ -1,4 +1,4 @@
-"""Exact-rational oracle of the FP contract (``shared/spec/fp-format.md``).
+"""Exact-rational oracle of the FP contract (``docs/fp-format.md``).
 
 Written from the contract's text alone, with :class:`fractions.Fraction` values and
 Python integers; it shares no code with ``raplas_hdl.fp`` (not even the format object:

@@ -1,7 +1,7 @@
 """The floating-point format object shared by the golden model, the RTL and the host.
 
 One :class:`FPFormat` describes a member of the family defined in
-``shared/spec/fp-format.md``: ``1 + exp_bits + man_bits`` bits, a hidden leading one,
+``docs/fp-format.md``: ``1 + exp_bits + man_bits`` bits, a hidden leading one,
 no denormals (flush to zero), one canonical NaN, and one of three roundings.
 """
 

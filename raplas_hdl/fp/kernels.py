@@ -1,4 +1,4 @@
-"""Scalar numba kernels of the FP contract (``shared/spec/fp-format.md``), bit for bit.
+"""Scalar numba kernels of the FP contract (``docs/fp-format.md``), bit for bit.
 
 Every kernel is an ``@njit(cache=True)`` function of plain integers, generic in the
 format: ``e`` (exponent bits), ``m`` (fraction bits) and ``rmode`` (:data:`RTZ`,

@@ -1,7 +1,7 @@
 """Bit-exact golden model of the FP contract on NumPy arrays of bit patterns.
 
 Every operation takes and returns ``uint32`` bit patterns of a
-:class:`~raplas_hdl.fp.format.FPFormat` and follows ``shared/spec/fp-format.md`` bit for
+:class:`~raplas_hdl.fp.format.FPFormat` and follows ``docs/fp-format.md`` bit for
 bit (the scalar rules live in :mod:`raplas_hdl.fp.kernels`; this module broadcasts in
 NumPy and runs the kernels in parallel numba loops, no per-element Python).
 

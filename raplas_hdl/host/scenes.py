@@ -10,7 +10,7 @@ constants. Scenes come from :func:`get_scene`:
 - ``soup``: seeded random triangles above a floor;
 - a path to an ``.obj``, ``.ply`` or ``.stl`` file (read with trimesh), placed on a floor.
 
-The load normalisation of ``shared/spec/raplas.md`` ("Coordinates") is
+The load normalisation of ``docs/raplas.md`` ("Coordinates") is
 :meth:`Scene.normalised`: a translation that centres the bounding box of everything the
 accelerator sees (triangles, camera, light), then a power-of-two scale so that every
 coordinate lies in ``[-bound, bound]`` with the largest magnitude above ``bound/2``.

@@ -3,7 +3,7 @@
 Shared by the golden model (:mod:`raplas_hdl.model.intersection`), the host backends and
 the RTL driver, so that all of them read the same memories the same way. No Amaranth.
 
-The four memories of ``shared/spec/raplas.md`` hold bit patterns of the unit's format
+The four memories of ``docs/raplas.md`` hold bit patterns of the unit's format
 (``uint32`` arrays):
 
 - :class:`SceneMemory` (written once per scene): Triangle Memory (V0, E1, E2, N) and Sphere

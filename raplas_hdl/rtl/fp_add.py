@@ -1,4 +1,4 @@
-"""Pipelined floating-point adder/subtractor, bit for bit as ``shared/spec/fp-format.md``.
+"""Pipelined floating-point adder/subtractor, bit for bit as ``docs/fp-format.md``.
 
 Datapath (``M`` = fraction bits; significands are ``M+1`` bits with the hidden one). The
 aligned sum is kept as a *floor with sticky*: an integer ``S`` with two bits below the

@@ -1,7 +1,7 @@
 """Combinational building blocks shared by the floating-point units.
 
 Every function here builds an Amaranth expression for one format of the contract
-(``shared/spec/fp-format.md``); none of them adds registers. :mod:`.fp_add` and
+(``docs/fp-format.md``); none of them adds registers. :mod:`.fp_add` and
 :mod:`.fp_mul` share unpacking and classification (:func:`unpack`), the rounding of a
 normalised significand with guard and sticky bits (:func:`round_significand`) and the
 final packing with overflow, underflow and special values (:func:`pack`), so each rule of

@@ -1,4 +1,4 @@
-"""Pipelined floating-point multiplier, bit for bit as ``shared/spec/fp-format.md``.
+"""Pipelined floating-point multiplier, bit for bit as ``docs/fp-format.md``.
 
 The significand product is exact (``2M+2`` bits from one ``(M+1) x (M+1)`` unsigned
 multiply in :class:`SigMul`, a single DSP48 at FP24), so truncating it with guard and
