@@ -171,13 +171,13 @@ class RayBundle:
         _, _, o, d = encode_bundles([self], fmt)[0]
         return o, d
 
-    def pack_planes(self, fmt: FPFormat) -> np.ndarray:
-        """Plane words for the array's write port: ``nx | ny<<W | nz<<2W | p<<3W``
-        (Python ints, in plane-ID order)."""
+    def pack_planes(self, fmt: FPFormat) -> list:
+        """Plane words for the array's write port, in plane-ID order (Python ints): the
+        record :data:`raplas_hdl.model.records.PLANE` (``nx | ny<<W | nz<<2W | p<<3W``)."""
+        from ..model.records import PLANE
+
         n, p = self.encode_planes(fmt)
-        w = fmt.width
-        return [int(n[k, 0]) | int(n[k, 1]) << w | int(n[k, 2]) << 2 * w | int(p[k]) << 3 * w
-                for k in range(self.n_planes)]
+        return PLANE.bind(fmt).pack({"nx": n[:, 0], "ny": n[:, 1], "nz": n[:, 2], "p": p})
 
     def __repr__(self):
         return (f"RayBundle(rows={self.rows}, cols={self.cols}, origin={self.origin.tolist()}, "

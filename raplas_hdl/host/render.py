@@ -7,17 +7,25 @@ Stages (each timed in :attr:`RenderResult.timings`):
    (:mod:`raplas_hdl.host.spheres`) with the unit's conservative margin when that mode is
    on;
 2. ``load``: write Triangle Memory and Sphere Memory (:meth:`Backend.load`);
-3. ``primary``: the camera's ``rows`` x ``cols`` tiles as bundles (lattice points outside
-   the image are disabled rays); per bundle the host culls the hierarchy top-down
-   (``primary cull``), then the unit runs the surviving leaf spheres (``primary unit``);
-   the nearest hit wins (ties to the lowest triangle ID);
-4. ``shading``: hit points, normals, Phong terms; shadow bundles for the points that need
-   one (the others counted);
-5. ``shadows``: per shadow bundle, the hierarchy cull (``shadow cull``), then the
-   surviving leaves in batches of ``batch_spheres`` (``shadow unit``); between batches
-   the rays already blocked are disabled (early-out), and a bundle whose rays are all
-   blocked runs no further batch;
-6. ``image``: compose and tone-map.
+3. ``compile``: a throw-away pass of one bundle, so that the compiled kernels are built
+   (first run on a machine) or loaded from numba's cache before the real passes (the
+   progress bar says so instead of showing a bundle rate);
+4. ``primary``: the camera's ``rows`` x ``cols`` tiles as bundles (lattice points outside
+   the image are disabled rays), handed to the backend as whole passes of ``chunk``
+   bundles: the hierarchy cull of the pass (``primary cull``), then the unit's runs of the
+   surviving leaf spheres reduced to each ray's nearest hit (``primary unit``; ties to the
+   lowest triangle ID);
+5. ``shading``: hit points, normals, Phong terms; shadow bundles for the points that need
+   one (the others counted), built as arrays;
+6. ``shadows``: passes of ``chunk`` shadow bundles: the hierarchy cull (``shadow cull``),
+   then early-out rounds (``shadow unit``): round ``k`` runs every bundle's ``k``-th batch
+   of ``batch_spheres`` leaves; between rounds the rays already blocked are disabled, and a
+   bundle whose rays are all blocked runs no further batch;
+7. ``image``: compose and tone-map.
+
+A bundle whose quantisation slack is over the culling budget carries the keep-all bit: it
+is not culled, on the host or in the unit (counted as ``unguaranteed_bundles``). The
+results do not depend on ``chunk`` or on the thread count.
 
 The summary counts rays, bundles, spheres, plane tests (host hierarchy and unit), pairs
 issued against brute force (every ray against every triangle), pairs skipped by
