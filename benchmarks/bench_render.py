@@ -12,7 +12,8 @@ render, the pairs of a sample of the frame's runs (recorded as the render traces
 :class:`raplas_hdl.bench.sweep.RunSampler`) go through the flat pair kernel in one call (on
 the render's threads):
 :func:`raplas_hdl.model.ray_triangle.intersect` for the model,
-:func:`raplas_hdl.host.exact.float64_intersect` for float64; and the sampled bundles' planes
+:func:`raplas_hdl.host.exact.float64_intersect` for float64 (NumPy, not compiled: slower than
+the render's compiled float64 pass, so no limit there); and the sampled bundles' planes
 against every leaf sphere through the flat plane test
 (:func:`raplas_hdl.model.plane_sphere.tester_flags`; float64: ``|n.C + p| <= r``). The
 render's pairs per second over its unit stages divided by the flat kernel's is printed.
@@ -51,7 +52,7 @@ if str(ROOT) not in sys.path:
 from raplas_hdl.bench.sweep import RunSampler  # noqa: E402
 from raplas_hdl.cli.render import _jsonable, _lattice, _size  # noqa: E402
 from raplas_hdl.fp import parse_format  # noqa: E402
-from raplas_hdl.host.backends import BackendUnavailable, make_backend  # noqa: E402
+from raplas_hdl.host.backends import COUNTERS, BackendUnavailable, make_backend  # noqa: E402
 from raplas_hdl.host.render import (  # noqa: E402
     RenderSettings,
     compare,
@@ -137,8 +138,8 @@ class StageMeter:
         elif name == "cull":
             rec["host_plane_tests"] += int(out.plane_tests)
         elif name == "trace":
-            rec["unit_plane_tests"] += int(out[:, 1].sum())
-            rec["pairs"] += int(out[:, 2].sum())
+            rec["unit_plane_tests"] += int(out[:, COUNTERS.index("plane_tests")].sum())
+            rec["pairs"] += int(out[:, COUNTERS.index("pairs_issued")].sum())
             batch, run_b, run_start, run_sph = args[:4]
             self.sampler.add(batch, np.asarray(run_b, np.int64),
                              np.asarray(run_start, np.int64), np.asarray(run_sph, np.int64),
@@ -179,9 +180,9 @@ def flat_limit(backend, meter: StageMeter, max_bundles: int = 64) -> dict:
         d.append(sub.rd[k * R + r.ray_id])
         tri.append(r.tri_id)
     out = {"kernel_pairs": "raplas_hdl.model.ray_triangle.intersect" if model
-           else "raplas_hdl.host.exact.float64_intersect",
+           else "raplas_hdl.host.exact.float64_intersect (NumPy, not compiled: no limit)",
            "kernel_planes": "raplas_hdl.model.plane_sphere.tester_flags" if model
-           else "numpy |n.C + p| <= r"}
+           else "NumPy |n.C + p| <= r"}
     if tri:
         o, d, tri = np.concatenate(o), np.concatenate(d), np.concatenate(tri)
         args = [np.ascontiguousarray(o), np.ascontiguousarray(d)]

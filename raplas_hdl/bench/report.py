@@ -425,8 +425,8 @@ def render_markdown(results: dict, plots: list, md_path, *, command: str,
          f"Python {mach['python']}, NumPy {mach['numpy']}, numba {mach['numba']}; shared with "
          "other jobs, so times carry noise of some 10-30 %",
          f"- **Runs per point**: {spec['repeats']} (the fastest run's timings are kept); "
-         "a warm-up render per backend, mode and bundle size keeps numba's compile out of "
-         "the timings",
+         "a warm-up render per backend, format, rounding, mode and bundle size keeps "
+         "numba's compile out of the timings (the `compile` stage is what is left)",
          f"- **Images**: procedural scenes {spec['size'][0]}x{spec['size'][1]}, meshes "
          f"{spec['mesh_size'][0]}x{spec['mesh_size'][1]}, soft shadows "
          f"{spec['shadow'][0]}x{spec['shadow'][1]} per point"

@@ -68,7 +68,7 @@ import numpy as np
 
 from ..engine.passes import BundleBatch
 from ..fp import ROUNDINGS, FPFormat, parse_format
-from ..host.backends import BackendUnavailable, ModelBackend, make_backend
+from ..host.backends import COUNTERS, BackendUnavailable, ModelBackend, make_backend
 from ..host.exact import float64_intersect
 from ..host.render import RenderSettings, compare, render
 from ..host.scenes import MESH_SUFFIXES, SCENES, get_scene
@@ -98,6 +98,9 @@ DEFAULT_PAIR_SAMPLE = 200_000
 PREPASS_DIVISOR = 4
 #: Smallest slice of a pass (upper bound of its pairs) between two checks of the budget.
 MIN_SLICE_PAIRS = 1 << 20
+
+#: Columns of the unit's counters (per run) that the sweep reads.
+_SPHERES, _PAIRS = COUNTERS.index("spheres"), COUNTERS.index("pairs_issued")
 
 STAGES = ("spheres", "load", "compile", "primary cull", "primary unit", "shading",
           "shadow cull", "shadow unit", "image")
@@ -324,7 +327,7 @@ class RunSampler:
         self.records.append({
             "batch": _sub_batch(batch, run_b[sel]), "k": np.arange(sel.size),
             "ids": [run_sph[run_start[u]:run_start[u + 1]].copy() for u in sel],
-            "key": keys[sel], "n": counters[sel, 2].copy()})
+            "key": keys[sel], "n": counters[sel, _PAIRS].copy()})
         while self.pairs > self.max_pairs and self.rate > 1e-12:
             self.rate /= 2
             for rec in self.records:
@@ -361,7 +364,6 @@ class _SweepModel(ModelBackend):
         super().__init__(fmt, mode)
         self.out_of_domain = None
         self.pair_budget = pair_budget
-        self.sample_pairs = int(sample_pairs)
         self.device_testers = testers
         self.passes = {}
         self.pairs_issued = 0
@@ -398,7 +400,7 @@ class _SweepModel(ModelBackend):
         run_start = np.ascontiguousarray(run_start, np.int64)
         run_sph = np.ascontiguousarray(run_sph, np.int64)
         U = run_b.size
-        counters = np.zeros((U, 8), np.int64)
+        counters = np.zeros((U, len(COUNTERS)), np.int64)
         if U == 0:
             return counters
         cut = [0, U]
@@ -427,12 +429,13 @@ class _SweepModel(ModelBackend):
         p = self.passes.setdefault((rows, cols), {
             "rows": rows, "cols": cols, "testers": self.device_testers, "passes": g,
             "runs": 0, "spheres": 0, "pairs": 0, "empty_runs": 0, "overlap_core": 0})
+        spheres, pairs = c[:, _SPHERES], c[:, _PAIRS]
         p["runs"] += int(c.shape[0])
-        p["spheres"] += int(c[:, 0].sum())
-        p["pairs"] += int(c[:, 2].sum())
-        p["empty_runs"] += int(np.count_nonzero(c[:, 2] == 0))
-        p["overlap_core"] += int(np.maximum(c[:, 0] * g, c[:, 2]).sum())
-        self.pairs_issued += int(c[:, 2].sum())
+        p["spheres"] += int(spheres.sum())
+        p["pairs"] += int(pairs.sum())
+        p["empty_runs"] += int(np.count_nonzero(pairs == 0))
+        p["overlap_core"] += int(np.maximum(spheres * g, pairs).sum())
+        self.pairs_issued += int(pairs.sum())
 
     def device_passes(self, scale: float = 1.0) -> list[dict]:
         """The per-bundle-size counters (scaled by ``scale``, rounded)."""
