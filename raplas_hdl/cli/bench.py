@@ -10,8 +10,11 @@ a point estimated (by a low-resolution pre-pass) to issue more is reported as ca
 Writes results.csv, results.json and PNG plots under --out (default build/bench, with
 --quick build/bench-quick) and a markdown report at --report (default <out>/bench.md).
 Nothing goes to docs/ unless asked: to regenerate the committed report give
---out docs/results/bench --report docs/bench.md. The default campaign takes about 50-60
-minutes on 2 shared cores; --quick under a minute with warm caches.
+--out docs/results/bench --report docs/bench.md. The default campaign takes about 35-40
+minutes of CPU (one thread per render; estimated from measured points, most of it the
+conservative mode at FP16/FP20 on terrain and the meshes at 256x256), about an hour on 2
+shared cores; --max-pairs 100000000 makes it about 25 minutes of CPU (more points capped).
+--quick takes 10-20 s with warm caches.
 """
 
 from __future__ import annotations
@@ -45,7 +48,7 @@ def add_parser(subparsers):
     p.add_argument("--quick", action="store_true",
                    help="small sweep (FP16, FP24, FP32; rtz; paper; cornell, spheres; 8x8; "
                         "32x32, 2x2 shadows; one point under a cap of 1000 pairs, which comes "
-                        "out capped): under a minute with warm caches")
+                        "out capped): 10-20 s with warm caches")
     g.add_format_option(p, multiple=True, plural=True, default="FP16,FP20,FP24,FP32; quick "
                         "FP16,FP24,FP32", rounding_default="rtz,rne,chop; quick rtz")
     p.add_argument("--modes", default=None, metavar="LIST",
