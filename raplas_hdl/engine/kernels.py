@@ -229,6 +229,7 @@ def model_kernels(E: int, M: int, R: int, conservative: bool):
 
     @njit(nogil=True, cache=True)
     def cull(pn, pp, rows, n_planes, cand_b, cand_node, nc, nr, lo, hi, keep):
+        e, m, r = np.int64(E), np.int64(M), np.int64(R)
         for q in range(lo, hi):
             base = cand_b[q] * n_planes
             s = cand_node[q]
@@ -236,7 +237,7 @@ def model_kernels(E: int, M: int, R: int, conservative: bool):
             for i in range(rows):
                 k = base + i
                 if plane_keep(pn[k, 0], pn[k, 1], pn[k, 2], pp[k], nc[s, 0], nc[s, 1],
-                              nc[s, 2], nr[s], E, M, R):
+                              nc[s, 2], nr[s], e, m, r):
                     row = True
                     break
             col = False
@@ -244,7 +245,7 @@ def model_kernels(E: int, M: int, R: int, conservative: bool):
                 for j in range(rows, n_planes):
                     k = base + j
                     if plane_keep(pn[k, 0], pn[k, 1], pn[k, 2], pp[k], nc[s, 0], nc[s, 1],
-                                  nc[s, 2], nr[s], E, M, R):
+                                  nc[s, 2], nr[s], e, m, r):
                         col = True
                         break
             keep[q] = row and col
@@ -253,6 +254,7 @@ def model_kernels(E: int, M: int, R: int, conservative: bool):
     def trace(pn, pp, ro, rd, enable, keep_all, rows, cols, run_b, run_start, run_sph, sc,
               sr, tcount, tlist, v0, e1, e2, nn, mc, tmin, tmax, excl, lo, hi, best_t,
               best_tri, counters):
+        e, m, r, cons = np.int64(E), np.int64(M), np.int64(R), np.bool_(CONS)
         n_planes = rows + cols
         n_rays = rows * cols
         rm = np.empty(rows, np.bool_)
@@ -264,7 +266,7 @@ def model_kernels(E: int, M: int, R: int, conservative: bool):
         lane_di = np.empty(BLOCK, np.int64)
         lane_tid = np.empty(BLOCK, np.int64)
         lane_u = np.empty(BLOCK, np.int64)
-        n = 0
+        n = np.int64(0)
         for u in range(lo, hi):
             b = run_b[u]
             base = b * n_planes
@@ -279,7 +281,7 @@ def model_kernels(E: int, M: int, R: int, conservative: bool):
                     pk = base + k
                     keep = keep_all[b] or plane_keep(pn[pk, 0], pn[pk, 1], pn[pk, 2], pp[pk],
                                                      sc[s, 0], sc[s, 1], sc[s, 2], sr[s],
-                                                     E, M, R)
+                                                     e, m, r)
                     if k < rows:
                         rm[k] = keep
                     else:
@@ -315,8 +317,8 @@ def model_kernels(E: int, M: int, R: int, conservative: bool):
                             if n == BLOCK:
                                 _flush(g, w, lane_b, lane_ray, lane_di, lane_tid, lane_u, n,
                                        ro, rd, v0, e1, e2, nn, mc, tmin, tmax, excl, best_t,
-                                       best_tri, counters, E, M, R, CONS)
-                                n = 0
+                                       best_tri, counters, e, m, r, cons)
+                                n = np.int64(0)
             n_sph = run_start[u + 1] - run_start[u]
             counters[u, 0] = n_sph
             counters[u, 1] = n_sph * n_planes
@@ -324,7 +326,7 @@ def model_kernels(E: int, M: int, R: int, conservative: bool):
             counters[u, 3] = skipped
         if n:
             _flush(g, w, lane_b, lane_ray, lane_di, lane_tid, lane_u, n, ro, rd, v0, e1, e2,
-                   nn, mc, tmin, tmax, excl, best_t, best_tri, counters, E, M, R, CONS)
+                   nn, mc, tmin, tmax, excl, best_t, best_tri, counters, e, m, r, cons)
 
     _MODEL[key] = (cull, trace)
     return cull, trace

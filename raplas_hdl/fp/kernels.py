@@ -343,7 +343,7 @@ def add_f64_k(a, b, e, m, rmode):
         lb = (lb & (np.int64(1) << 63)) if keep < 0 else \
             (lb & ~((np.int64(1) << (52 - max(keep, 0))) - 1))
         ss = hi + np.int64(lb).view(np.float64)      # exact: both on hi's grid
-        return _round_f64(ss, 0.0, nan_in, e, m, RTZ)
+        return _round_f64(ss, 0.0, nan_in, e, m, np.int64(RTZ))
     ss = x + y
     bb = ss - x
     err = (x - (ss - bb)) + (y - bb)                 # x + y = ss + err exactly

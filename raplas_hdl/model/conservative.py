@@ -306,6 +306,8 @@ def margin_k(fo, fd, fv, fe1, fe2, fn, mc, e, m):
     lo, ld, lv = fo - b1, fd - b1, fv - b1
     le1, le2, ln = fe1 - b1, fe2 - b1, fn - b1
     lvo = max(lv, lo)
-    return (_margin_bits(mc, 0, ln + ld, e, m), _margin_bits(mc, 1, ln + lvo, e, m),
-            _margin_bits(mc, 2, ld + lvo + le2, e, m), _margin_bits(mc, 3, ld + lvo + le1, e, m),
-            _margin_bits(mc, 4, ld + max(ln, max(le1, le2) + lvo), e, m))
+    k = np.int64(0)         # one compiled signature (a literal index compiles one each)
+    return (_margin_bits(mc, k, ln + ld, e, m), _margin_bits(mc, k + 1, ln + lvo, e, m),
+            _margin_bits(mc, k + 2, ld + lvo + le2, e, m),
+            _margin_bits(mc, k + 3, ld + lvo + le1, e, m),
+            _margin_bits(mc, k + 4, ld + max(ln, max(le1, le2) + lvo), e, m))

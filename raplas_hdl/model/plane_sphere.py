@@ -28,7 +28,7 @@ from numba import njit
 
 from raplas_hdl.fp import FPFormat, check_format
 from raplas_hdl.fp.fast import fast_add, fast_mul
-from raplas_hdl.fp.kernels import add_k, lt_k, mul_k, rmode_code
+from raplas_hdl.fp.kernels import add_int_k, lt_k, mul_int_k, rmode_code
 from raplas_hdl.fp.numba_cache import drop_stale_cache
 from raplas_hdl.parallel import run_chunks
 
@@ -41,12 +41,12 @@ __all__ = ["tester_flags", "plane_distances", "sphere_masks", "schedule", "n_pas
 @njit(cache=True)
 def plane_exact(nx, ny, nz, p, cx, cy, cz, r, e, m, rmode):
     """One tester operation through the reference kernels: ``(d, keep, flags)``."""
-    mx, f0 = mul_k(nx, cx, e, m, rmode)
-    my, f1 = mul_k(ny, cy, e, m, rmode)
-    mz, f2 = mul_k(nz, cz, e, m, rmode)
-    s1, f3 = add_k(mx, my, e, m, rmode)
-    s2, f4 = add_k(mz, p, e, m, rmode)
-    d, f5 = add_k(s1, s2, e, m, rmode)
+    mx, f0 = mul_int_k(np.int64(nx), np.int64(cx), e, m, rmode)
+    my, f1 = mul_int_k(np.int64(ny), np.int64(cy), e, m, rmode)
+    mz, f2 = mul_int_k(np.int64(nz), np.int64(cz), e, m, rmode)
+    s1, f3 = add_int_k(np.int64(mx), np.int64(my), e, m, rmode)
+    s2, f4 = add_int_k(np.int64(mz), np.int64(p), e, m, rmode)
+    d, f5 = add_int_k(np.int64(s1), np.int64(s2), e, m, rmode)
     sign = np.uint32(1) << np.uint32(e + m)
     keep = not lt_k(r, d & ~sign, e, m)
     return d, keep, f0 | f1 | f2 | f3 | f4 | f5
@@ -71,7 +71,7 @@ def plane_keep(nx, ny, nz, p, cx, cy, cz, r, E, M, R):
     """The tester's keep flag, ``NOT(|d| > r')``: the fast path, else the reference."""
     d = plane_fast(nx, ny, nz, p, cx, cy, cz, r, E, M, R)
     if d >= 0:
-        return not lt_k(r, d & ((np.int64(1) << (E + M)) - 1), E, M)
+        return not lt_k(r, np.uint32(d & ((np.int64(1) << (E + M)) - 1)), E, M)
     return plane_exact(nx, ny, nz, p, cx, cy, cz, r, E, M, R)[1]
 
 
@@ -108,7 +108,7 @@ def _flat_kernel(fmt: FPFormat):
                                r[s], E, M, R)
                 if d >= 0:
                     d_out[s, k] = d
-                    keep_out[s, k] = not lt_k(r[s], d & (sign - 1), E, M)
+                    keep_out[s, k] = not lt_k(r[s], np.uint32(d & (sign - 1)), E, M)
                     fl_out[s, k] = 0
                 else:
                     d_out[s, k], keep_out[s, k], fl_out[s, k] = plane_exact(

@@ -50,7 +50,7 @@ from numba import njit
 
 from ..fp.format import FLAG_INVALID, FLAG_OVERFLOW, FLAG_UNDERFLOW, FPFormat, check_format
 from ..fp.fast import common_add, common_mul, fast_add, fast_mul
-from ..fp.kernels import add_k, is_nan_k, le_k, lt_k, mul_k, neg_k, rmode_code, sub_k
+from ..fp.kernels import add_int_k, is_nan_k, le_k, lt_k, mul_int_k, neg_k, rmode_code
 from ..fp.numba_cache import drop_stale_cache
 from .conservative import margin_constants, margin_k, margin_table
 from .modes import MODES, check_mode
@@ -79,21 +79,38 @@ def _tally(f):
 
 
 @njit(cache=True)
+def _add(a, b, e, m, r):
+    """The reference ``a + b`` (the integer kernel: the same bits as ``add_k``, and one
+    compiled signature for every caller)."""
+    return add_int_k(np.int64(a), np.int64(b), e, m, r)
+
+
+@njit(cache=True)
+def _mul(a, b, e, m, r):
+    return mul_int_k(np.int64(a), np.int64(b), e, m, r)
+
+
+@njit(cache=True)
+def _sub(a, b, e, m, r):
+    return add_int_k(np.int64(a), np.int64(neg_k(np.int64(b), e, m)), e, m, r)
+
+
+@njit(cache=True)
 def _dot(a0, a1, a2, b0, b1, b2, e, m, r):
-    p0, f0 = mul_k(a0, b0, e, m, r)
-    p1, f1 = mul_k(a1, b1, e, m, r)
-    p2, f2 = mul_k(a2, b2, e, m, r)
-    s01, f3 = add_k(p0, p1, e, m, r)
-    s, f4 = add_k(s01, p2, e, m, r)
+    p0, f0 = _mul(a0, b0, e, m, r)
+    p1, f1 = _mul(a1, b1, e, m, r)
+    p2, f2 = _mul(a2, b2, e, m, r)
+    s01, f3 = _add(p0, p1, e, m, r)
+    s, f4 = _add(s01, p2, e, m, r)
     return s, _tally(f0) + _tally(f1) + _tally(f2) + _tally(f3) + _tally(f4)
 
 
 @njit(cache=True)
 def _cross_term(a, b, c, d, e, m, r):
     """``a*b - c*d``."""
-    p, f0 = mul_k(a, b, e, m, r)
-    q, f1 = mul_k(c, d, e, m, r)
-    x, f2 = sub_k(p, q, e, m, r)
+    p, f0 = _mul(a, b, e, m, r)
+    q, f1 = _mul(c, d, e, m, r)
+    x, f2 = _sub(p, q, e, m, r)
     return x, _tally(f0) + _tally(f1) + _tally(f2)
 
 
@@ -143,9 +160,9 @@ def pair_exact(o, oi, d, di, v0, e1, e2, nn, ti, e, m, r, cons, mc):
     v', det, counts)``, ``counts`` the packed event counts (overflow in bits 0-7,
     underflow 8-15, invalid 16-23).
     """
-    tx, f0 = sub_k(v0[ti, 0], o[oi, 0], e, m, r)
-    ty, f1 = sub_k(v0[ti, 1], o[oi, 1], e, m, r)
-    tz, f2 = sub_k(v0[ti, 2], o[oi, 2], e, m, r)
+    tx, f0 = _sub(v0[ti, 0], o[oi, 0], e, m, r)
+    ty, f1 = _sub(v0[ti, 1], o[oi, 1], e, m, r)
+    tz, f2 = _sub(v0[ti, 2], o[oi, 2], e, m, r)
     det, c3 = _dot(nn[ti, 0], nn[ti, 1], nn[ti, 2], d[di, 0], d[di, 1], d[di, 2], e, m, r)
     tp, c4 = _dot(nn[ti, 0], nn[ti, 1], nn[ti, 2], tx, ty, tz, e, m, r)
     qx, c5 = _cross_term(d[di, 1], tz, d[di, 2], ty, e, m, r)
@@ -154,14 +171,14 @@ def pair_exact(o, oi, d, di, v0, e1, e2, nn, ti, e, m, r, cons, mc):
     qe2, c8 = _dot(qx, qy, qz, e2[ti, 0], e2[ti, 1], e2[ti, 2], e, m, r)
     up = neg_k(qe2, e, m)
     vp, c9 = _dot(qx, qy, qz, e1[ti, 0], e1[ti, 1], e1[ti, 2], e, m, r)
-    s, f10 = add_k(up, vp, e, m, r)
+    s, f10 = _add(up, vp, e, m, r)
     cnt = (_tally(f0) + _tally(f1) + _tally(f2) + c3 + c4 + c5 + c6 + c7 + c8 + c9
            + _tally(f10))
     w = np.uint32(0)
     bad = False
     margins = (w, w, w, w, w)
     if cons:
-        w, f11 = sub_k(det, s, e, m, r)
+        w, f11 = _sub(det, s, e, m, r)
         cnt += _tally(f11)
         bad = (is_nan_k(det, e, m) or is_nan_k(tp, e, m) or is_nan_k(up, e, m)
                or is_nan_k(vp, e, m) or is_nan_k(w, e, m) or (cnt & 0xFF) != 0)
@@ -217,7 +234,7 @@ def pair_fast(o, oi, d, di, v0, e1, e2, nn, ti, E, M, R, cons, mc):
     if cons:
         margins = _margins(o, oi, d, di, v0, e1, e2, nn, ti, E, M, mc)
     h = _decide(np.uint32(det), np.uint32(tp), np.uint32(up), np.uint32(vp), np.uint32(s),
-                np.uint32(w), False, cons, margins, E, M)
+                np.uint32(w), np.bool_(False), cons, margins, E, M)
     return True, h, np.uint32(tp), np.uint32(up), np.uint32(vp), np.uint32(det)
 
 
@@ -307,7 +324,8 @@ def _key(x, sb):
 def hit_common(det, tp, up, vp, s, ww, cons, margins, sb):
     """The hit decision of a lane whose every operation took the common case (all values
     finite and normal or zero, no flag): the contract's comparisons as integer keys."""
-    kd, kt, ku, kv, ks = _key(det, sb), _key(tp, sb), _key(up, sb), _key(vp, sb), _key(s, sb)
+    kd, kt, ku, kv, ks = (_key(np.int64(det), sb), _key(np.int64(tp), sb),
+                          _key(np.int64(up), sb), _key(np.int64(vp), sb), _key(np.int64(s), sb))
     if not cons:
         if kd > 0:
             return ku >= 0 and kv >= 0 and ks <= kd and kt >= 0
@@ -318,7 +336,7 @@ def hit_common(det, tp, up, vp, s, ww, cons, margins, sb):
     kmd, kmt, kmu, kmv, kmw = (_key(np.int64(m_det), sb), _key(np.int64(m_t), sb),
                                _key(np.int64(m_u), sb), _key(np.int64(m_v), sb),
                                _key(np.int64(m_w), sb))
-    kw = _key(ww, sb)
+    kw = _key(np.int64(ww), sb)
     pos = -kmu <= ku and -kmv <= kv and -kmw <= kw and -kmt <= kt
     neg = ku <= kmu and kv <= kmv and kw <= kmw and kt <= kmt
     return (-kmd <= kd and pos) or (kd <= kmd and neg)
