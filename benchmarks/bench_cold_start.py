@@ -42,8 +42,7 @@ from raplas_hdl.fp.format import parse_format
 from raplas_hdl.fp import model as fpm
 fmt = parse_format(spec)
 from raplas_hdl.model import plane_sphere, ray_triangle
-from raplas_hdl.engine.kernels import cull_f64, model_kernels, trace_f64
-from raplas_hdl.fp.kernels import rmode_code
+import raplas_hdl.engine.kernels
 t0 = clock()
 print(json.dumps({"group": "import", "cpu": t0[0] - t_imp[0], "wall": t0[1] - t_imp[1]}),
       flush=True)

@@ -2,10 +2,10 @@
 
 - :func:`raplas_hdl.fp.fast.fast_add` / :func:`~raplas_hdl.fp.fast.fast_mul` equal the integer
   kernels wherever they do not return the sentinel (and flag nothing);
-- the ray-triangle loop specialised to a format (:func:`_flat_kernel`), the generic loop and
-  the reference path alone (:func:`pair_exact` on every pair) agree on every output, on
-  vectors full of special patterns, in both modes, for several formats and roundings;
-- likewise the plane-sphere tester's specialised and generic loops and :func:`plane_exact`.
+- the ray-triangle loop (a block at a time, with its fallbacks) and the reference path alone
+  (:func:`pair_exact` on every pair) agree on every output, on vectors full of special
+  patterns, in both modes, for several formats and roundings;
+- likewise the plane-sphere tester's loop and :func:`plane_exact`.
 """
 
 import numpy as np
@@ -77,14 +77,15 @@ def test_ray_triangle_paths_agree(spec, mode):
         return (np.empty(n, bool), *[np.empty(n, np.uint32) for _ in range(4)],
                 np.empty((n, 3), np.uint8))
 
-    spec_out, gen_out = outputs(), outputs()
-    ray_triangle._flat_kernel(fmt, mode)(*arrs, mc, 0, n, *spec_out)
-    ray_triangle._generic_loop(*arrs, mc, 0, n, *gen_out, *key)
+    whole, split = outputs(), outputs()
+    ray_triangle._loop(*arrs, mc, 0, n, *whole, *key)
+    for lo in range(0, n, 1000):          # ranges that cut blocks: the same bits
+        ray_triangle._loop(*arrs, mc, lo, min(n, lo + 1000), *split, *key)
     ref = [ray_triangle.pair_exact(*[a for a in arrs[:1]], i, arrs[1], i, *arrs[2:], i, *key,
                                    mc) for i in range(n)]
     ref_hit = np.array([r[0] for r in ref])
     ref_cnt = np.array([[r[5] & 0xFF, (r[5] >> 8) & 0xFF, (r[5] >> 16) & 0xFF] for r in ref])
-    for out in (spec_out, gen_out):
+    for out in (whole, split):
         np.testing.assert_array_equal(out[0], ref_hit)
         for k, name in enumerate(("t", "u", "v", "det"), start=1):
             np.testing.assert_array_equal(out[k], [r[k] for r in ref], err_msg=name)
@@ -108,8 +109,9 @@ def test_plane_tester_paths_agree(spec):
     outs = [(np.empty(shape, np.uint32), np.empty(shape, bool), np.empty(shape, np.uint8))
             for _ in range(2)]
     key = (fmt.exp_bits, fmt.man_bits, rmode_code(fmt))
-    plane_sphere._flat_kernel(fmt)(n, p, c, r, 0, 500, *outs[0])
-    plane_sphere._generic_loop(n, p, c, r, 0, 500, *outs[1], *key)
+    plane_sphere._loop(n, p, c, r, 0, 500, *outs[0], *key)
+    for lo in range(0, 500, 77):
+        plane_sphere._loop(n, p, c, r, lo, min(500, lo + 77), *outs[1], *key)
     for k in range(3):
         np.testing.assert_array_equal(outs[0][k], outs[1][k])
     for s in range(0, 500, 7):

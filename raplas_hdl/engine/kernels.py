@@ -3,11 +3,11 @@
 Two arithmetics run the same passes:
 
 - the **model**: the bit-exact plane test and ray-triangle pair of the golden models
-  (:func:`raplas_hdl.model.plane_sphere.plane_keep`,
-  :func:`raplas_hdl.model.ray_triangle.pair_fast` with its fallback
-  :func:`~raplas_hdl.model.ray_triangle.pair_exact`), with the format, the rounding and the
-  mode as compile-time constants: :func:`model_kernels` builds one set per
-  ``(E, M, rounding, mode)`` and numba caches it on disk;
+  (:func:`raplas_hdl.model.plane_sphere.plane_keep`; the pairs a block at a time through
+  :func:`raplas_hdl.model.ray_triangle.vpair`, lanes that leave the common case through
+  :func:`~raplas_hdl.model.ray_triangle.pair_fast` and
+  :func:`~raplas_hdl.model.ray_triangle.pair_exact`), the format, the rounding and the mode
+  as runtime arguments: compiled once for all of them and cached on disk by numba;
 - **float64**: the reference, ``|n.C + p| <= r`` with a float64-rounding allowance and the
   division-free Moller-Trumbore decision on the original geometry
   (:func:`raplas_hdl.host.exact.float64_intersect`, operation for operation), compiled once.
@@ -39,14 +39,15 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..fp.kernels import decode_k
+from ..fp.kernels import decode_k, rmode_code
 from ..fp.numba_cache import drop_stale_cache
 from ..model.plane_sphere import plane_keep
 from ..model.ray_triangle import BLOCK, _margins, hit_common, pair_exact, pair_fast, vpair
 
 drop_stale_cache(__file__)
 
-__all__ = ["model_kernels", "cull_f64", "trace_f64", "F64_SLACK", "N_COUNTERS"]
+__all__ = ["cull_model", "trace_model", "model_args", "cull_f64", "trace_f64", "F64_SLACK",
+           "N_COUNTERS"]
 
 #: Relative allowance of the float64 plane test for float64's own rounding.
 F64_SLACK = 1e-9
@@ -174,10 +175,10 @@ def trace_f64(pn, pp, ro, rd, enable, keep_all, rows, cols, run_b, run_start, ru
 
 @njit(nogil=True, cache=True, error_model="numpy")
 def _flush(g, w, lane_b, lane_ray, lane_di, lane_tid, lane_u, n, ro, rd, v0, e1, e2, nn, mc,
-           tmin, tmax, excl, best_t, best_tri, counters, E, M, R, CONS):
+           tmin, tmax, excl, best_t, best_tri, counters, e, m, r, cons):
     """The block's pairs: operations, recomputed lanes, decisions, nearest hits."""
-    vpair(g, w, n, CONS, E, M, R)
-    sb = np.int64(1) << (E + M)
+    vpair(g, w, n, cons, e, m, r)
+    sb = np.int64(1) << (e + m)
     zero = np.uint32(0)
     for k in range(n):
         b = lane_b[k]
@@ -185,148 +186,143 @@ def _flush(g, w, lane_b, lane_ray, lane_di, lane_tid, lane_u, n, ro, rd, v0, e1,
         tid = lane_tid[k]
         if w[11, k] >= 0:
             margins = (zero, zero, zero, zero, zero)
-            if CONS:
-                margins = _margins(ro, b, rd, di, v0, e1, e2, nn, tid, E, M, mc)
-            h = hit_common(w[3, k], w[0, k], w[1, k], w[2, k], w[4, k], w[5, k], CONS,
+            if cons:
+                margins = _margins(ro, b, rd, di, v0, e1, e2, nn, tid, e, m, mc)
+            h = hit_common(w[3, k], w[0, k], w[1, k], w[2, k], w[4, k], w[5, k], cons,
                             margins, sb)
             tp = np.uint32(w[0, k])
             det = np.uint32(w[3, k])
         else:
-            ok, h, tp, up, vp, det = pair_fast(ro, b, rd, di, v0, e1, e2, nn, tid, E, M,
-                                               R, CONS, mc)
+            ok, h, tp, up, vp, det = pair_fast(ro, b, rd, di, v0, e1, e2, nn, tid, e, m,
+                                               r, cons, mc)
             if not ok:
-                h, tp, up, vp, det, c = pair_exact(ro, b, rd, di, v0, e1, e2, nn, tid, E,
-                                                   M, R, CONS, mc)
+                h, tp, up, vp, det, c = pair_exact(ro, b, rd, di, v0, e1, e2, nn, tid, e,
+                                                   m, r, cons, mc)
                 u = lane_u[k]
                 counters[u, 5] += c & 0xFF
                 counters[u, 6] += (c >> 8) & 0xFF
                 counters[u, 7] += (c >> 16) & 0xFF
         if h:
             counters[lane_u[k], 4] += 1
-            tf = np.int64(decode_k(tp, E, M)).view(np.float64)
-            df = np.int64(decode_k(det, E, M)).view(np.float64)
+            tf = np.int64(decode_k(tp, e, m)).view(np.float64)
+            df = np.int64(decode_k(det, e, m)).view(np.float64)
             _accept(tf * (1.0 / df), tid, b, lane_ray[k], tmin, tmax, excl, best_t,
                     best_tri)
 
 
 # -- the model ----------------------------------------------------------------------------
-_MODEL = {}
-
-
-def model_kernels(E: int, M: int, R: int, conservative: bool):
-    """``(cull, trace)`` of the model for one format, rounding code and mode.
-
-    ``cull(pn, pp, rows, n_planes, cand_b, cand_node, nc, nr, lo, hi, keep)`` and
-    ``trace(pn, pp, ro, rd, enable, keep_all, rows, cols, run_b, run_start, run_sph, sc, sr,
-    tcount, tlist, v0, e1, e2, nn, mc, tmin, tmax, excl, lo, hi, best_t, best_tri,
-    counters)``; every geometric array holds bit patterns (``uint32``), ``mc`` the
-    conservative margin table. Built once per process and key; cached on disk by numba.
-    """
-    key = (int(E), int(M), int(R), bool(conservative))
-    if key in _MODEL:
-        return _MODEL[key]
-    E, M, R, CONS = key
-
-    @njit(nogil=True, cache=True)
-    def cull(pn, pp, rows, n_planes, cand_b, cand_node, nc, nr, lo, hi, keep):
-        e, m, r = np.int64(E), np.int64(M), np.int64(R)
-        for q in range(lo, hi):
-            base = cand_b[q] * n_planes
-            s = cand_node[q]
-            row = False
-            for i in range(rows):
-                k = base + i
+# The format, the rounding and the mode are runtime arguments: one compile serves them all
+# (their values are loop invariants, so the vector loops of the block arithmetic still run
+# at full speed); :func:`model_args` gives them for a format.
+@njit(nogil=True, cache=True)
+def cull_model(pn, pp, rows, n_planes, cand_b, cand_node, nc, nr, lo, hi, keep, e, m, r):
+    """Hierarchy cull, the model: as :func:`cull_f64` with the plane-sphere tester's
+    arithmetic (:func:`~raplas_hdl.model.plane_sphere.plane_keep`) in the format ``(e, m)``
+    and rounding code ``r``."""
+    for q in range(lo, hi):
+        base = cand_b[q] * n_planes
+        s = cand_node[q]
+        row = False
+        for i in range(rows):
+            k = base + i
+            if plane_keep(pn[k, 0], pn[k, 1], pn[k, 2], pp[k], nc[s, 0], nc[s, 1],
+                          nc[s, 2], nr[s], e, m, r):
+                row = True
+                break
+        col = False
+        if row:
+            for j in range(rows, n_planes):
+                k = base + j
                 if plane_keep(pn[k, 0], pn[k, 1], pn[k, 2], pp[k], nc[s, 0], nc[s, 1],
                               nc[s, 2], nr[s], e, m, r):
-                    row = True
+                    col = True
                     break
-            col = False
-            if row:
-                for j in range(rows, n_planes):
-                    k = base + j
-                    if plane_keep(pn[k, 0], pn[k, 1], pn[k, 2], pp[k], nc[s, 0], nc[s, 1],
-                                  nc[s, 2], nr[s], e, m, r):
-                        col = True
-                        break
-            keep[q] = row and col
+        keep[q] = row and col
 
-    @njit(nogil=True, cache=True, error_model="numpy")
-    def trace(pn, pp, ro, rd, enable, keep_all, rows, cols, run_b, run_start, run_sph, sc,
-              sr, tcount, tlist, v0, e1, e2, nn, mc, tmin, tmax, excl, lo, hi, best_t,
-              best_tri, counters):
-        e, m, r, cons = np.int64(E), np.int64(M), np.int64(R), np.bool_(CONS)
-        n_planes = rows + cols
-        n_rays = rows * cols
-        rm = np.empty(rows, np.bool_)
-        cm = np.empty(cols, np.bool_)
-        g = np.empty((18, BLOCK), np.int64)
-        w = np.empty((13, BLOCK), np.int64)
-        lane_b = np.empty(BLOCK, np.int64)
-        lane_ray = np.empty(BLOCK, np.int64)
-        lane_di = np.empty(BLOCK, np.int64)
-        lane_tid = np.empty(BLOCK, np.int64)
-        lane_u = np.empty(BLOCK, np.int64)
-        n = np.int64(0)
-        for u in range(lo, hi):
-            b = run_b[u]
-            base = b * n_planes
-            issued = 0
-            skipped = 0
-            for c in range(5, 8):
-                counters[u, c] = 0
-            counters[u, 4] = 0
-            for q in range(run_start[u], run_start[u + 1]):
-                s = run_sph[q]
-                for k in range(n_planes):
-                    pk = base + k
-                    keep = keep_all[b] or plane_keep(pn[pk, 0], pn[pk, 1], pn[pk, 2], pp[pk],
-                                                     sc[s, 0], sc[s, 1], sc[s, 2], sr[s],
-                                                     e, m, r)
-                    if k < rows:
-                        rm[k] = keep
-                    else:
-                        cm[k - rows] = keep
-                nt = tcount[s]
-                for i in range(rows):
-                    if not rm[i]:
+@njit(nogil=True, cache=True, error_model="numpy")
+def trace_model(pn, pp, ro, rd, enable, keep_all, rows, cols, run_b, run_start, run_sph, sc,
+                sr, tcount, tlist, v0, e1, e2, nn, mc, tmin, tmax, excl, lo, hi, best_t,
+                best_tri, counters, e, m, r, cons):
+    """Runs ``lo .. hi-1`` of a pass, the model (module docstring): the unit's plane tests
+    and pair order, the pairs a block at a time, in the format ``(e, m)``, rounding code
+    ``r`` and mode ``cons`` (conservative), with the margin table ``mc``."""
+    n_planes = rows + cols
+    n_rays = rows * cols
+    rm = np.empty(rows, np.bool_)
+    cm = np.empty(cols, np.bool_)
+    g = np.empty((18, BLOCK), np.int64)
+    w = np.empty((13, BLOCK), np.int64)
+    lane_b = np.empty(BLOCK, np.int64)
+    lane_ray = np.empty(BLOCK, np.int64)
+    lane_di = np.empty(BLOCK, np.int64)
+    lane_tid = np.empty(BLOCK, np.int64)
+    lane_u = np.empty(BLOCK, np.int64)
+    n = np.int64(0)
+    for u in range(lo, hi):
+        b = run_b[u]
+        base = b * n_planes
+        issued = 0
+        skipped = 0
+        for c in range(5, 8):
+            counters[u, c] = 0
+        counters[u, 4] = 0
+        for q in range(run_start[u], run_start[u + 1]):
+            s = run_sph[q]
+            for k in range(n_planes):
+                pk = base + k
+                keep = keep_all[b] or plane_keep(pn[pk, 0], pn[pk, 1], pn[pk, 2], pp[pk],
+                                                 sc[s, 0], sc[s, 1], sc[s, 2], sr[s],
+                                                 e, m, r)
+                if k < rows:
+                    rm[k] = keep
+                else:
+                    cm[k - rows] = keep
+            nt = tcount[s]
+            for i in range(rows):
+                if not rm[i]:
+                    continue
+                for j in range(cols):
+                    if not cm[j]:
                         continue
-                    for j in range(cols):
-                        if not cm[j]:
-                            continue
-                        ray = i * cols + j
-                        if not enable[b, ray]:
-                            skipped += nt
-                            continue
-                        di = b * n_rays + ray
-                        for k in range(nt):
-                            tid = tlist[s, k]
-                            for c in range(3):
-                                g[c, n] = ro[b, c]
-                                g[3 + c, n] = rd[di, c]
-                                g[6 + c, n] = v0[tid, c]
-                                g[9 + c, n] = e1[tid, c]
-                                g[12 + c, n] = e2[tid, c]
-                                g[15 + c, n] = nn[tid, c]
-                            lane_b[n] = b
-                            lane_ray[n] = ray
-                            lane_di[n] = di
-                            lane_tid[n] = tid
-                            lane_u[n] = u
-                            n += 1
-                            issued += 1
-                            if n == BLOCK:
-                                _flush(g, w, lane_b, lane_ray, lane_di, lane_tid, lane_u, n,
-                                       ro, rd, v0, e1, e2, nn, mc, tmin, tmax, excl, best_t,
-                                       best_tri, counters, e, m, r, cons)
-                                n = np.int64(0)
-            n_sph = run_start[u + 1] - run_start[u]
-            counters[u, 0] = n_sph
-            counters[u, 1] = n_sph * n_planes
-            counters[u, 2] = issued
-            counters[u, 3] = skipped
-        if n:
-            _flush(g, w, lane_b, lane_ray, lane_di, lane_tid, lane_u, n, ro, rd, v0, e1, e2,
-                   nn, mc, tmin, tmax, excl, best_t, best_tri, counters, e, m, r, cons)
+                    ray = i * cols + j
+                    if not enable[b, ray]:
+                        skipped += nt
+                        continue
+                    di = b * n_rays + ray
+                    for k in range(nt):
+                        tid = tlist[s, k]
+                        for c in range(3):
+                            g[c, n] = ro[b, c]
+                            g[3 + c, n] = rd[di, c]
+                            g[6 + c, n] = v0[tid, c]
+                            g[9 + c, n] = e1[tid, c]
+                            g[12 + c, n] = e2[tid, c]
+                            g[15 + c, n] = nn[tid, c]
+                        lane_b[n] = b
+                        lane_ray[n] = ray
+                        lane_di[n] = di
+                        lane_tid[n] = tid
+                        lane_u[n] = u
+                        n += 1
+                        issued += 1
+                        if n == BLOCK:
+                            _flush(g, w, lane_b, lane_ray, lane_di, lane_tid, lane_u, n,
+                                   ro, rd, v0, e1, e2, nn, mc, tmin, tmax, excl, best_t,
+                                   best_tri, counters, e, m, r, cons)
+                            n = np.int64(0)
+        n_sph = run_start[u + 1] - run_start[u]
+        counters[u, 0] = n_sph
+        counters[u, 1] = n_sph * n_planes
+        counters[u, 2] = issued
+        counters[u, 3] = skipped
+    if n:
+        _flush(g, w, lane_b, lane_ray, lane_di, lane_tid, lane_u, n, ro, rd, v0, e1, e2,
+               nn, mc, tmin, tmax, excl, best_t, best_tri, counters, e, m, r, cons)
 
-    _MODEL[key] = (cull, trace)
-    return cull, trace
+
+
+def model_args(fmt, mode: str) -> tuple:
+    """The trailing arguments ``(e, m, r, cons)`` of :func:`trace_model` (the first three
+    end :func:`cull_model`'s) for a format and a ray-triangle mode."""
+    return (np.int64(fmt.exp_bits), np.int64(fmt.man_bits), np.int64(rmode_code(fmt)),
+            np.bool_(mode == "conservative"))

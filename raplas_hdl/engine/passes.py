@@ -45,12 +45,16 @@ class Arithmetic:
         The compiled kernels (:mod:`raplas_hdl.engine.kernels`).
     extra : tuple
         Extra arguments of ``trace`` before ``tmin`` (the model's margin table).
+    cull_tail, trace_tail : tuple
+        Trailing arguments of ``cull`` and ``trace`` (the model's format, rounding and mode).
     """
 
     name: str
     cull: object
     trace: object
     extra: tuple = ()
+    cull_tail: tuple = ()
+    trace_tail: tuple = ()
 
 
 @dataclass
@@ -200,7 +204,7 @@ def cull_pass(arith: Arithmetic, scene: EngineScene, batch: BundleBatch,
         keep = np.empty(b.size, np.bool_)
         run_chunks(b.size, lambda lo, hi, b=b, nodes=nodes, keep=keep: arith.cull(
             batch.pn, batch.pp, batch.rows, batch.n_planes, b, nodes, scene.node_c,
-            scene.node_r, lo, hi, keep), min_chunk=2048)
+            scene.node_r, lo, hi, keep, *arith.cull_tail), min_chunk=2048)
         lvl = scene.depth[nodes]
         tested += np.bincount(lvl, minlength=L)[:L]
         dropped += np.bincount(lvl[~keep], minlength=L)[:L]
@@ -293,6 +297,6 @@ def trace_pass(arith: Arithmetic, scene: EngineScene, batch: BundleBatch, run_b,
             scene.tlist, scene.v0, scene.e1, scene.e2, scene.nn, *arith.extra, float(tmin),
             np.ascontiguousarray(tmax, np.float64), np.ascontiguousarray(exclude, np.int64))
     run_chunks(run_b.size, lambda lo, hi: arith.trace(*args, lo, hi, best_t, best_tri,
-                                                      counters),
+                                                      counters, *arith.trace_tail),
                min_chunk=16, weights=work)
     return counters

@@ -9,11 +9,11 @@ the first process compiles, the others wait for the lock and then only load the 
 Groups:
 
 - ``generic``: the FP model's NumPy API (encode, decode, add, sub, mul, comparisons) and
-  the unit models' loops for small calls, whose format is a runtime argument (one compile
-  serves every format; :func:`raplas_hdl.model.ray_triangle.intersect` and
-  :func:`raplas_hdl.model.plane_sphere.tester_flags` below their ``SPECIALISE_MIN``);
-- ``engine``: the render passes of the model for each format and mode given (one compile
-  per format, rounding and mode) and of float64.
+  the unit models' loops (:func:`raplas_hdl.model.ray_triangle.intersect`,
+  :func:`raplas_hdl.model.plane_sphere.tester_flags`); their format is a runtime argument,
+  so one compile serves every format;
+- ``engine``: the render passes of the model and of float64 (the model's kernels also take
+  the format and mode at run time; the formats given only exercise them).
 """
 
 from __future__ import annotations

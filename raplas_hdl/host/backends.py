@@ -43,11 +43,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..engine.kernels import F64_SLACK, cull_f64, model_kernels, trace_f64
+from ..engine.kernels import (F64_SLACK, cull_f64, cull_model, model_args, trace_f64,
+                              trace_model)
 from ..engine.passes import (COUNTER_NAMES, Arithmetic, BundleBatch, EngineScene,
                              cull_pass, round_runs, trace_pass)
 from ..fp.format import FP24, FPFormat, check_format
-from ..fp.kernels import rmode_code
 from ..model.modes import check_mode
 from .bundles import RayBundle, bundle_geometry, encode_bundle_arrays
 from .shading import nearest_hits
@@ -183,9 +183,10 @@ class Backend:
         """The host's hierarchy test of nodes against bundle 0 of a batch (bool array)."""
         nodes = np.asarray(nodes, np.int64)
         keep = np.empty(nodes.size, np.bool_)
-        self._arith().cull(batch.pn, batch.pp, batch.rows, batch.n_planes,
-                           np.zeros(nodes.size, np.int64), nodes, self.scene.node_c,
-                           self.scene.node_r, 0, nodes.size, keep)
+        arith = self._arith()
+        arith.cull(batch.pn, batch.pp, batch.rows, batch.n_planes,
+                   np.zeros(nodes.size, np.int64), nodes, self.scene.node_c, self.scene.node_r,
+                   0, nodes.size, keep, *arith.cull_tail)
         return keep
 
     def run(self, batch: BundleBatch, sphere_ids) -> RunResult:
@@ -353,12 +354,10 @@ class ModelBackend(Backend):
     def _arith(self):
         from ..model.conservative import margin_constants, margin_table
 
-        cons = self.mode == "conservative"
-        cull, trace = model_kernels(self.fmt.exp_bits, self.fmt.man_bits,
-                                    rmode_code(self.fmt), cons)
-        mc = (margin_table(margin_constants(self.fmt, self.margin_scale)) if cons
+        tail = model_args(self.fmt, self.mode)
+        mc = (margin_table(margin_constants(self.fmt, self.margin_scale)) if tail[3]
               else np.zeros((3, 5), np.int64))
-        return Arithmetic("model", cull, trace, (mc,))
+        return Arithmetic("model", cull_model, trace_model, (mc,), tail[:3], tail)
 
     def usable(self, tris):
         """Triangles that :func:`raplas_hdl.host.triangles.make_triangles` keeps (not

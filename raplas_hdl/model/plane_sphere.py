@@ -76,47 +76,22 @@ def plane_keep(nx, ny, nz, p, cx, cy, cz, r, E, M, R):
 
 
 @njit(nogil=True, cache=True)
-def _generic_loop(n, p, c, r, lo, hi, d_out, keep_out, fl_out, e, m, rmode):
-    """Every (sphere, plane) pair of spheres ``lo .. hi-1``, the format as runtime integers
-    (compiled once for every format; large calls take :func:`_flat_kernel`)."""
+def _loop(n, p, c, r, lo, hi, d_out, keep_out, fl_out, e, m, rmode):
+    """Every (sphere, plane) pair of spheres ``lo .. hi-1``: the fast path, else the
+    reference; the format and the rounding are runtime arguments (one compile for all)."""
+    sign = np.int64(1) << (e + m)
     for s in range(lo, hi):
         for k in range(n.shape[0]):
-            d_out[s, k], keep_out[s, k], fl_out[s, k] = plane_exact(
-                n[k, 0], n[k, 1], n[k, 2], p[k], c[s, 0], c[s, 1], c[s, 2], r[s], e, m, rmode)
-
-
-#: Calls with at least this many (sphere, plane) pairs use the loop specialised to their
-#: format.
-SPECIALISE_MIN = 1 << 18
-
-_FLAT = {}
-
-
-def _flat_kernel(fmt: FPFormat):
-    """Every (sphere, plane) pair of spheres ``lo .. hi-1``, for one format and rounding
-    (compile-time constants, cached on disk per format by numba)."""
-    E, M, R = fmt.exp_bits, fmt.man_bits, rmode_code(fmt)
-    if (E, M, R) in _FLAT:
-        return _FLAT[(E, M, R)]
-
-    @njit(nogil=True, cache=True)
-    def loop(n, p, c, r, lo, hi, d_out, keep_out, fl_out):
-        sign = np.int64(1) << (E + M)
-        for s in range(lo, hi):
-            for k in range(n.shape[0]):
-                d = plane_fast(n[k, 0], n[k, 1], n[k, 2], p[k], c[s, 0], c[s, 1], c[s, 2],
-                               r[s], E, M, R)
-                if d >= 0:
-                    d_out[s, k] = d
-                    keep_out[s, k] = not lt_k(r[s], np.uint32(d & (sign - 1)), E, M)
-                    fl_out[s, k] = 0
-                else:
-                    d_out[s, k], keep_out[s, k], fl_out[s, k] = plane_exact(
-                        n[k, 0], n[k, 1], n[k, 2], p[k], c[s, 0], c[s, 1], c[s, 2], r[s],
-                        E, M, R)
-
-    _FLAT[(E, M, R)] = loop
-    return loop
+            d = plane_fast(n[k, 0], n[k, 1], n[k, 2], p[k], c[s, 0], c[s, 1], c[s, 2], r[s],
+                           e, m, rmode)
+            if d >= 0:
+                d_out[s, k] = d
+                keep_out[s, k] = not lt_k(r[s], np.uint32(d & (sign - 1)), e, m)
+                fl_out[s, k] = 0
+            else:
+                d_out[s, k], keep_out[s, k], fl_out[s, k] = plane_exact(
+                    n[k, 0], n[k, 1], n[k, 2], p[k], c[s, 0], c[s, 1], c[s, 2], r[s], e, m,
+                    rmode)
 
 
 def _as_bits(x, shape_tail, name, fmt):
@@ -145,15 +120,9 @@ def _run(planes_n, planes_p, centres, radii, fmt: FPFormat):
     d = np.empty(shape, np.uint32)
     keep = np.empty(shape, np.bool_)
     fl = np.empty(shape, np.uint8)
-    chunk = max(1, 8192 // max(1, n.shape[0]))
-    if d.size >= SPECIALISE_MIN:
-        loop = _flat_kernel(fmt)
-        run_chunks(c.shape[0], lambda lo, hi: loop(n, p, c, r, lo, hi, d, keep, fl),
-                   min_chunk=chunk)
-    else:
-        key = (fmt.exp_bits, fmt.man_bits, rmode_code(fmt))
-        run_chunks(c.shape[0], lambda lo, hi: _generic_loop(n, p, c, r, lo, hi, d, keep, fl,
-                                                            *key), min_chunk=chunk)
+    key = (np.int64(fmt.exp_bits), np.int64(fmt.man_bits), np.int64(rmode_code(fmt)))
+    run_chunks(c.shape[0], lambda lo, hi: _loop(n, p, c, r, lo, hi, d, keep, fl, *key),
+               min_chunk=max(1, 8192 // max(1, n.shape[0])))
     return d, keep, fl
 
 

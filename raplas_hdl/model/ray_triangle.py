@@ -343,88 +343,52 @@ def hit_common(det, tp, up, vp, s, ww, cons, margins, sb):
 
 
 @njit(nogil=True, cache=True)
-def _generic_loop(o, d, v0, e1, e2, nn, mc, lo, hi, hit, t_o, u_o, v_o, det_o, cnt_o, e, m, r,
-                  cons):
-    """The per-pair loop of :func:`intersect` with the format as runtime integers: compiled
-    once for every format (small calls; large ones take :func:`_flat_kernel`)."""
-    for i in range(lo, hi):
-        ok, h, tp, up, vp, det = pair_fast(o, i, d, i, v0, e1, e2, nn, i, e, m, r, cons, mc)
-        cnt = np.int64(0)
-        if not ok:
-            h, tp, up, vp, det, cnt = pair_exact(o, i, d, i, v0, e1, e2, nn, i, e, m, r, cons,
-                                                 mc)
-        hit[i] = h
-        t_o[i] = tp
-        u_o[i] = up
-        v_o[i] = vp
-        det_o[i] = det
-        cnt_o[i, 0] = cnt & 0xFF
-        cnt_o[i, 1] = (cnt >> 8) & 0xFF
-        cnt_o[i, 2] = (cnt >> 16) & 0xFF
-
-
-#: Calls with at least this many pairs use the loop specialised to their format (a compile
-#: of about a second per format, once per machine, for about three times the speed).
-SPECIALISE_MIN = 1 << 18
-
-_FLAT = {}
-
-
-def _flat_kernel(fmt: FPFormat, mode: str):
-    """The loop of :func:`intersect` for one format, rounding and mode, a block of pairs at a
-    time (:func:`vpair`); the format is a compile-time constant (cached on disk per format
-    by numba)."""
-    E, M, R, CONS = fmt.exp_bits, fmt.man_bits, rmode_code(fmt), mode == "conservative"
-    key = (E, M, R, CONS)
-    if key in _FLAT:
-        return _FLAT[key]
-
-    @njit(nogil=True, cache=True)
-    def loop(o, d, v0, e1, e2, nn, mc, lo, hi, hit, t_o, u_o, v_o, det_o, cnt_o):
-        g = np.empty((18, BLOCK), np.int64)
-        w = np.empty((13, BLOCK), np.int64)
-        sb = np.int64(1) << (E + M)
-        zero = np.uint32(0)
-        for start in range(lo, hi, BLOCK):
-            n = min(BLOCK, hi - start)
-            for k in range(n):
-                i = start + k
-                for c in range(3):
-                    g[c, k] = o[i, c]
-                    g[3 + c, k] = d[i, c]
-                    g[6 + c, k] = v0[i, c]
-                    g[9 + c, k] = e1[i, c]
-                    g[12 + c, k] = e2[i, c]
-                    g[15 + c, k] = nn[i, c]
-            vpair(g, w, n, CONS, E, M, R)
-            for k in range(n):
-                i = start + k
-                cnt = np.int64(0)
-                if w[11, k] >= 0:
-                    margins = (zero, zero, zero, zero, zero)
-                    if CONS:
-                        margins = _margins(o, i, d, i, v0, e1, e2, nn, i, E, M, mc)
-                    h = hit_common(w[3, k], w[0, k], w[1, k], w[2, k], w[4, k], w[5, k], CONS,
-                                   margins, sb)
-                    tp, up, vp, det = (np.uint32(w[0, k]), np.uint32(w[1, k]),
-                                       np.uint32(w[2, k]), np.uint32(w[3, k]))
-                else:
-                    ok, h, tp, up, vp, det = pair_fast(o, i, d, i, v0, e1, e2, nn, i, E, M, R,
-                                                       CONS, mc)
-                    if not ok:
-                        h, tp, up, vp, det, cnt = pair_exact(o, i, d, i, v0, e1, e2, nn, i, E,
-                                                             M, R, CONS, mc)
-                hit[i] = h
-                t_o[i] = tp
-                u_o[i] = up
-                v_o[i] = vp
-                det_o[i] = det
-                cnt_o[i, 0] = cnt & 0xFF
-                cnt_o[i, 1] = (cnt >> 8) & 0xFF
-                cnt_o[i, 2] = (cnt >> 16) & 0xFF
-
-    _FLAT[key] = loop
-    return loop
+def _loop(o, d, v0, e1, e2, nn, mc, lo, hi, hit, t_o, u_o, v_o, det_o, cnt_o, e, m, r, cons):
+    """Pairs ``lo .. hi-1`` of :func:`intersect`, a block at a time (:func:`vpair`; lanes
+    that leave the common case through :func:`pair_fast` and :func:`pair_exact`). The format
+    ``(e, m)``, the rounding code ``r`` and the mode ``cons`` are runtime arguments: one
+    compile serves them all."""
+    g = np.empty((18, BLOCK), np.int64)
+    w = np.empty((13, BLOCK), np.int64)
+    sb = np.int64(1) << (e + m)
+    zero = np.uint32(0)
+    for start in range(lo, hi, BLOCK):
+        n = min(BLOCK, hi - start)
+        for k in range(n):
+            i = start + k
+            for c in range(3):
+                g[c, k] = o[i, c]
+                g[3 + c, k] = d[i, c]
+                g[6 + c, k] = v0[i, c]
+                g[9 + c, k] = e1[i, c]
+                g[12 + c, k] = e2[i, c]
+                g[15 + c, k] = nn[i, c]
+        vpair(g, w, n, cons, e, m, r)
+        for k in range(n):
+            i = start + k
+            cnt = np.int64(0)
+            if w[11, k] >= 0:
+                margins = (zero, zero, zero, zero, zero)
+                if cons:
+                    margins = _margins(o, i, d, i, v0, e1, e2, nn, i, e, m, mc)
+                h = hit_common(w[3, k], w[0, k], w[1, k], w[2, k], w[4, k], w[5, k], cons,
+                               margins, sb)
+                tp, up, vp, det = (np.uint32(w[0, k]), np.uint32(w[1, k]),
+                                   np.uint32(w[2, k]), np.uint32(w[3, k]))
+            else:
+                ok, h, tp, up, vp, det = pair_fast(o, i, d, i, v0, e1, e2, nn, i, e, m, r,
+                                                   cons, mc)
+                if not ok:
+                    h, tp, up, vp, det, cnt = pair_exact(o, i, d, i, v0, e1, e2, nn, i, e,
+                                                         m, r, cons, mc)
+            hit[i] = h
+            t_o[i] = tp
+            u_o[i] = up
+            v_o[i] = vp
+            det_o[i] = det
+            cnt_o[i, 0] = cnt & 0xFF
+            cnt_o[i, 1] = (cnt >> 8) & 0xFF
+            cnt_o[i, 2] = (cnt >> 16) & 0xFF
 
 
 def _vec(x, fmt, name):
@@ -483,13 +447,9 @@ def intersect(o, d, v0, e1, e2, n, fmt: FPFormat, mode: str = "paper",
     hit = np.empty(count, dtype=np.bool_)
     outs = [np.empty(count, dtype=np.uint32) for _ in range(4)]
     counts = np.empty((count, 3), dtype=np.uint8)
-    if count >= SPECIALISE_MIN:
-        loop = _flat_kernel(fmt, mode)
-        run_chunks(count, lambda lo, hi: loop(*arrs, mc, lo, hi, hit, *outs, counts))
-    else:
-        key = (fmt.exp_bits, fmt.man_bits, rmode_code(fmt), conservative)
-        run_chunks(count, lambda lo, hi: _generic_loop(*arrs, mc, lo, hi, hit, *outs, counts,
-                                                       *key))
+    key = (np.int64(fmt.exp_bits), np.int64(fmt.man_bits), np.int64(rmode_code(fmt)),
+           np.bool_(conservative))
+    run_chunks(count, lambda lo, hi: _loop(*arrs, mc, lo, hi, hit, *outs, counts, *key))
     fl = ((counts[:, 0] != 0) * FLAG_OVERFLOW | (counts[:, 1] != 0) * FLAG_UNDERFLOW
           | (counts[:, 2] != 0) * FLAG_INVALID).astype(np.uint8)
     return {"hit": hit, "t": outs[0], "u": outs[1], "v": outs[2], "det": outs[3],
