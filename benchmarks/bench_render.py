@@ -61,9 +61,10 @@ from raplas_hdl.host.render import (  # noqa: E402
     render,
     save_png,
 )
-from raplas_hdl.host.scenes import get_scene  # noqa: E402
+from raplas_hdl.host.scenes import MESHES, get_scene  # noqa: E402
+from raplas_hdl.model.modes import MODES  # noqa: E402
 
-DEFAULT_MESH = Path("/work/shared/meshes/stanford-bunny.obj")
+DEFAULT_MESH = "stanford-bunny"
 DEFAULT_OUT = ROOT / "build" / "render-bench" / "render_bench.json"
 STAGES = ("spheres", "load", "compile", "primary cull", "primary unit", "shading",
           "shadow cull", "shadow unit", "image")
@@ -306,13 +307,14 @@ def _stage_lines(entry) -> list[str]:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--mesh", default=str(DEFAULT_MESH))
+    p.add_argument("--mesh", default=DEFAULT_MESH,
+                   help="a shipped mesh's name or a mesh file (default stanford-bunny)")
     p.add_argument("--size", default="256x256")
     p.add_argument("--tile", default="8x8")
     p.add_argument("--shadow", default="3x3")
     p.add_argument("--backends", default="float64,model")
     p.add_argument("--format", default="FP24")
-    p.add_argument("--mode", default="paper", choices=("paper", "conservative"))
+    p.add_argument("--mode", default="paper", choices=MODES)
     p.add_argument("--batch", type=int, default=32)
     p.add_argument("--threads", type=int, default=None,
                    help="threads of the compiled passes (default: every core)")
@@ -323,10 +325,10 @@ def main(argv=None) -> int:
     p.add_argument("--out", default=str(DEFAULT_OUT))
     args = p.parse_args(argv)
 
-    mesh = Path(args.mesh)
-    if not mesh.exists():
-        print(f"bench_render: {mesh} not found (the benchmark needs the shared meshes)",
-              file=sys.stderr)
+    mesh = MESHES.get(args.mesh, args.mesh)
+    if not Path(mesh).exists():
+        print(f"bench_render: {args.mesh} is neither a shipped mesh ({', '.join(MESHES)}) nor "
+              "a file", file=sys.stderr)
         return 2
     w, h = _size(args.size)
     rows, cols = _lattice(args.tile, "--tile")

@@ -1,8 +1,8 @@
 """The benchmark sweep: which points run, and what is measured at each.
 
 Axes: formats (FP16, FP20, FP24, FP32 and any extra), roundings (rtz, rne, chop), ray-triangle
-modes (paper, conservative), scenes (the procedural ones, and the mesh files of
-``../shared/meshes`` when that directory exists), bundle sizes, backends (``float64``,
+modes (paper, conservative), scenes (the procedural ones, and the meshes shipped with the
+package, :data:`raplas_hdl.host.scenes.MESH_DIR`), bundle sizes, backends (``float64``,
 ``model``; ``rtl`` on one tiny point on request). The full product is too large for one
 machine, so the points form three grids:
 
@@ -71,7 +71,8 @@ from ..fp import ROUNDINGS, FPFormat, parse_format
 from ..host.backends import COUNTERS, BackendUnavailable, ModelBackend, make_backend
 from ..host.exact import float64_intersect
 from ..host.render import RenderSettings, compare, render
-from ..host.scenes import MESH_SUFFIXES, SCENES, get_scene
+from ..host.scenes import MESH_DIR, MESH_SUFFIXES, SCENES, get_scene
+from ..model.modes import MODES
 from ..host.triangles import make_triangles
 from ..model.conservative import domain
 from ..model.plane_sphere import n_passes
@@ -84,11 +85,10 @@ __all__ = ["BOUND_CAP", "MODEL_METRICS", "REFERENCE_METRICS", "CAPPED_METRICS", 
            "device_figures", "DEFAULT_MESH_DIR", "DEFAULT_MAX_PAIRS", "DEFAULT_PAIR_SAMPLE",
            "PREPASS_DIVISOR"]
 
-MODES = ("paper", "conservative")
 #: Largest normalisation bound used (beyond it only the host's float64 shading changes).
 BOUND_CAP = 256.0
-#: ``../shared/meshes`` beside the repository.
-DEFAULT_MESH_DIR = Path(__file__).resolve().parents[3] / "shared" / "meshes"
+#: The meshes shipped with the package.
+DEFAULT_MESH_DIR = Path(MESH_DIR)
 #: Pairs a point may issue (2 % of the brute-force pairs of a 70k-triangle mesh at 256x256
 #: with 3x3 shadows; 1-15 minutes of the model on one core, by format and mode).
 DEFAULT_MAX_PAIRS = 500_000_000

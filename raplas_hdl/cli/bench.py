@@ -58,8 +58,8 @@ def add_parser(subparsers):
                    help="comma-separated procedural scenes: " + ", ".join(SCENE_NAMES)
                         + " (default all; quick cornell,spheres)")
     p.add_argument("--meshes", default=None, metavar="DIR",
-                   help="directory of mesh files, or none (default ../shared/meshes, skipped "
-                        "with a note when missing; quick none)")
+                   help="directory of mesh files, or none (default the meshes shipped with "
+                        "the package; quick none)")
     p.add_argument("--bundles", default=None, metavar="LIST",
                    help=f"comma-separated bundle sizes RxC, sides 1 to {g.MAX_LATTICE}, the "
                         "first is the main one (default 8x8,4x4,16x16; quick 8x8)")
