@@ -25,24 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..locks import file_lock
 from ..model.modes import MODES
 
-__all__ = ["warm", "warm_lock", "default_lock"]
-
-
-@contextlib.contextmanager
-def warm_lock(path):
-    """An exclusive lock on ``path`` (created), held for the ``with`` block."""
-    import fcntl
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "a+") as fh:
-        fcntl.flock(fh, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(fh, fcntl.LOCK_UN)
+__all__ = ["warm", "default_lock"]
 
 
 def _generic():
@@ -94,7 +80,7 @@ def warm(formats=("FP24/rtz",), modes=MODES, float64: bool = True,
     from ..fp.format import FPFormat, parse_format
 
     times = {}
-    with warm_lock(lock) if lock else contextlib.nullcontext():
+    with file_lock(lock) if lock else contextlib.nullcontext():
         if generic:
             t0 = time.perf_counter()
             _generic()

@@ -18,7 +18,6 @@ into the kept run directory, and ``run_cocotb`` returns its path as ``waves``.
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import hashlib
 import os
 import shutil
@@ -29,9 +28,14 @@ import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+from ..locks import file_lock
+
 __all__ = ["SIMULATORS", "SimulatorNotFound", "available_simulators", "require_simulator",
            "simulator_env", "build", "mark_ports_public", "run_cocotb", "build_plain_verilator", "verilator_flags",
            "REPO_ROOT", "BUILD_ROOT"]
+
+#: The lock between processes that build the same model (kept under this name for callers).
+_file_lock = file_lock
 
 SIMULATORS = ("icarus", "verilator")
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -168,17 +172,6 @@ def _patched_environ(env: dict, drop=("PYTEST_CURRENT_TEST",)):
         os.environ.update(saved)
 
 
-@contextlib.contextmanager
-def _file_lock(path: Path):
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "a+") as fh:
-        fcntl.flock(fh, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(fh, fcntl.LOCK_UN)
-
-
 def _runner(simulator: str, log_file: Path | None, timeout_s: float | None,
             public_all: bool = True):
     from cocotb_tools.runner import get_runner
@@ -299,7 +292,7 @@ def build(simulator: str, verilog_text: str, toplevel: str, build_key: str,
     stamp = build_dir / ".built"
     if stamp.exists():
         return build_dir
-    with _file_lock(top_dir / f".{simulator}.lock"):
+    with file_lock(top_dir / f".{simulator}.lock"):
         if stamp.exists():
             return build_dir
         if build_dir.exists():
@@ -471,7 +464,7 @@ def build_plain_verilator(verilog_text: str, toplevel: str, build_key: str,
     stamp = build_dir / ".built"
     if stamp.exists():
         return exe
-    with _file_lock(top_dir / ".plain.lock"):
+    with file_lock(top_dir / ".plain.lock"):
         if stamp.exists():
             return exe
         if build_dir.exists():
