@@ -12,6 +12,7 @@ or per range in index order.
 
 from __future__ import annotations
 
+import itertools
 import os
 from concurrent.futures import ThreadPoolExecutor
 
@@ -70,7 +71,7 @@ def run_chunks(n: int, fn, min_chunk: int = 4096, weights=None):
         cuts = np.searchsorted(w, targets).tolist()
     else:
         cuts = [n * k // parts for k in range(1, parts)]
-    bounds = sorted(set([0, *[min(max(c, 0), n) for c in cuts], n]))
-    futs = [_pool(threads).submit(fn, lo, hi) for lo, hi in zip(bounds[:-1], bounds[1:])
+    bounds = sorted({0, *[min(max(c, 0), n) for c in cuts], n})
+    futs = [_pool(threads).submit(fn, lo, hi) for lo, hi in itertools.pairwise(bounds)
             if hi > lo]
     return [f.result() for f in futs]

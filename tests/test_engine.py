@@ -86,7 +86,7 @@ def test_cull_pass_equals_cull_tree(kind, fmt, mode):
 @pytest.mark.parametrize("threads", [1, 2])
 @pytest.mark.parametrize("kind, fmt, mode", BACKENDS)
 def test_trace_equals_stream(kind, fmt, mode, threads):
-    be, tree = _loaded(kind, fmt, mode)
+    be, _ = _loaded(kind, fmt, mode)
     rng = np.random.default_rng(7)
     k = 10
     batch = be.batch(*_bundles(rng, k), enable=rng.random((k, 15)) < 0.85)

@@ -193,11 +193,11 @@ def _flush(g, w, lane_b, lane_ray, lane_di, lane_tid, lane_u, n, ro, rd, v0, e1,
             tp = np.uint32(w[0, k])
             det = np.uint32(w[3, k])
         else:
-            ok, h, tp, up, vp, det = pair_fast(ro, b, rd, di, v0, e1, e2, nn, tid, e, m,
-                                               r, cons, mc)
+            ok, h, tp, _, _, det = pair_fast(ro, b, rd, di, v0, e1, e2, nn, tid, e, m, r,
+                                             cons, mc)
             if not ok:
-                h, tp, up, vp, det, c = pair_exact(ro, b, rd, di, v0, e1, e2, nn, tid, e,
-                                                   m, r, cons, mc)
+                h, tp, _, _, det, c = pair_exact(ro, b, rd, di, v0, e1, e2, nn, tid, e, m, r,
+                                                 cons, mc)
                 u = lane_u[k]
                 counters[u, 5] += c & 0xFF
                 counters[u, 6] += (c >> 8) & 0xFF

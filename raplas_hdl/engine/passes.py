@@ -24,13 +24,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..model.memory_image import COUNTER_NAMES
 from ..parallel import run_chunks
 from .kernels import N_COUNTERS
 
 __all__ = ["Arithmetic", "BundleBatch", "EngineScene", "CullResult", "cull_pass",
            "trace_pass", "round_runs", "select_runs", "COUNTER_NAMES"]
-
-from ..model.memory_image import COUNTER_NAMES  # noqa: E402  (the counters' one definition)
 
 
 @dataclass

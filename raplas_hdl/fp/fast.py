@@ -52,7 +52,7 @@ def common_mul(a, b, E, M, R):
     SH = E + M
     MAG = (np.int64(1) << SH) - 1
     EM = ((np.int64(1) << E) - 1) << M               # exponent field of inf/NaN, in place
-    BIAS1 = ((np.int64(1) << (E - 1))) << M          # (bias + 1) in place
+    BIAS1 = (np.int64(1) << (E - 1)) << M          # (bias + 1) in place
     ma = a & MAG
     mb = b & MAG
     p = ((a & MM) | H) * ((b & MM) | H)              # exact, in [2^2M, 2^(2M+2))

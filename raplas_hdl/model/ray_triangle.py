@@ -48,15 +48,15 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..fp.format import FLAG_INVALID, FLAG_OVERFLOW, FLAG_UNDERFLOW, FPFormat, check_format
 from ..fp.fast import common_add, common_mul, fast_add, fast_mul
+from ..fp.format import FLAG_INVALID, FLAG_OVERFLOW, FLAG_UNDERFLOW, FPFormat, check_format
 from ..fp.kernels import add_int_k, is_nan_k, le_k, lt_k, mul_int_k, neg_k, rmode_code
 from ..fp.numba_cache import drop_stale_cache
+from ..parallel import run_chunks
 from .conservative import margin_constants, margin_k, margin_table
 from .modes import MODES, check_mode
-from ..parallel import run_chunks
 
-__all__ = ["intersect", "MODES", "N_OPS", "EVENTS"]
+__all__ = ["EVENTS", "MODES", "N_OPS", "intersect"]
 
 #: Arithmetic operations per pair, by mode.
 N_OPS = {"paper": 33, "conservative": 34}
