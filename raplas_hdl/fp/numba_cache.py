@@ -1,8 +1,9 @@
 """Keep numba's on-disk cache honest for modules that inline the FP kernels.
 
-numba keys a cached function on its own source file only: when ``kernels.py`` (or the
-format) changes, a caller in another file would load machine code built from the old
-kernels. :func:`drop_stale_cache` compares a hash of those sources with the one recorded
+numba keys a cached function on its own source file only: when a compiled function that
+another file's kernels call changes (the FP kernels, the fast paths, the unit models' pair
+and plane arithmetic, the conservative margins), a caller would load machine code built
+from the old source. :func:`drop_stale_cache` compares a hash of those sources with the one recorded
 beside the caller's cache and removes the caller's cache entries when they differ. Each
 module with ``@njit(cache=True)`` functions that call the kernels calls it at import.
 """
@@ -14,14 +15,16 @@ from pathlib import Path
 
 __all__ = ["drop_stale_cache"]
 
-_SOURCES = ("kernels.py", "format.py")
+#: Files (relative to the package) whose compiled functions other files' kernels call.
+_SOURCES = ("fp/kernels.py", "fp/format.py", "fp/fast.py", "model/ray_triangle.py",
+            "model/plane_sphere.py", "model/conservative.py", "engine/kernels.py")
 
 
 def _kernel_digest() -> str:
-    here = Path(__file__).resolve().parent
+    root = Path(__file__).resolve().parents[1]
     digest = hashlib.sha256()
     for name in _SOURCES:
-        digest.update((here / name).read_bytes())
+        digest.update((root / name).read_bytes())
     return digest.hexdigest()
 
 
