@@ -1,11 +1,12 @@
 """An RTL render equals the model render bit for bit, under both simulators.
 
 A small scene (a soup of 16 triangles on a floor): 4x4 primary bundles and 4x4 soft-shadow
-bundles (one unit configuration, so one simulator build), with early-out batches, through
-the intersection unit's Verilog under cocotb and through the golden model. Image, nearest
-triangle per pixel, visibility and the unit's counters must agree. Verilator renders
-32x32 pixels (about 190k unit cycles); Icarus, some 30x slower on this unit, renders 8x4.
-A missing simulator is an error, not a skip.
+bundles (one unit configuration, so one live simulation for the whole render), with
+early-out rounds, through the intersection unit's Verilog (the job-stream harness of
+:mod:`raplas_hdl.sim.unit_harness`: the scene loaded once, then one round of runs per pass
+and early-out batch) and through the golden model. Image, nearest triangle per pixel,
+visibility and the unit's counters must agree. Verilator renders 32x32 pixels; Icarus,
+some 30x slower on this unit, renders 8x4. A missing simulator is an error, not a skip.
 """
 
 import numpy as np
@@ -23,10 +24,16 @@ def test_rtl_render_equals_model(sim, size):
     st = RenderSettings(*size, rows=4, cols=4, shadow_rows=4, shadow_cols=4, tris_per_sphere=4,
                         batch_spheres=4, chunk=4096, progress=False)
     model = render(scene, make_backend("model", FP24, mode="paper"), st)
-    rtl = render(scene, make_backend("rtl", FP24, mode="paper", sim=sim), st)
+    backend = make_backend("rtl", FP24, mode="paper", sim=sim)
+    rtl = render(scene, backend, st)
     np.testing.assert_array_equal(rtl.tri_id, model.tri_id)
     np.testing.assert_array_equal(rtl.image, model.image)
     np.testing.assert_array_equal(rtl.visibility, model.visibility)
     unit_rtl = {k: v for k, v in rtl.stats["unit"].items() if not k.startswith(("_", "cycles"))}
     assert unit_rtl == model.stats["unit"]
     assert model.stats["shadow_bundles"] > 0 and model.stats["hits"] > 0
+    # one live simulation served the primary pass and every shadow round
+    (stats,) = backend.session_stats.values()
+    assert stats["rounds"] >= 3 and stats["load_cycles"] > 0
+    backend.close()
+    assert not backend._sessions

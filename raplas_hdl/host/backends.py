@@ -458,12 +458,14 @@ class ModelBackend(Backend):
 
 
 class RtlBackend(ModelBackend):
-    """The Verilog of the intersection unit under cocotb (Icarus or Verilator).
+    """The Verilog of the intersection unit, simulated (Icarus or Verilator).
 
-    The host side (memories, hierarchy test, pair order) is the model backend's; the
-    runs go through the unit's RTL driver, which loads the memories through the unit's
-    write port and collects the result stream and counters. Runs are batched: one
-    simulation per :meth:`run_many` call.
+    The host side (memories, hierarchy test, pair order) is the model backend's. The runs go
+    through live simulations of the unit (:class:`raplas_hdl.sim.unit_harness.UnitSession`):
+    one per unit configuration a render needs (the primary and the shadow bundle sizes),
+    started on first use with the scene loaded once, then fed one round of runs per
+    :meth:`stream` call; the simulator builds are cached on disk across renders. A new
+    scene (:meth:`load`) or :meth:`close` ends the sessions.
 
     Raises
     ------
@@ -472,7 +474,7 @@ class RtlBackend(ModelBackend):
     """
 
     name = "rtl"
-    DRIVER = "raplas_hdl.sim.unit_driver"
+    DRIVER = "raplas_hdl.sim.unit_harness"
 
     def __init__(self, fmt: FPFormat = FP24, mode: str = "conservative", testers=None,
                  margin_scale: int = 1, sim: str = "icarus"):
@@ -492,19 +494,66 @@ class RtlBackend(ModelBackend):
             self._driver = importlib.import_module(self.DRIVER)
         except ImportError as exc:
             raise BackendUnavailable(
-                f"the rtl backend needs the intersection unit's cocotb driver "
-                f"({self.DRIVER.replace('.', '/')}.py with run_runs()), which is not "
+                f"the rtl backend needs the intersection unit's driver "
+                f"({self.DRIVER.replace('.', '/')}.py with UnitSession), which is not "
                 f"available: {exc}") from exc
-        if not hasattr(self._driver, "run_runs"):
-            raise BackendUnavailable(f"{self.DRIVER} has no run_runs(); the rtl backend "
+        if not hasattr(self._driver, "UnitSession"):
+            raise BackendUnavailable(f"{self.DRIVER} has no UnitSession; the rtl backend "
                                      f"cannot drive the unit")
         self.sim = sim
+        self._sessions = {}
+        #: per configuration: clock cycles, scene-load cycles and seconds, rounds, and
+        #: ``rounds_s`` (wall seconds in the rounds: sending jobs, simulating, decoding)
+        self.session_stats = {}
+        #: a directory to record each session's op stream in (``<rows>x<cols>.ops``; the
+        #: benchmark replays them without a host), or None
+        self.record_dir = None
 
     def describe(self):
         return f"{self.name} ({self.sim}) {self.fmt} {self.mode}"
 
+    def load(self, tris, tree, bound):
+        self.close()
+        return super().load(tris, tree, bound)
+
+    def session(self, config):
+        """The live simulation of ``config`` (started, and the scene loaded, on first use)."""
+        s = self._sessions.get(config)
+        if s is None:
+            from pathlib import Path
+
+            record = None
+            if self.record_dir is not None:
+                Path(self.record_dir).mkdir(parents=True, exist_ok=True)
+                record = Path(self.record_dir) / f"{config.rows}x{config.cols}.ops"
+            s = self._sessions[config] = self._driver.UnitSession(self.sim, config,
+                                                                   self.scene_memory,
+                                                                   record=record)
+            self.session_stats[config] = {"cycles": s.cycles, "load_cycles": s.load_cycles,
+                                          "load_s": s.load_s, "rounds": s.rounds,
+                                          "rounds_s": 0.0}
+        return s
+
     def _run_runs(self, config, runs):
-        return self._driver.run_runs(self.sim, config, self.scene_memory, runs)
+        s = self.session(config)
+        t0 = time.perf_counter()
+        out = s.run(runs)
+        st = self.session_stats[config]
+        st.update(cycles=s.cycles, rounds=s.rounds)
+        st["rounds_s"] += time.perf_counter() - t0
+        return out
+
+    def close(self):
+        """End every live simulation (a later run starts a new one)."""
+        sessions, self._sessions = self._sessions, {}
+        for s in sessions.values():
+            s.close()
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:  # noqa: BLE001 - interpreter shutdown
+            pass
 
     def warm_pass(self, *args, **kwargs) -> float:
         """Nothing to compile on the host side (the simulator builds on first use)."""
@@ -512,8 +561,8 @@ class RtlBackend(ModelBackend):
 
     def trace(self, batch, run_b, run_start, run_sph, best_t, best_tri, tmin=0.0, tmax=None,
               exclude=None):
-        """The runs through the simulated unit (one simulation per pass), each run's stream
-        folded into the nearest hits on the host."""
+        """The runs through the simulated unit (one round of the configuration's live
+        simulation), each run's stream folded into the nearest hits on the host."""
         runs = _runs_of(run_b, run_start, run_sph)
         counters = np.zeros((len(runs), len(COUNTERS)), np.int64)
         R = batch.n_rays

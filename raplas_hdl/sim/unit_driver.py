@@ -188,7 +188,8 @@ def _same_geometry(a: BundleMemory, b: BundleMemory) -> bool:
                          for f in ("plane_n", "plane_p", "ray_o", "ray_d"))
 
 
-def encode_runs(config: UnitConfig, scene: SceneMemory, runs, *, overlap: bool = False):
+def encode_runs(config: UnitConfig, scene: SceneMemory, runs, *, overlap: bool = False,
+                with_scene: bool = True):
     """Stimulus of a simulation as a dict of arrays (saved with ``np.savez``).
 
     ``runs`` is a list of :class:`~raplas_hdl.model.memory_image.Run`,
@@ -197,9 +198,13 @@ def encode_runs(config: UnitConfig, scene: SceneMemory, runs, *, overlap: bool =
     (the host's early-out batches), otherwise the bundle goes into the other bank.
     Contiguous ``sphere_ids`` start a range run, others a run-list run. Each run's command
     fields are ``run_first``, ``run_count``, ``run_bank``, ``run_indirect`` and
-    ``run_keep_all``.
+    ``run_keep_all``. ``with_scene=False`` leaves the scene's writes out (a live session
+    loaded it already).
     """
-    wa, wd = scene_writes(config, scene)
+    if with_scene:
+        wa, wd = scene_writes(config, scene)
+    else:
+        wa = wd = np.zeros(0, np.uint32)
     stim = {"scene_addr": wa, "scene_data": wd}
     banks, firsts, counts, inds, keeps, offsets = [], [], [], [], [], [0]
     addrs, datas = [], []
