@@ -35,11 +35,11 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from raplas_hdl.fp import FP24  # noqa: E402
-from raplas_hdl.host.backends import make_backend  # noqa: E402
-from raplas_hdl.host.render import RenderSettings, render  # noqa: E402
-from raplas_hdl.host.scenes import get_scene  # noqa: E402
-from raplas_hdl.sim.unit_harness import replay  # noqa: E402
+from raplas_hdl.fp import FP24
+from raplas_hdl.host.backends import make_backend
+from raplas_hdl.host.render import RenderSettings, render
+from raplas_hdl.host.scenes import get_scene
+from raplas_hdl.sim.unit_harness import replay
 
 BASELINE_PRIMARY_S = 239.0   # issue 12: bunny 32x32, Verilator, per-cycle driver, primary pass
 

@@ -34,6 +34,6 @@ def test_rtl_render_equals_model(sim, size):
     assert model.stats["shadow_bundles"] > 0 and model.stats["hits"] > 0
     # one live simulation served the primary pass and every shadow round
     (stats,) = backend.session_stats.values()
-    assert stats["rounds"] >= 3 and stats["load_cycles"] > 0
+    assert stats["rounds"] >= 3 and stats["cycles"] > 0
     backend.close()
     assert not backend._sessions

@@ -465,7 +465,9 @@ class RtlBackend(ModelBackend):
     one per unit configuration a render needs (the primary and the shadow bundle sizes),
     started on first use with the scene loaded once, then fed one round of runs per
     :meth:`stream` call; the simulator builds are cached on disk across renders. A new
-    scene (:meth:`load`) or :meth:`close` ends the sessions.
+    scene (:meth:`load`) or :meth:`close` ends the sessions. With waveforms asked for
+    (``WAVES=1``, ``render --waves``) the runs go through the per-cycle cocotb driver
+    (:func:`raplas_hdl.sim.unit_driver.run_runs`, one simulation per round) instead.
 
     Raises
     ------
@@ -535,6 +537,13 @@ class RtlBackend(ModelBackend):
         return s
 
     def _run_runs(self, config, runs):
+        import os
+
+        if os.environ.get("WAVES", "") not in ("", "0"):
+            # waveforms (render --waves): the per-cycle cocotb driver, which records them
+            from raplas_hdl.sim.unit_driver import run_runs
+
+            return run_runs(self.sim, config, self.scene_memory, runs)
         s = self.session(config)
         t0 = time.perf_counter()
         out = s.run(runs)
@@ -550,10 +559,10 @@ class RtlBackend(ModelBackend):
             s.close()
 
     def __del__(self):
-        try:
+        import contextlib
+
+        with contextlib.suppress(Exception):   # interpreter shutdown
             self.close()
-        except Exception:  # noqa: BLE001 - interpreter shutdown
-            pass
 
     def warm_pass(self, *args, **kwargs) -> float:
         """Nothing to compile on the host side (the simulator builds on first use)."""

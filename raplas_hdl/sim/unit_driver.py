@@ -1,6 +1,8 @@
 """Driver of the intersection unit's Verilog under cocotb, and small test scenes.
 
-:func:`run_runs` is what the host's ``rtl`` backend calls: it emits the unit's Verilog for a
+:func:`run_runs` is the per-cycle cocotb path (the host's ``rtl`` backend takes it only for
+waveforms; its renders use the live sessions of :mod:`raplas_hdl.sim.unit_harness`, which
+reuse :func:`unit_verilog` and :func:`encode_runs`): it emits the unit's Verilog for a
 :class:`~raplas_hdl.model.memory_image.UnitConfig` (one simulator build per configuration,
 reused), writes the scene and the runs into a stimulus file, runs
 :mod:`raplas_hdl.sim.tb_intersection` and returns, per run, the result stream (the structured array

@@ -29,8 +29,12 @@ the harness checks that the pair FIFO never overflowed and stays within its dept
 (or a wait without progress for ``+MAX_STALL`` clocks) writes ``error ...`` to the status pipe
 and ends the simulation.
 
-A session (:class:`UnitSession`) loads the scene once, through the write port from the op
-stream (0.9 M words for the bunny take about a second, no Python per word), then runs rounds
+A session (:class:`UnitSession`) loads the scene once: by default through a backdoor,
+``$readmemh`` of the Triangle, Sphere, count and triangle-list memories (hierarchical
+references into the unit's RAM instances, no change to the unit) from images the host
+writes (:func:`scene_images`: the words the write port would store); with
+``backdoor=False`` through the write port from the op stream, one word per clock (the
+bunny's 0.95 M words take 4-6 s under Verilator, no Python per word). Then it runs rounds
 of runs (:meth:`UnitSession.run`): per run its bundle writes (into the other bank while the
 previous run goes: the double buffer), then, without overlap, a wait for the previous run
 and its counters, then the command; exactly the order of the cocotb testbench, so streams
@@ -41,6 +45,7 @@ measures the co-simulated render against).
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import select
@@ -55,8 +60,19 @@ import numpy as np
 from raplas_hdl.model.memory_image import SceneMemory, UnitConfig, as_run, scene_writes
 from raplas_hdl.model.records import CMD, COUNTERS, RESULT
 
-__all__ = ["harness_verilog", "build_harness", "encode_ops", "ops_bytes", "parse_hex",
-           "UnitSession", "HarnessError", "replay", "TOPLEVEL"]
+__all__ = [
+    "BACKDOOR",
+    "TOPLEVEL",
+    "HarnessError",
+    "UnitSession",
+    "build_harness",
+    "encode_ops",
+    "harness_verilog",
+    "ops_bytes",
+    "parse_hex",
+    "replay",
+    "scene_images",
+]
 
 TOPLEVEL = "unit_harness"
 OP_WRITE, OP_CMD, OP_WAIT, OP_COUNTERS, OP_END, OP_QUIT = range(6)
@@ -102,7 +118,7 @@ module {TOPLEVEL} (input wire clk, input wire rst, output reg done, output reg t
     .counters(counters), .clear(clear), .busy(busy), .fifo_level(fifo_level),
     .fifo_overflow(fifo_overflow));
   integer fi = 0, fo = 0, fc = 0, fs = 0, rc = 0;
-  reg [4095*8:0] p_ctl, p_beats, p_ctr, p_status;
+  reg [4095*8:0] p_ctl, p_beats, p_ctr, p_status, p_init;
   reg [31:0] ready_thr = 65536, seed = 1, lfsr = 1, runs_done = 0, max_level = 0;
   reg [63:0] cycles = 0, stall = 0, max_stall = 64'd100000000;
   reg [3:0] op = 0;
@@ -120,6 +136,11 @@ module {TOPLEVEL} (input wire clk, input wire rst, output reg done, output reg t
     if ($value$plusargs("MAX_STALL=%d", max_stall)) ;
     lfsr = (seed * 32'h9E3779B1) ^ 32'h1234567;
     if (lfsr == 0) lfsr = 1;
+    // scene backdoor: Triangle, Sphere, count and triangle-list memories from hex files
+    if ($value$plusargs("TRI_INIT=%s", p_init)) $readmemh(p_init, dut.tri_mem.mem);
+    if ($value$plusargs("SPH_INIT=%s", p_init)) $readmemh(p_init, dut.sph_mem.mem);
+    if ($value$plusargs("CNT_INIT=%s", p_init)) $readmemh(p_init, dut.cnt_mem.mem);
+    if ($value$plusargs("TL_INIT=%s", p_init)) $readmemh(p_init, dut.tlist_mem.mem);
     fi = $fopen(p_ctl, "r");
     if (fi == 0) $fatal(1, "unit_harness: cannot open %0s", p_ctl);
     fs = $fopen(p_status, "w");
@@ -241,7 +262,7 @@ def build_harness(simulator: str, config: UnitConfig, build_key: str | None = No
                 src.write_text(text)
                 with open(d / "build.log", "w") as log:
                     res = subprocess.run(["iverilog", "-g2005", "-o", str(out), "-s", TOPLEVEL,
-                                          str(src)], env=env, stdout=log,
+                                          str(src)], check=False, env=env, stdout=log,
                                          stderr=subprocess.STDOUT)
                 if res.returncode != 0:
                     raise RuntimeError(f"iverilog build of the unit harness failed:\n"
@@ -335,6 +356,48 @@ def encode_ops(config: UnitConfig, scene: SceneMemory, runs, *, first_run: int =
     return np.concatenate(ops), np.concatenate(addrs), np.concatenate(datas)
 
 
+#: The scene memories the backdoor fills: plusarg, instance in the unit, region, fields.
+BACKDOOR = (("TRI_INIT", "tri_mem", "tri"), ("SPH_INIT", "sph_mem", "sphere"),
+            ("CNT_INIT", "cnt_mem", "sphere"), ("TL_INIT", "tlist_mem", "tlist"))
+
+
+def scene_images(config: UnitConfig, scene: SceneMemory) -> dict:
+    """``$readmemh`` text of the scene memories, ``{plusarg: bytes}``: exactly the words the
+    write port would store for :func:`~raplas_hdl.model.memory_image.scene_writes` (the
+    same address decoding, lanes and truncation as the unit's write port)."""
+    from raplas_hdl.model.memory_image import REGIONS
+
+    w = config.fmt.width
+    wa, wd = scene_writes(config, scene)
+    wa = np.asarray(wa, np.int64)
+    wd = np.asarray(wd, np.uint64)
+    region, index, fld = wa >> 28, (wa >> 4) & ((1 << 23) - 1), wa & 15
+    layout = {   # plusarg: (select, lane, lane width, lanes, depth)
+        "TRI_INIT": ((region == REGIONS["tri"]) & (fld < 12), fld, w, 12,
+                     config.max_triangles),
+        "SPH_INIT": ((region == REGIONS["sphere"]) & (fld < 4), fld, w, 4, config.max_spheres),
+        "CNT_INIT": ((region == REGIONS["sphere"]) & (fld == 4), 0 * fld, config.count_bits, 1,
+                     config.max_spheres),
+        "TL_INIT": ((region == REGIONS["tlist"]) & (fld == 0), 0 * fld, config.tri_id_bits, 1,
+                    config.max_spheres * config.tris_per_sphere),
+    }
+    out = {}
+    for name, (sel, lane, lw, lanes, depth) in layout.items():
+        sel = sel & (index < depth)
+        rows, lane, data = index[sel], lane[sel], wd[sel]
+        n = int(rows.max()) + 1 if rows.size else 0
+        width = lw * lanes
+        digits = -(-width // 4)
+        bits = np.zeros((n, 4 * digits), np.uint8)
+        for b in range(lw):
+            bits[rows, lane * lw + b] = ((data >> np.uint64(b)) & np.uint64(1)).astype(np.uint8)
+        nib = bits.reshape(n, digits, 4) @ np.array([1, 2, 4, 8], np.uint8)
+        text = np.concatenate([_HEX[nib[:, ::-1]], np.full((n, 1), ord("\n"), np.uint8)],
+                              axis=1)
+        out[name] = text.tobytes()
+    return out
+
+
 def _scene_ops(config: UnitConfig, scene: SceneMemory):
     wa, wd = scene_writes(config, scene)
     return (np.concatenate([np.zeros(wa.size, np.uint64), [OP_END]]),
@@ -355,7 +418,11 @@ class UnitSession:
     seed, ready_density : int, float
         Back-pressure on the result stream (probability that ``o.ready`` is high).
     record : path, optional
-        Keep every op sent in this file (:func:`replay` runs it without a host).
+        Keep every op sent in this file (:func:`replay` runs it without a host); with the
+        backdoor, the memory images go beside it (``<record>.<PLUSARG>.hex``).
+    backdoor : bool
+        Load the scene memories with ``$readmemh`` at start-up (default) instead of through
+        the write port (one word per clock from the op stream).
     timeout_s : float
         Longest wait for one round's status line.
 
@@ -371,7 +438,7 @@ class UnitSession:
     def __init__(self, simulator: str, config: UnitConfig, scene: SceneMemory, *,
                  seed: int = 1, ready_density: float = 1.0, record=None,
                  timeout_s: float = 24 * 3600.0, build_key: str | None = None,
-                 max_stall: int = 100_000_000):
+                 max_stall: int = 100_000_000, backdoor: bool = True):
         if not 0.0 < ready_density <= 1.0:
             raise ValueError(f"ready_density must be in (0, 1], not {ready_density}")
         scene.check(config)
@@ -399,17 +466,28 @@ class UnitSession:
         self._ctl = os.open(ctl, os.O_RDWR)
         self._status = os.open(st, os.O_RDWR | os.O_NONBLOCK)
         self._status_buf = b""
-        self._record = open(record, "wb") if record else None
-        thr = min(65536, max(1, int(round(ready_density * 65536))))
+        self._record = open(record, "wb") if record else None  # noqa: SIM115 - session-long
+        thr = min(65536, max(1, round(ready_density * 65536)))
         self._log_path = self._dir / "sim.log"
-        self._log = open(self._log_path, "wb")
+        self._log = open(self._log_path, "wb")  # noqa: SIM115 - session-long
+        init = []
+        if backdoor:
+            for name, text in scene_images(config, scene).items():
+                path = self._dir / f"{name}.hex"
+                path.write_bytes(text)
+                if record:
+                    shutil.copyfile(path, f"{record}.{name}.hex")
+                init.append(f"+{name}={path}")
         self._proc = subprocess.Popen(
-            cmd + [f"+CTRL={ctl}", f"+BEATS={self._beats_path}", f"+CTRS={self._ctr_path}",
+            cmd + init + [f"+CTRL={ctl}", f"+BEATS={self._beats_path}", f"+CTRS={self._ctr_path}",
                    f"+STATUS={st}", f"+READY_THR={thr}", f"+SEED={int(seed)}",
                    f"+MAX_STALL={int(max_stall)}"],
             cwd=self._dir, env=simulator_env(simulator), stdout=self._log,
             stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
-        self._send(*_scene_ops(config, scene))
+        if backdoor:
+            self._send(np.array([OP_END]), np.array([0]), np.array([0]))
+        else:
+            self._send(*_scene_ops(config, scene))
         self._wait_round()
         self.load_cycles = self.cycles
         self.load_s = time.monotonic() - t0
@@ -512,11 +590,10 @@ class UnitSession:
         proc, self._proc = self._proc, None
         if proc is not None:
             if not kill and proc.poll() is None:
-                try:
+                # closing: on any trouble fall through to kill
+                with contextlib.suppress(Exception):
                     self._send(np.array([OP_QUIT]), np.array([0]), np.array([0]))
                     proc.wait(timeout=60)
-                except Exception:  # noqa: BLE001 - closing: fall through to kill
-                    pass
             if proc.poll() is None:
                 proc.kill()
                 proc.wait()
@@ -539,28 +616,29 @@ class UnitSession:
         self.close()
 
     def __del__(self):
-        try:
+        with contextlib.suppress(Exception):
             self.close()
-        except Exception:  # noqa: BLE001
-            pass
 
 
 def replay(simulator: str, config: UnitConfig, ops_path, *, seed: int = 1,
            ready_density: float = 1.0, build_key: str | None = None) -> dict:
     """Run a recorded op file in one go, with no host in the loop (``OP_END`` lines only
-    flush). Returns ``cycles`` (clock cycles), ``wall_s`` and the beats file size."""
+    flush; the memory images ``<ops_path>.<PLUSARG>.hex`` a backdoor session recorded are
+    loaded). Returns ``cycles`` (clock cycles), ``wall_s`` and the beats file size."""
     cmd = build_harness(simulator, config, build_key)
     from raplas_hdl.sim.runner import simulator_env
 
     with tempfile.TemporaryDirectory(prefix="raplas-unit-replay-") as tmp:
         tmp = Path(tmp)
         st = tmp / "status"
-        thr = min(65536, max(1, int(round(ready_density * 65536))))
+        thr = min(65536, max(1, round(ready_density * 65536)))
         t0 = time.monotonic()
-        res = subprocess.run(cmd + [f"+CTRL={ops_path}", f"+BEATS={tmp / 'beats'}",
+        init = [f"+{name}={ops_path}.{name}.hex" for name, _, _ in BACKDOOR
+                if Path(f"{ops_path}.{name}.hex").exists()]
+        res = subprocess.run(cmd + init + [f"+CTRL={ops_path}", f"+BEATS={tmp / 'beats'}",
                                     f"+CTRS={tmp / 'ctrs'}", f"+STATUS={st}",
                                     f"+READY_THR={thr}", f"+SEED={seed}"],
-                             cwd=tmp, env=simulator_env(simulator), capture_output=True,
+                             check=False, cwd=tmp, env=simulator_env(simulator), capture_output=True,
                              text=True)
         wall = time.monotonic() - t0
         status = st.read_text().split("\n") if st.exists() else []
