@@ -8,7 +8,8 @@ from FPMul takes the same option. Checked here:
 * the stated latencies (FP24: multiplier 4 instead of 3, tester 13, ray-triangle 30) and the
   errors for a bad target, in Python;
 * FP24 FPMul in ``rtz`` and ``rne``, generic and virtex4 side by side in one batch-harness
-  DUT (:func:`raplas_hdl.sim.tb_fp.fp_bundle`), under Icarus and Verilator with Yosys's ``DSP48`` model:
+  DUT (:func:`raplas_hdl.sim.tb_fp.fp_bundle`), under Icarus and Verilator with Yosys's
+  ``DSP48`` model:
   every result bit and flag against :mod:`raplas_hdl.fp.model`, with random gaps and
   clock-enable stalls. The bundle delays each unit to the longest *stated* latency, so
   every unit valid on every beat proves that the virtex4 unit's ``latency`` is its true one

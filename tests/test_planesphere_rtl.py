@@ -325,8 +325,8 @@ def _verilog(rows, cols, testers, fmt):
 
 
 def write_stimulus(path, cases, fmt, idle=0.3, stall=0.3, seed=7):
-    """The stimulus file of ``raplas_hdl/sim/tb_plane_sphere.py``: planes and spheres as hex words, and
-    the testbench's random idle and stall rates."""
+    """The stimulus file of ``raplas_hdl/sim/tb_plane_sphere.py``: planes and spheres as hex
+    words, and the testbench's random idle and stall rates."""
     np.savez(path,
              planes=np.array([[f"{w:x}" for w in c["planes"]] for c in cases]),
              spheres=np.array([[f"{v:x}" for v in sphere_payloads(fmt, c)] for c in cases]),

@@ -80,7 +80,8 @@ from ..model.records import RESULT
 from . import cost as dev
 
 __all__ = ["BOUND_CAP", "MODEL_METRICS", "REFERENCE_METRICS", "CAPPED_METRICS", "MODES",
-           "BenchSpec", "PairBudgetExceeded", "RunSampler", "quick_spec", "full_spec", "domain_bound",
+           "BenchSpec", "PairBudgetExceeded", "RunSampler", "quick_spec", "full_spec",
+           "domain_bound",
            "find_meshes", "plan", "stress_metrics", "run_sweep", "missing_metrics",
            "device_figures", "DEFAULT_MESH_DIR", "DEFAULT_MAX_PAIRS", "DEFAULT_PAIR_SAMPLE",
            "PREPASS_DIVISOR"]

@@ -31,8 +31,8 @@ from pathlib import Path
 from ..locks import file_lock
 
 __all__ = ["SIMULATORS", "SimulatorNotFound", "available_simulators", "require_simulator",
-           "simulator_env", "build", "mark_ports_public", "run_cocotb", "build_plain_verilator", "verilator_flags",
-           "REPO_ROOT", "BUILD_ROOT"]
+           "simulator_env", "build", "mark_ports_public", "run_cocotb", "build_plain_verilator",
+           "verilator_flags", "REPO_ROOT", "BUILD_ROOT"]
 
 #: The lock between processes that build the same model (kept under this name for callers).
 _file_lock = file_lock

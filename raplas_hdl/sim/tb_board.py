@@ -2,8 +2,8 @@
 
 Started by :func:`raplas_hdl.sim.board_sim.run_board`, which passes, in environment variables,
 ``BOARD_STIM`` (an ``.npz``: the scene's and the runs' memories, see
-:func:`raplas_hdl.sim.board_sim.encode_stimulus`), ``BOARD_META`` (JSON: the unit's parameters, seed,
-bus gap density) and ``BOARD_OUT`` (where the results go).
+:func:`raplas_hdl.sim.board_sim.encode_stimulus`), ``BOARD_META`` (JSON: the unit's parameters,
+seed, bus gap density) and ``BOARD_OUT`` (where the results go).
 
 The host side is the real driver, :class:`raplas_hdl.host.board_driver.BoardDriver`, run
 unchanged in a cocotb *bridge* thread: its bus object turns every ``read``/``write`` into a
