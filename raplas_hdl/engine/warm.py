@@ -75,12 +75,21 @@ def warm(formats=("FP24/rtz",), modes=MODES, float64: bool = True,
     float64, generic, engine : bool
         Which groups.
     lock : path, optional
-        Hold this file's lock while compiling (default: none).
+        Hold this file's lock while compiling (default: none). A lock that cannot be
+        created (a read-only install) is skipped: each process then compiles on its own.
     """
     from ..fp.format import FPFormat, parse_format
 
     times = {}
-    with file_lock(lock) if lock else contextlib.nullcontext():
+    held = contextlib.nullcontext()
+    if lock:
+        try:
+            Path(lock).parent.mkdir(parents=True, exist_ok=True)
+            with open(lock, "a+"):
+                held = file_lock(lock)
+        except OSError:
+            pass
+    with held:
         if generic:
             t0 = time.perf_counter()
             _generic()
