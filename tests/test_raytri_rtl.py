@@ -64,16 +64,20 @@ def run_unit(dut, payloads, burst, idle, stall, seed):
     n = len(payloads)
 
     async def driver(ctx):
+        # stream rule: a raised valid (and its payload) stays until the transfer; the
+        # idle inserter draws a gap only between pairs
         rng = random.Random(seed)
-        i = 0
+        i, valid = 0, False
         while i < n:
-            gap = i >= burst and rng.random() < idle
-            ctx.set(dut.i.valid, int(not gap))
+            if not valid:
+                valid = i < burst or rng.random() >= idle
+            ctx.set(dut.i.valid, int(valid))
             ctx.set(dut.i.payload.as_value(), payloads[i])
             _, _, ready = await ctx.tick().sample(dut.i.ready)
-            if ready and not gap:
+            if ready and valid:
                 t_in.append(state["cycle"])
                 i += 1
+                valid = False
         ctx.set(dut.i.valid, 0)
 
     async def monitor(ctx):

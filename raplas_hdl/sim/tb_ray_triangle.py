@@ -12,7 +12,9 @@ hexadecimal line per pair, and names the files in environment variables:
 
 :class:`RayTriangleTB` drives and monitors every cycle: it sets its inputs at the falling
 edge, samples the handshakes in the read-only phase before the rising edge, and counts a
-transfer when ``valid`` and ``ready`` were both high there. The TB compares nothing with
+transfer when ``valid`` and ``ready`` were both high there. The driver keeps Amaranth's
+stream rule: once ``i.valid`` is raised, it and the payload stay until the transfer (gaps
+come only between pairs). The TB compares nothing with
 a model; it checks only that the unit never offers more results than it took pairs, and
 the pytest side compares every bit in bulk.
 
@@ -80,18 +82,22 @@ class RayTriangleTB:
         n = len(payloads)
         limit = max_cycles or 64 * n + 1000
         sent, got, cycles = 0, [], 0
+        offer = False
         while len(got) < n:
             if cycles >= limit:
                 raise AssertionError(f"timeout: {len(got)} of {n} results after {cycles} cycles")
-            offer = sent < n and self.rng.random() >= self.idle
-            dut.i__valid.value = int(offer)
-            if offer:
+            # stream rule: an offered pair stays (valid and payload) until it is taken;
+            # the idle inserter draws a gap only between pairs
+            if not offer and sent < n and self.rng.random() >= self.idle:
+                offer = True
                 dut.i__payload.value = payloads[sent]
+            dut.i__valid.value = int(offer)
             take = self.rng.random() >= self.stall
             dut.o__ready.value = int(take)
             await ReadOnly()
             if offer and int(dut.i__ready.value):
                 sent += 1
+                offer = False
             if take and int(dut.o__valid.value):
                 got.append(int(dut.o__payload.value))
                 if len(got) > sent:
