@@ -3,14 +3,17 @@ campaigns and the CLI.
 
 - ``paper``: the paper's exact inequalities on the unit's arithmetic;
 - ``conservative``: every test widened by a certified margin
-  (:mod:`raplas_hdl.model.conservative`), so no pair the exact test hits is missed.
+  (:mod:`raplas_hdl.model.conservative`), so no pair the exact test hits is missed;
+- ``certified``: a three-valued outcome per pair, hit / miss / uncertain, each hit and miss
+  guaranteed against the exact test by running error bounds
+  (:mod:`raplas_hdl.model.certified`); the host resolves the uncertain pairs.
 """
 
 from __future__ import annotations
 
 __all__ = ["MODES", "check_mode"]
 
-MODES = ("paper", "conservative")
+MODES = ("paper", "conservative", "certified")
 
 
 def check_mode(mode) -> str:

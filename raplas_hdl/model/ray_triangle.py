@@ -36,6 +36,10 @@ a *callee's* source changes (the FP kernels are compiled into the loop). So at i
 module compares a hash of the kernel sources with the one recorded beside its cache and
 drops its own cache entries when they differ.
 
+Certified mode: see :mod:`raplas_hdl.model.certified` (the 34 operations with a running
+error bound beside each result; ``outcome`` 0 miss, 1 hit, 2 uncertain, guaranteed against
+the exact reference; ``hit = outcome == 1``).
+
 Outputs: ``hit``, ``t = t'``, ``u = u'``, ``v = v'``, ``det`` (bit patterns), ``flags``,
 the OR of the event flags of the pair's operations (33 in paper mode, 34 in
 conservative mode), and ``event_counts``, the number of the pair's operations that raised
@@ -59,7 +63,7 @@ from .modes import MODES, check_mode
 __all__ = ["EVENTS", "MODES", "N_OPS", "intersect"]
 
 #: Arithmetic operations per pair, by mode.
-N_OPS = {"paper": 33, "conservative": 34}
+N_OPS = {"paper": 33, "conservative": 34, "certified": 34}
 
 #: The events counted per pair, in the columns of ``event_counts``.
 EVENTS = ("overflow", "underflow", "invalid")
@@ -342,6 +346,19 @@ def hit_common(det, tp, up, vp, s, ww, cons, margins, sb):
     return (-kmd <= kd and pos) or (kd <= kmd and neg)
 
 
+@njit(cache=True)
+def store(i, tp, up, vp, det, cnt, t_o, u_o, v_o, det_o, cnt_o):
+    """Row ``i`` of the pair outputs: t', u', v', det and the packed event counts unpacked
+    into their three columns."""
+    t_o[i] = tp
+    u_o[i] = up
+    v_o[i] = vp
+    det_o[i] = det
+    cnt_o[i, 0] = cnt & 0xFF
+    cnt_o[i, 1] = (cnt >> 8) & 0xFF
+    cnt_o[i, 2] = (cnt >> 16) & 0xFF
+
+
 @njit(nogil=True, cache=True)
 def _loop(o, d, v0, e1, e2, nn, mc, lo, hi, hit, t_o, u_o, v_o, det_o, cnt_o, e, m, r, cons):
     """Pairs ``lo .. hi-1`` of :func:`intersect`, a block at a time (:func:`vpair`; lanes
@@ -382,13 +399,7 @@ def _loop(o, d, v0, e1, e2, nn, mc, lo, hi, hit, t_o, u_o, v_o, det_o, cnt_o, e,
                     h, tp, up, vp, det, cnt = pair_exact(o, i, d, i, v0, e1, e2, nn, i, e,
                                                          m, r, cons, mc)
             hit[i] = h
-            t_o[i] = tp
-            u_o[i] = up
-            v_o[i] = vp
-            det_o[i] = det
-            cnt_o[i, 0] = cnt & 0xFF
-            cnt_o[i, 1] = (cnt >> 8) & 0xFF
-            cnt_o[i, 2] = (cnt >> 16) & 0xFF
+            store(i, tp, up, vp, det, cnt, t_o, u_o, v_o, det_o, cnt_o)
 
 
 def _vec(x, fmt, name):
@@ -404,7 +415,7 @@ def _vec(x, fmt, name):
 
 
 def intersect(o, d, v0, e1, e2, n, fmt: FPFormat, mode: str = "paper",
-              margin_scale: float = 1.0) -> dict:
+              margin_scale: float = 1.0, bound_variant: str | None = None) -> dict:
     """Run the ray-triangle unit's arithmetic on ``len(o)`` (ray, triangle) pairs.
 
     Parameters
@@ -415,10 +426,15 @@ def intersect(o, d, v0, e1, e2, n, fmt: FPFormat, mode: str = "paper",
         Triangle record (V0, E1 = V1 - V0, E2 = V2 - V0, N = E1 x E2), bit patterns.
     fmt : FPFormat
         Format and rounding.
-    mode : {"paper", "conservative"}
-        The paper's exact inequalities, or the widened tests of the conservative mode.
+    mode : {"paper", "conservative", "certified"}
+        The paper's exact inequalities, the widened tests of the conservative mode, or the
+        three-valued outcome of the certified mode.
     margin_scale : float
-        ``s`` of the conservative margin (1: the derivation); ignored in paper mode.
+        ``s`` of the conservative margin, or the factor on every certified bound (1: the
+        derivation; smaller only for the negative control); ignored in paper mode.
+    bound_variant : str, optional
+        Certified mode only: a key of :data:`raplas_hdl.model.certified.VARIANTS`
+        (default :data:`~raplas_hdl.model.certified.DEFAULT_VARIANT`).
 
     Returns
     -------
@@ -426,7 +442,8 @@ def intersect(o, d, v0, e1, e2, n, fmt: FPFormat, mode: str = "paper",
         ``hit`` (bool), ``t``, ``u``, ``v``, ``det`` (uint32: t', u', v', det),
         ``flags`` (uint8, OR of the event flags of the pair's operations) and
         ``event_counts`` (uint8, shape (n, 3): the pair's operations that raised overflow,
-        underflow and invalid, columns in the order of :data:`EVENTS`).
+        underflow and invalid, columns in the order of :data:`EVENTS`). Certified mode
+        also ``outcome`` (uint8: 0 miss, 1 hit, 2 uncertain), and ``hit = outcome == 1``.
 
     Raises
     ------
@@ -441,6 +458,14 @@ def intersect(o, d, v0, e1, e2, n, fmt: FPFormat, mode: str = "paper",
     count = arrs[0].shape[0]
     if any(a.shape[0] != count for a in arrs):
         raise ValueError("o, d, v0, e1, e2 and n must have the same number of rows")
+    if mode == "certified":
+        from .certified import DEFAULT_VARIANT, intersect_certified
+        res = intersect_certified(arrs, fmt, margin_scale, bound_variant or DEFAULT_VARIANT)
+        res["hit"] = res["outcome"] == 1
+        res["flags"] = _flags(res["event_counts"])
+        return res
+    if bound_variant is not None:
+        raise ValueError("bound_variant applies to the certified mode only")
     conservative = mode == "conservative"
     mc = (margin_table(margin_constants(fmt, margin_scale)) if conservative
           else np.zeros((3, 5), np.int64))
@@ -450,7 +475,10 @@ def intersect(o, d, v0, e1, e2, n, fmt: FPFormat, mode: str = "paper",
     key = (np.int64(fmt.exp_bits), np.int64(fmt.man_bits), np.int64(rmode_code(fmt)),
            np.bool_(conservative))
     run_chunks(count, lambda lo, hi: _loop(*arrs, mc, lo, hi, hit, *outs, counts, *key))
-    fl = ((counts[:, 0] != 0) * FLAG_OVERFLOW | (counts[:, 1] != 0) * FLAG_UNDERFLOW
-          | (counts[:, 2] != 0) * FLAG_INVALID).astype(np.uint8)
     return {"hit": hit, "t": outs[0], "u": outs[1], "v": outs[2], "det": outs[3],
-            "flags": fl, "event_counts": counts}
+            "flags": _flags(counts), "event_counts": counts}
+
+
+def _flags(counts):
+    return ((counts[:, 0] != 0) * FLAG_OVERFLOW | (counts[:, 1] != 0) * FLAG_UNDERFLOW
+            | (counts[:, 2] != 0) * FLAG_INVALID).astype(np.uint8)

@@ -1,0 +1,68 @@
+"""The certified mode of the ray-triangle model: every hit is an R hit, every miss an R miss
+(raplas_hdl/model/certified.py, docs/certified-mode.md)."""
+
+import numpy as np
+import pytest
+
+from raplas_hdl.fp.format import FPFormat
+from raplas_hdl.model import certified
+from raplas_hdl.model.modes import MODES
+from raplas_hdl.model.ray_triangle import intersect
+from raplas_hdl.verify import stress
+
+
+def _run(fmt, per_family, seed, scale=1.0, variant=certified.DEFAULT_VARIANT):
+    cases = stress.generate(fmt, per_family, seed)
+    enc = stress.reference(cases, fmt)
+    k = enc.kept
+    res = intersect(enc.o_bits[k], enc.d_bits[k], enc.v0_bits, enc.e1_bits, enc.e2_bits,
+                    enc.n_bits, fmt, mode="certified", margin_scale=scale,
+                    bound_variant=variant)
+    return cases, enc, res
+
+
+def test_mode_listed():
+    assert "certified" in MODES
+
+
+@pytest.mark.parametrize("fmt", [FPFormat(7, 16, "rtz"), FPFormat(7, 16, "rne"),
+                                 FPFormat(7, 16, "chop"), FPFormat(5, 10, "rtz")],
+                         ids=lambda f: f.name)
+@pytest.mark.parametrize("variant", sorted(certified.VARIANTS))
+def test_outcome_agrees_with_r(fmt, variant):
+    cases, enc, res = _run(fmt, 120, 11, variant=variant)
+    oc = res["outcome"]
+    rh = enc.r_hit[enc.kept]
+    assert set(np.unique(oc)) <= {0, 1, 2}
+    assert not ((oc == 1) & ~rh).any()
+    assert not ((oc == 0) & rh).any()
+    assert np.array_equal(res["hit"], oc == 1)
+    # a unit that calls everything uncertain must not pass: the random family decides
+    rnd = cases.family[enc.kept] == stress.FAMILIES.index("random")
+    assert (oc[rnd] == 2).mean() < 0.15
+
+
+def test_same_results_as_paper_mode():
+    fmt = FPFormat(7, 16, "rtz")
+    cases, enc, res = _run(fmt, 40, 3)
+    k = enc.kept
+    ref = intersect(enc.o_bits[k], enc.d_bits[k], enc.v0_bits, enc.e1_bits, enc.e2_bits,
+                    enc.n_bits, fmt, mode="paper")
+    for key in ("t", "u", "v", "det"):
+        assert np.array_equal(res[key], ref[key])
+
+
+def test_domain_and_constants():
+    assert certified.certified_domain(FPFormat(7, 16)) == 2.0 ** 30
+    assert certified.certified_domain(FPFormat(5, 10)) == 2.0 ** 6
+    cc = certified.certified_constants(FPFormat(7, 16), 0.5, "exp")
+    assert list(cc) == [0.5, 0, 3]
+    with pytest.raises(ValueError, match="exp_bits <= 9"):
+        certified.certified_domain(FPFormat(11, 20))
+    with pytest.raises(ValueError, match="bound variant"):
+        certified.certified_constants(FPFormat(7, 16), 1.0, "nope")
+    with pytest.raises(ValueError, match="scale"):
+        certified.certified_constants(FPFormat(7, 16), 0.0)
+    with pytest.raises(ValueError, match="certified mode only"):
+        intersect(np.zeros((1, 3), np.uint32), *[np.zeros((1, 3), np.uint32)] * 5,
+                  FPFormat(7, 16), bound_variant="exp")
