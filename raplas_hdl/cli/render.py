@@ -5,10 +5,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from ..model.modes import MODES
 from . import grammar as g
 
 __all__ = ["add_parser", "add_render_options", "check", "check_scene", "run",
-           "settings_from_args", "_size", "_lattice", "_jsonable"]
+           "scene_from_args", "settings_from_args", "_size", "_lattice", "_jsonable"]
 
 #: Limits of the render options (stated in --help, checked while parsing).
 MAX_TRIS_PER_SPHERE = 4096
@@ -39,12 +40,65 @@ def _power_of_two(text):
     return v
 
 
+def _point(text):
+    """``X,Y,Z``: three finite numbers (scene units)."""
+    import argparse
+    import math
+
+    try:
+        v = tuple(float(x) for x in str(text).split(","))
+    except ValueError:
+        v = ()
+    if len(v) != 3 or not all(math.isfinite(c) for c in v):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a point X,Y,Z (three finite "
+                                         "numbers, for example 0,1.5,4)")
+    return v
+
+
+def _axis(text):
+    """``x``, ``y``, ``z``, ``-x``, ... or ``X,Y,Z``."""
+    import argparse
+
+    from ..host.scene_file import parse_axis
+
+    try:
+        return parse_axis(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def add_view_options(p):
+    """``--camera``, ``--look-at``, ``--up``, ``--fov``, ``--light``: override a scene's
+    view and light (in the scene's own units, before the load normalisation)."""
+    v = p.add_argument_group(
+        "view overrides", "In the scene's own units (for a mesh file: standing on the floor "
+        "y = 0, scaled to a height of about 2). A value starting with '-' is written with "
+        "'=': --up=-z.")
+    v.add_argument("--camera", type=_point, default=None, metavar="X,Y,Z",
+                   help="camera position")
+    v.add_argument("--look-at", type=_point, default=None, metavar="X,Y,Z",
+                   help="the point the camera looks at")
+    v.add_argument("--up", type=_axis, default=None, metavar="x|y|z|X,Y,Z",
+                   help="the up axis: for a mesh file, the mesh's axis that points up (the "
+                        "mesh is turned to stand on the floor); otherwise the camera's up "
+                        "vector (-x, -y, -z too)")
+    v.add_argument("--fov", type=g.float_range(0.0, 180.0, lo_open=True, hi_open=True),
+                   default=None, metavar="DEG", help="vertical field of view in degrees, "
+                                                     "between 0 and 180")
+    v.add_argument("--light", type=_point, default=None, metavar="X,Y,Z",
+                   help="move the light's centre there (its size and orientation kept)")
+
+
+def _overrides(args) -> dict:
+    return {k: getattr(args, k, None) for k in ("camera", "look_at", "up", "fov", "light")}
+
+
 def add_render_options(p):
     """Options shared by ``render`` and ``demo``: the format and the render settings."""
     g.add_format_option(p, field_widths=True)
     r = p.add_argument_group("render settings")
-    r.add_argument("--mode", type=g.choice("paper", "conservative", what="mode"),
-                   default="paper", metavar="{paper,conservative}",
+    r.add_argument("--mode", type=g.choice(*MODES, what="mode"),
+                   default="paper", metavar="{" + ",".join(MODES) + "}",
                    help="ray-triangle mode of the model and rtl backends (default paper)")
     r.add_argument("--tile", type=g.lattice_type("--tile", allow_zero=False), default=(8, 8),
                    metavar="RxC", help=f"primary bundle size, sides 1 to {g.MAX_LATTICE} "
@@ -80,39 +134,73 @@ def settings_from_args(args, size):
                           batch_spheres=args.batch, progress=not args.no_progress)
 
 
-def check_scene(spec: str) -> None:
-    """A scene name or a mesh file that exists (its contents are read by the command)."""
+def check_scene(spec: str, overrides: dict | None = None) -> None:
+    """A scene name, a mesh file that exists (its contents are read by the command) or a
+    scene file (``.toml``, or a shipped one by name), checked whole with the view
+    ``overrides`` (:func:`~raplas_hdl.host.scene_file.check_scene_file`)."""
     from ..host import scenes
+
+    def scene_file(path):
+        from ..host.scene_file import check_scene_file
+
+        check_scene_file(path, **(overrides or {}))
 
     if spec in scenes.SCENES or spec in scenes.MESHES:
         return
-    suffixes = tuple(getattr(scenes, "SCENE_SUFFIXES", ())) + tuple(scenes.MESH_SUFFIXES)
+    if spec in scenes.SCENE_FILES:
+        return scene_file(scenes.SCENE_FILES[spec])
+    suffixes = tuple(scenes.SCENE_SUFFIXES) + tuple(scenes.MESH_SUFFIXES)
     p = Path(spec)
     if p.suffix.lower() in suffixes or p.exists():
         if p.is_dir():
-            raise ValueError(f"scene {spec!r} is a directory, not a mesh file")
+            raise ValueError(f"scene {spec!r} is a directory, not a mesh or scene file")
         if not p.exists():
             raise ValueError(f"scene file {spec!r} does not exist")
         if p.suffix.lower() not in suffixes:
             raise ValueError(f"scene file {spec!r}: unsupported type {p.suffix!r} (use "
                              f"{', '.join(suffixes)})")
         g.check_input_file(spec, "scene file")
+        if p.suffix.lower() in scenes.SCENE_SUFFIXES:
+            scene_file(spec)
         return
     raise ValueError(f"unknown scene {spec!r}: use one of "
-                     f"{', '.join([*scenes.SCENES, *scenes.MESHES])} or a path to an "
-                     f"{'/'.join(s[1:].upper() for s in suffixes)} file")
+                     f"{', '.join([*scenes.SCENES, *scenes.MESHES, *scenes.SCENE_FILES])} "
+                     f"or a path to an {'/'.join(s[1:].upper() for s in suffixes)} file")
+
+
+def scene_from_args(args):
+    """The scene of ``--scene`` with the view overrides, in its own units.
+
+    For a mesh file ``--up`` names the mesh's up axis; for a scene file the overrides are
+    checked with the file (:func:`check_scene`); for every other scene they replace the
+    camera's values and move the light (:func:`~raplas_hdl.host.scene_file.override_scene`).
+    """
+    from ..host import scenes
+    from ..host.scene_file import override_scene
+
+    spec, over = args.scene, _overrides(args)
+    if spec in scenes.SCENE_FILES or Path(spec).suffix.lower() in scenes.SCENE_SUFFIXES:
+        return scenes.get_scene(spec, bound=None, **over)
+    if spec not in scenes.SCENES and over["up"] is not None:        # a mesh file
+        scene = scenes.get_scene(spec, bound=None, up=over.pop("up"))
+    else:
+        scene = scenes.get_scene(spec, bound=None)
+    return override_scene(scene, **over)
 
 
 def add_parser(subparsers):
     p = subparsers.add_parser(
         "render", help="render a scene through the float64, model or rtl backend",
-        description="Render a procedural scene (cornell, spheres, terrain, soup) or a mesh "
-                    "file (OBJ, PLY, STL) with primary bundles, Phong shading and soft "
-                    "shadows, and print rays, bundles, spheres, plane tests, pairs against "
-                    "brute force, hits, time per stage and arithmetic events.")
+        description="Render a procedural scene (cornell, spheres, terrain, soup), a mesh "
+                    "file (OBJ, PLY, STL, glTF) or a scene file (TOML: camera, light, "
+                    "materials, meshes with transforms; docs/scenes.md) with primary "
+                    "bundles, Phong shading and soft shadows, and print rays, bundles, "
+                    "spheres, plane tests, pairs against brute force, hits, time per stage "
+                    "and arithmetic events.")
     p.add_argument("--scene", default="cornell", metavar="NAME|FILE",
                    help="cornell | spheres | terrain | soup | a shipped mesh (stanford-bunny, "
-                        "teapot, spot, suzanne, stanford-dragon-100k) | path to .obj/.ply/.stl "
+                        "teapot, spot, suzanne, stanford-dragon-100k) | a shipped scene file "
+                        "(showcase) | path to .obj/.ply/.stl/.gltf/.glb or .toml "
                         "(default cornell)")
     p.add_argument("--size", type=g.size_type("--size"), default=(128, 128), metavar="WxH",
                    help=f"image size, sides 1 to {g.MAX_IMAGE} (default 128x128)")
@@ -123,6 +211,7 @@ def add_parser(subparsers):
                    default=None, metavar="{icarus,verilator}",
                    help="simulator of the rtl backend (default icarus; --backend rtl only)")
     add_render_options(p)
+    add_view_options(p)
     o = p.add_argument_group("outputs")
     o.add_argument("-o", "--output", required=True, metavar="FILE.png", help="PNG to write")
     o.add_argument("--compare", action="store_true",
@@ -143,7 +232,7 @@ def check(args) -> None:
         g.reject(args, ("compare", "diff"), "to --backend float64 (it is the reference)")
     if args.backend != "rtl":
         g.reject(args, ("sim",), f"to --backend {args.backend} (only to rtl)")
-    check_scene(args.scene)
+    check_scene(args.scene, _overrides(args))
     g.check_output_file(args.output, (".png",), "-o")
     if args.diff:
         g.check_output_file(args.diff, (".png",), "--diff")
@@ -161,9 +250,7 @@ def check(args) -> None:
 
 
 def run(args) -> int:
-    from ..host.scenes import get_scene
-
-    scene = get_scene(args.scene, bound=None)   # a bad mesh fails here, before the rest
+    scene = scene_from_args(args)    # a bad mesh or override fails here, before the rest
 
     from ..host.backends import make_backend
     from ..host.render import compare, difference_image, format_summary, render, save_ids, save_png

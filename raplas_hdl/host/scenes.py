@@ -2,13 +2,19 @@
 
 A :class:`Scene` is a triangle list (float64 vertices, integer faces, a diffuse colour
 per triangle) with a pinhole camera, one rectangular area light and Phong material
-constants. Scenes come from :func:`get_scene`:
+constants: ``material`` (shared by every triangle of the procedural scenes) and a
+materials table with a material ID per triangle (scene files give each mesh its own).
+Scenes come from :func:`get_scene`:
 
 - ``cornell``: the Cornell box (walls subdivided into a grid, two blocks);
 - ``spheres``: meshed spheres and a torus standing on a floor;
 - ``terrain``: a seeded height field;
 - ``soup``: seeded random triangles above a floor;
-- a path to an ``.obj``, ``.ply`` or ``.stl`` file (read with trimesh), placed on a floor.
+- a path to an ``.obj``, ``.ply``, ``.stl``, ``.gltf`` or ``.glb`` file (read with
+  trimesh), placed on a floor (``up`` names the mesh's up axis);
+- a scene file (``.toml``: camera, light, materials, meshes with transforms; see
+  :mod:`.scene_file` and ``docs/scenes.md``), or the name of a shipped one
+  (:data:`SCENE_FILES`: ``showcase``).
 
 The load normalisation of ``docs/raplas.md`` ("Coordinates") is
 :meth:`Scene.normalised`: a translation that centres the bounding box of everything the
@@ -33,6 +39,9 @@ __all__ = [
     "DEFAULT_BOUND",
     "MESH_DIR",
     "MESHES",
+    "SCENE_DIR",
+    "SCENE_FILES",
+    "SCENE_SUFFIXES",
     "SCENES",
     "AreaLight",
     "Material",
@@ -44,6 +53,7 @@ __all__ = [
     "soup_scene",
     "spheres_scene",
     "terrain_scene",
+    "up_rotation",
 ]
 
 #: Default bound of the normalisation: every scene coordinate lies in [-8, 8]. With
@@ -51,15 +61,27 @@ __all__ = [
 #: stay far from both ends of even FP16's range (2^-14 .. 2^15).
 DEFAULT_BOUND = 8.0
 
-MESH_SUFFIXES = (".obj", ".ply", ".stl")
+MESH_SUFFIXES = (".obj", ".ply", ".stl", ".gltf", ".glb")
+#: Scene files (:mod:`.scene_file`).
+SCENE_SUFFIXES = (".toml",)
+
+_DATA_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data")
+
+
+def _shipped(folder: str, suffixes) -> dict:
+    return {os.path.splitext(f)[0]: os.path.join(folder, f)
+            for f in sorted(os.listdir(folder)) if os.path.splitext(f)[1] in suffixes} \
+        if os.path.isdir(folder) else {}
+
 
 #: The meshes shipped with the package (licence notes in its README.md).
-MESH_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data",
-                        "meshes")
+MESH_DIR = os.path.join(_DATA_DIR, "meshes")
 #: Shipped meshes by name (the file stem): ``stanford-bunny``, ``teapot``, ...
-MESHES = {os.path.splitext(f)[0]: os.path.join(MESH_DIR, f)
-          for f in sorted(os.listdir(MESH_DIR)) if os.path.splitext(f)[1] in MESH_SUFFIXES} \
-    if os.path.isdir(MESH_DIR) else {}
+MESHES = _shipped(MESH_DIR, MESH_SUFFIXES)
+#: The scene files shipped with the package.
+SCENE_DIR = os.path.join(_DATA_DIR, "scenes")
+#: Shipped scene files by name (the file stem): ``showcase``.
+SCENE_FILES = _shipped(SCENE_DIR, SCENE_SUFFIXES)
 
 
 @dataclass(frozen=True)
@@ -68,12 +90,18 @@ class AreaLight:
 
     Points are ``corner + a*edge_u + b*edge_v`` for ``a, b`` in ``[0, 1]``; it emits on the
     side of ``normal = unit(edge_u x edge_v)``.
+
+    ``kind`` is ``"area"``, or ``"point"`` for a point light of a scene file: the renderer
+    shades and shadows with a light's lattice, so a point light is a small square (its
+    ``centre`` the point) facing a stated direction, and lights the half-space in front of
+    it; its soft shadows are then hard ones.
     """
 
     corner: tuple
     edge_u: tuple
     edge_v: tuple
     colour: tuple = (1.0, 1.0, 1.0)
+    kind: str = "area"
 
     def __post_init__(self):
         n = np.cross(np.asarray(self.edge_u, float), np.asarray(self.edge_v, float))
@@ -109,17 +137,44 @@ class AreaLight:
         t = np.asarray(translation, float)
         return AreaLight(tuple((np.asarray(self.corner, float) + t) * scale),
                          tuple(np.asarray(self.edge_u, float) * scale),
-                         tuple(np.asarray(self.edge_v, float) * scale), self.colour)
+                         tuple(np.asarray(self.edge_v, float) * scale), self.colour, self.kind)
+
+    def moved(self, centre) -> AreaLight:
+        """The same light with its centre at ``centre``."""
+        return self.transformed(np.asarray(centre, float) - self.centre, 1.0)
 
 
 @dataclass(frozen=True)
 class Material:
-    """Phong constants shared by all triangles (the colour is per triangle)."""
+    """Phong constants and the secondary-ray properties of a surface (the colour is per
+    triangle, :attr:`Scene.colours`).
+
+    Attributes
+    ----------
+    ambient, diffuse, specular, shininess : float
+        Phong constants ``ka``, ``kd``, ``ks``, ``n``.
+    reflectivity : float
+        Fraction of the light a mirror reflection carries, in ``[0, 1]``.
+    transparency : float
+        Fraction a refracted ray carries, in ``[0, 1]``; ``reflectivity + transparency``
+        is at most 1.
+    ior : float
+        Index of refraction of the inside (the outside is 1).
+    gloss_angle : float
+        Half-angle in degrees of the cone of glossy reflection around the mirror
+        direction (0: a perfect mirror), below 90.
+    name : str
+    """
 
     ambient: float = 0.12
     diffuse: float = 0.8
     specular: float = 0.25
     shininess: float = 24.0
+    reflectivity: float = 0.0
+    transparency: float = 0.0
+    ior: float = 1.0
+    gloss_angle: float = 0.0
+    name: str = "default"
 
 
 @dataclass
@@ -137,11 +192,17 @@ class Scene:
     camera : Camera
     light : AreaLight
     material : Material
+        The default Phong constants (what a renderer that shades every triangle alike
+        uses).
     background : tuple
         Colour of pixels whose primary ray hits nothing.
     translation, scale : ndarray (3,), float
         Scene coordinates are ``(original + translation) * scale``; identity until
         :meth:`normalised` is applied.
+    materials : tuple of Material
+        The materials table (default: ``(material,)``).
+    material_ids : ndarray (F,) int64
+        Index into ``materials`` of every triangle (default: all 0).
     """
 
     name: str
@@ -154,6 +215,8 @@ class Scene:
     background: tuple = (0.05, 0.05, 0.08)
     translation: np.ndarray = field(default_factory=lambda: np.zeros(3))
     scale: float = 1.0
+    materials: tuple = ()
+    material_ids: np.ndarray | None = None
 
     def __post_init__(self):
         v = np.asarray(self.vertices, dtype=np.float64)
@@ -173,10 +236,30 @@ class Scene:
         c = np.broadcast_to(np.asarray(self.colours, dtype=np.float64), (len(f), 3)).copy()
         self.vertices, self.faces, self.colours = v, f, c
         self.translation = np.asarray(self.translation, dtype=np.float64)
+        self.materials = tuple(self.materials) or (self.material,)
+        ids = np.zeros(len(f), np.int64) if self.material_ids is None else \
+            np.asarray(self.material_ids, dtype=np.int64)
+        if ids.shape != (len(f),):
+            raise ValueError(f"scene {self.name!r}: material_ids must have shape ({len(f)},), "
+                             f"not {ids.shape}")
+        if ids.min() < 0 or ids.max() >= len(self.materials):
+            raise ValueError(f"scene {self.name!r}: a material ID is outside the "
+                             f"{len(self.materials)} materials")
+        self.material_ids = ids
 
     @property
     def n_triangles(self) -> int:
         return len(self.faces)
+
+    def material_at(self, tri) -> Material:
+        """The Phong constants of triangles ``tri`` as one :class:`Material` whose fields
+        are arrays (one value per entry of ``tri``), for
+        :func:`~raplas_hdl.host.shading.phong`."""
+        ids = self.material_ids[np.asarray(tri, np.int64)]
+        table = {k: np.array([getattr(m, k) for m in self.materials], np.float64)
+                 for k in ("ambient", "diffuse", "specular", "shininess", "reflectivity",
+                           "transparency", "ior", "gloss_angle")}
+        return Material(**{k: v[ids] for k, v in table.items()}, name="per-triangle")
 
     @property
     def triangles(self) -> np.ndarray:
@@ -434,10 +517,36 @@ def load_mesh(path) -> tuple[np.ndarray, np.ndarray]:
     return verts, faces
 
 
-def mesh_scene(path, colour=(0.78, 0.72, 0.62), floor: bool = True) -> Scene:
-    """A mesh file (Y up) scaled to a height of about 2, standing on a floor, lit from
-    above-left and seen from the front at a slight elevation."""
+def up_rotation(up) -> np.ndarray:
+    """The 3x3 rotation that turns the direction ``up`` to ``+y`` (the shortest one; half
+    a turn about ``x`` for ``-y``).
+
+    Raises
+    ------
+    ValueError
+        For a zero or non-finite vector.
+    """
+    u = np.asarray(up, dtype=np.float64)
+    n = float(np.linalg.norm(u)) if u.shape == (3,) else 0.0
+    if not (n > 0.0 and math.isfinite(n)):
+        raise ValueError(f"up must be a non-zero finite 3-vector, not {np.asarray(up).tolist()}")
+    u = u / n
+    y = np.array([0.0, 1.0, 0.0])
+    c = float(u @ y)
+    if c < -1.0 + 1e-12:
+        return np.diag([1.0, -1.0, -1.0])
+    k = np.cross(u, y)
+    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + kx + kx @ kx / (1.0 + c)
+
+
+def mesh_scene(path, colour=(0.78, 0.72, 0.62), floor: bool = True, up=(0.0, 1.0, 0.0)
+               ) -> Scene:
+    """A mesh file turned so that its axis ``up`` points up (``+y``), scaled to a height of
+    about 2, standing on a floor, lit from above-left and seen from the front at a slight
+    elevation."""
     verts, faces = load_mesh(path)
+    verts = verts @ up_rotation(up).T
     used = verts[np.unique(faces)]
     lo, hi = used.min(axis=0), used.max(axis=0)
     size = float(np.max(hi - lo))
@@ -466,24 +575,37 @@ SCENES = {
 }
 
 
+def _is_scene_file(spec: str) -> bool:
+    return spec in SCENE_FILES or os.path.splitext(spec)[1].lower() in SCENE_SUFFIXES
+
+
 def get_scene(spec: str, bound: float | None = DEFAULT_BOUND, **options) -> Scene:
     """A scene by name (``cornell``, ``spheres``, ``terrain``, ``soup``), the name of a
-    shipped mesh (:data:`MESHES`: ``stanford-bunny``, ``teapot``, ...) or a mesh path,
-    normalised into ``[-bound, bound]`` (``bound=None`` leaves it in its own units).
+    shipped mesh (:data:`MESHES`: ``stanford-bunny``, ``teapot``, ...) or a mesh path, a
+    scene file (``.toml``) or the name of a shipped one (:data:`SCENE_FILES`:
+    ``showcase``), normalised into ``[-bound, bound]`` (``bound=None`` leaves it in its own
+    units). ``options`` go to the builder (:func:`mesh_scene` takes ``up``; a scene file
+    takes the overrides of :func:`~raplas_hdl.host.scene_file.load_scene_file`).
 
     Raises
     ------
     ValueError
-        For an unknown name, or what :func:`load_mesh` raises for a file.
+        For an unknown name, what :func:`load_mesh` raises for a file, or a malformed scene
+        file (one line naming the file and the line or key).
     """
     if spec in SCENES:
         scene = SCENES[spec](**options)
     elif spec in MESHES:
         scene = mesh_scene(MESHES[spec], **options)
+    elif _is_scene_file(spec):
+        from .scene_file import load_scene_file
+
+        scene = load_scene_file(SCENE_FILES.get(spec, spec), **options)
     elif os.path.splitext(spec)[1].lower() in MESH_SUFFIXES or os.path.exists(spec):
         scene = mesh_scene(spec, **options)
     else:
-        raise ValueError(f"unknown scene {spec!r}: use one of {', '.join([*SCENES, *MESHES])} "
-                         f"or a path to an {'/'.join(s[1:].upper() for s in MESH_SUFFIXES)} "
-                         "file")
+        raise ValueError(f"unknown scene {spec!r}: use one of "
+                         f"{', '.join([*SCENES, *MESHES, *SCENE_FILES])}, a path to an "
+                         f"{'/'.join(s[1:].upper() for s in MESH_SUFFIXES)} file or a "
+                         "scene file (.toml)")
     return scene if bound is None else scene.normalised(bound)

@@ -117,6 +117,8 @@ def phong(points, normals, albedo, eye, light: AreaLight, material: Material, vi
     eye : ndarray (3,)
     light : AreaLight
     material : Material
+        Constants shared by every point, or one value per point in each field
+        (:meth:`Scene.material_at <raplas_hdl.host.scenes.Scene.material_at>`).
     visibility : ndarray (n,)
         Fraction of the light seen (1: unshadowed).
 
@@ -132,10 +134,13 @@ def phong(points, normals, albedo, eye, light: AreaLight, material: Material, vi
     ndl = np.einsum("ij,ij->i", normals, L)
     R = 2.0 * ndl[:, None] * normals - L
     rdv = np.clip(np.einsum("ij,ij->i", R, V), 0.0, None)
-    diffuse = material.diffuse * albedo * np.clip(ndl, 0.0, None)[:, None]
-    spec = material.specular * np.where(ndl > 0, rdv ** material.shininess, 0.0)[:, None]
+    ka, kd, ks = (np.asarray(k, float)[..., None]      # scalar or per point: (1,) or (n, 1)
+                  for k in (material.ambient, material.diffuse, material.specular))
+    n = np.asarray(material.shininess, float)
+    diffuse = kd * albedo * np.clip(ndl, 0.0, None)[:, None]
+    spec = ks * np.where(ndl > 0, rdv ** n, 0.0)[:, None]
     direct = (diffuse + spec) * np.asarray(visibility, float)[:, None]
-    return (material.ambient * albedo + direct) * lc
+    return (ka * albedo + direct) * lc
 
 
 @dataclass
