@@ -211,6 +211,21 @@ def _flush(g, w, lane_b, lane_ray, lane_di, lane_tid, lane_u, n, ro, rd, v0, e1,
 
 
 # -- the model ----------------------------------------------------------------------------
+@njit(cache=True)
+def plane_masks(pn, pp, base, rows, n_planes, keep_all, sc, sr, s, rm, cm, e, m, r):
+    """The unit's row and column masks of leaf sphere ``s`` against the planes
+    ``base .. base + n_planes - 1`` (rows first), into ``rm`` and ``cm``; all set for a
+    keep-all bundle."""
+    for k in range(n_planes):
+        pk = base + k
+        keep = keep_all or plane_keep(pn[pk, 0], pn[pk, 1], pn[pk, 2], pp[pk], sc[s, 0],
+                                      sc[s, 1], sc[s, 2], sr[s], e, m, r)
+        if k < rows:
+            rm[k] = keep
+        else:
+            cm[k - rows] = keep
+
+
 # The format, the rounding and the mode are runtime arguments: one compile serves them all
 # (their values are loop invariants, so the vector loops of the block arithmetic still run
 # at full speed); :func:`model_args` gives them for a format.
@@ -268,15 +283,7 @@ def trace_model(pn, pp, ro, rd, enable, keep_all, rows, cols, run_b, run_start, 
         counters[u, 4] = 0
         for q in range(run_start[u], run_start[u + 1]):
             s = run_sph[q]
-            for k in range(n_planes):
-                pk = base + k
-                keep = keep_all[b] or plane_keep(pn[pk, 0], pn[pk, 1], pn[pk, 2], pp[pk],
-                                                 sc[s, 0], sc[s, 1], sc[s, 2], sr[s],
-                                                 e, m, r)
-                if k < rows:
-                    rm[k] = keep
-                else:
-                    cm[k - rows] = keep
+            plane_masks(pn, pp, base, rows, n_planes, keep_all[b], sc, sr, s, rm, cm, e, m, r)
             nt = tcount[s]
             for i in range(rows):
                 if not rm[i]:

@@ -255,6 +255,31 @@ def select_runs(run_b, run_start, run_sph, keep):
     return np.asarray(run_b)[keep], start, np.asarray(run_sph)[sel]
 
 
+def pass_arguments(scene: EngineScene, batch: BundleBatch, run_b, run_start, run_sph,
+                   tmin: float, tmax, exclude):
+    """The arguments the trace kernels share: ``(head, run_b, work, tail)``, ``head`` the
+    batch, the runs and the scene's memories, ``tail`` ``(tmin, tmax, exclude)`` with
+    their defaults, ``work`` the cumulative cost of the runs (spheres times triangles) to
+    balance the ranges by."""
+    B = batch.n_bundles
+    run_b = np.ascontiguousarray(run_b, np.int64)
+    run_start = np.ascontiguousarray(run_start, np.int64)
+    run_sph = np.ascontiguousarray(run_sph, np.int64)
+    if np.unique(run_b).size != run_b.size:
+        raise ValueError("a pass runs each bundle at most once")
+    if tmax is None:
+        tmax = np.full((B, batch.n_rays), np.inf)
+    if exclude is None:
+        exclude = np.full(B, -1, np.int64)
+    work = np.concatenate([[0], np.cumsum(scene.tcount[run_sph] + 1)])[run_start]
+    head = (batch.pn, batch.pp, batch.ro, batch.rd, batch.enable, batch.keep_all, batch.rows,
+            batch.cols, run_b, run_start, run_sph, scene.sc, scene.sr, scene.tcount,
+            scene.tlist, scene.v0, scene.e1, scene.e2, scene.nn)
+    tail = (float(tmin), np.ascontiguousarray(tmax, np.float64),
+            np.ascontiguousarray(exclude, np.int64))
+    return head, run_b, work, tail
+
+
 def trace_pass(arith: Arithmetic, scene: EngineScene, batch: BundleBatch, run_b, run_start,
                run_sph, best_t: np.ndarray, best_tri: np.ndarray, tmin: float = 0.0,
                tmax: np.ndarray | None = None, exclude: np.ndarray | None = None) -> np.ndarray:
@@ -278,23 +303,10 @@ def trace_pass(arith: Arithmetic, scene: EngineScene, batch: BundleBatch, run_b,
     counters : ndarray (U, 8) int64
         Per run, in :data:`COUNTER_NAMES` order.
     """
-    B = batch.n_bundles
-    run_b = np.ascontiguousarray(run_b, np.int64)
-    run_start = np.ascontiguousarray(run_start, np.int64)
-    run_sph = np.ascontiguousarray(run_sph, np.int64)
-    if np.unique(run_b).size != run_b.size:
-        raise ValueError("a pass runs each bundle at most once")
-    if tmax is None:
-        tmax = np.full((B, batch.n_rays), np.inf)
-    if exclude is None:
-        exclude = np.full(B, -1, np.int64)
+    head, run_b, work, tail = pass_arguments(scene, batch, run_b, run_start, run_sph, tmin,
+                                             tmax, exclude)
     counters = np.zeros((run_b.size, N_COUNTERS), np.int64)
-    # balance the ranges by work: spheres times triangles per run
-    work = np.concatenate([[0], np.cumsum(scene.tcount[run_sph] + 1)])[run_start]
-    args = (batch.pn, batch.pp, batch.ro, batch.rd, batch.enable, batch.keep_all, batch.rows,
-            batch.cols, run_b, run_start, run_sph, scene.sc, scene.sr, scene.tcount,
-            scene.tlist, scene.v0, scene.e1, scene.e2, scene.nn, *arith.extra, float(tmin),
-            np.ascontiguousarray(tmax, np.float64), np.ascontiguousarray(exclude, np.int64))
+    args = (*head, *arith.extra, *tail)
     run_chunks(run_b.size, lambda lo, hi: arith.trace(*args, lo, hi, best_t, best_tri,
                                                       counters, *arith.trace_tail),
                min_chunk=16, weights=work)

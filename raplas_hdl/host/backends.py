@@ -159,9 +159,11 @@ class Backend:
         return cull_pass(self._arith(), self.scene, batch, hierarchy)
 
     def trace(self, batch: BundleBatch, run_b, run_start, run_sph, best_t, best_tri,
-              tmin: float = 0.0, tmax=None, exclude=None) -> np.ndarray:
+              tmin: float = 0.0, tmax=None, exclude=None, any_hit: bool = False) -> np.ndarray:
         """Runs of a batch folded into each ray's nearest hit
-        (:func:`raplas_hdl.engine.passes.trace_pass`); counters (U, 8)."""
+        (:func:`raplas_hdl.engine.passes.trace_pass`); counters (U, 8). ``any_hit``: only
+        whether a ray is blocked matters (shadow rays); the certified mode then stops at the
+        first hit it is sure of, the other modes fold the nearest all the same."""
         return trace_pass(self._arith(), self.scene, batch, run_b, run_start, run_sph,
                           best_t, best_tri, tmin, tmax, exclude)
 
@@ -329,6 +331,11 @@ class ModelBackend(Backend):
         check_mode(mode)
         self.fmt, self.mode, self.testers, self.margin_scale = fmt, mode, testers, margin_scale
         self._configs = {}
+        #: certified mode's work: the unit's certified hits and uncertain pairs, pairs
+        #: through the float64 filter, pairs it left pending, pairs evaluated exactly and
+        #: the seconds that took
+        self.certified = dict.fromkeys(("certified_hits", "uncertain", "filtered", "pending",
+                                        "exact", "exact_s"), 0)
 
     def describe(self):
         return f"{self.name} {self.fmt} {self.mode}"
@@ -355,9 +362,45 @@ class ModelBackend(Backend):
         from ..model.conservative import margin_constants, margin_table
 
         tail = model_args(self.fmt, self.mode)
+        if self.mode == "certified":
+            from ..engine.unit_outcome import outcome_constants
+
+            return Arithmetic("model", cull_model, None, (outcome_constants(self.fmt),),
+                              tail[:3], tail)
         mc = (margin_table(margin_constants(self.fmt, self.margin_scale)) if tail[3]
               else np.zeros((3, 5), np.int64))
         return Arithmetic("model", cull_model, trace_model, (mc,), tail[:3], tail)
+
+    def trace(self, batch, run_b, run_start, run_sph, best_t, best_tri, tmin=0.0, tmax=None,
+              exclude=None, any_hit=False):
+        """As :meth:`Backend.trace`; in ``certified`` mode the unit's outcomes, the float64
+        filter and the exact resolution of what it leaves
+        (:func:`raplas_hdl.engine.certified.certified_pass`,
+        :func:`raplas_hdl.host.resolve.resolve_pending`) give R's answer per ray, and
+        :attr:`certified` counts the work."""
+        if self.mode != "certified":
+            return super().trace(batch, run_b, run_start, run_sph, best_t, best_tri, tmin,
+                                 tmax, exclude, any_hit)
+        from ..engine.certified import CERT_COUNTERS, certified_pass
+        from .resolve import resolve_pending
+
+        if not any_hit and (best_tri >= 0).any():
+            raise ValueError("a certified nearest-hit pass starts from rays without a hit")
+        lo = np.where(best_tri >= 0, best_t, np.inf)
+        hi = lo.copy()
+        ctr, pending = certified_pass(self._arith(), self.scene, batch, run_b, run_start,
+                                      run_sph, self.tris, lo, hi, best_tri, tmin, tmax,
+                                      exclude, any_hit)
+        t0 = time.perf_counter()
+        exact = resolve_pending(pending, batch.origin, batch.directions, self.tris, lo, hi,
+                                best_tri, best_t, tmin, tmax, exclude, any_hit)
+        st = self.certified
+        st["exact_s"] += time.perf_counter() - t0
+        st["exact"] += exact
+        st["certified_hits"] += int(ctr[:, COUNTERS.index("hits")].sum())
+        for k, name in enumerate(CERT_COUNTERS):
+            st[name] += int(ctr[:, len(COUNTERS) + k].sum())
+        return ctr[:, :len(COUNTERS)]
 
     def usable(self, tris):
         """Triangles that :func:`raplas_hdl.host.triangles.make_triangles` keeps (not
@@ -569,7 +612,7 @@ class RtlBackend(ModelBackend):
         return 0.0
 
     def trace(self, batch, run_b, run_start, run_sph, best_t, best_tri, tmin=0.0, tmax=None,
-              exclude=None):
+              exclude=None, any_hit=False):
         """The runs through the simulated unit (one round of the configuration's live
         simulation), each run's stream folded into the nearest hits on the host."""
         runs = _runs_of(run_b, run_start, run_sph)

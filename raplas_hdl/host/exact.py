@@ -20,7 +20,7 @@ from ..fp.format import FPFormat
 from ..fp.model import decode
 from .triangles import to_scaled_ints
 
-__all__ = ["exact_intersect", "exact_intersect_bits", "float64_intersect"]
+__all__ = ["exact_intersect", "exact_intersect_bits", "exact_t", "float64_intersect"]
 
 
 def _dot(a, b):
@@ -44,6 +44,52 @@ def _ratio(num, den):
 def _scaled(ints, scale):
     import math
     return np.array([math.ldexp(float(x), int(k)) for x, k in zip(ints, scale)])
+
+
+def _exact_terms(o, d, v0, v1, v2):
+    """R's exact ``det, t', u', v'`` (object arrays of Python ints, scaled by ``2**(3*k0)``
+    per row) and ``k0``; None for no rows."""
+    arrs = [np.asarray(x, dtype=np.float64) for x in (o, d, v0, v1, v2)]
+    if any(a.ndim != 2 or a.shape[1] != 3 or a.shape != arrs[0].shape for a in arrs):
+        raise ValueError("o, d, v0, v1 and v2 must all have the same shape (n, 3)")
+    allv = np.concatenate(arrs, axis=1)
+    if not np.isfinite(allv).all():
+        raise ValueError("the exact reference needs finite rays and vertices")
+    if allv.shape[0] == 0:
+        return None
+    ints, k0 = to_scaled_ints(allv)
+    oi, di, a, b, c = (ints[:, 3 * k:3 * k + 3] for k in range(5))
+    t = a - oi
+    e1, e2 = b - a, c - a
+    n = _cross(e1, e2)
+    q = _cross(di, t)
+    return _dot(n, di), _dot(n, t), -_dot(q, e2), _dot(q, e1), k0
+
+
+def _exact_hits(det, tp, up, vp) -> np.ndarray:
+    """R's decision from its exact terms (module docstring)."""
+    return np.array([(dt > 0 and u >= 0 and v >= 0 and u + v <= dt and tt >= 0)
+                     or (dt < 0 and u <= 0 and v <= 0 and u + v >= dt and tt <= 0)
+                     for u, v, dt, tt in zip(up, vp, det, tp)], dtype=bool)
+
+
+def exact_t(o, d, v0, v1, v2) -> tuple[np.ndarray, list]:
+    """R's hit and its exact ``t = t'/det`` per pair (arguments as :func:`exact_intersect`).
+
+    Returns
+    -------
+    hit : ndarray (n,) bool
+    t : list of :class:`fractions.Fraction` or None
+        ``t'/det`` exactly where R hits, None where it misses.
+    """
+    from fractions import Fraction
+
+    terms = _exact_terms(o, d, v0, v1, v2)
+    if terms is None:
+        return np.zeros(0, bool), []
+    det, tp, up, vp, _ = terms
+    hit = _exact_hits(det, tp, up, vp)
+    return hit, [Fraction(int(a), int(b)) if h else None for a, b, h in zip(tp, det, hit)]
 
 
 def exact_intersect(o, d, v0, v1, v2, values: bool = False) -> dict:
@@ -70,31 +116,13 @@ def exact_intersect(o, d, v0, v1, v2, values: bool = False) -> dict:
     ValueError
         On shapes that differ or non-finite values.
     """
-    arrs = [np.asarray(x, dtype=np.float64) for x in (o, d, v0, v1, v2)]
-    if any(a.ndim != 2 or a.shape[1] != 3 or a.shape != arrs[0].shape for a in arrs):
-        raise ValueError("o, d, v0, v1 and v2 must all have the same shape (n, 3)")
-    allv = np.concatenate(arrs, axis=1)
-    if not np.isfinite(allv).all():
-        raise ValueError("the exact reference needs finite rays and vertices")
-    if allv.shape[0] == 0:
+    terms = _exact_terms(o, d, v0, v1, v2)
+    if terms is None:
         z = np.zeros(0)
         return {"hit": z.astype(bool), "det_sign": z.astype(np.int8), "t": z, "u": z, "v": z}
-    ints, k0 = to_scaled_ints(allv)
-    oi, di, a, b, c = (ints[:, 3 * k:3 * k + 3] for k in range(5))
-    t = a - oi
-    e1, e2 = b - a, c - a
-    n = _cross(e1, e2)
-    det = _dot(n, di)
-    tp = _dot(n, t)
-    q = _cross(di, t)
-    up = -_dot(q, e2)
-    vp = _dot(q, e1)
+    det, tp, up, vp, k0 = terms
     sign = np.array([(x > 0) - (x < 0) for x in det], dtype=np.int8)
-    pos = np.array([u >= 0 and v >= 0 and u + v <= dt and tt >= 0
-                    for u, v, dt, tt in zip(up, vp, det, tp)], dtype=bool)
-    neg = np.array([u <= 0 and v <= 0 and u + v >= dt and tt <= 0
-                    for u, v, dt, tt in zip(up, vp, det, tp)], dtype=bool)
-    hit = ((sign > 0) & pos) | ((sign < 0) & neg)
+    hit = _exact_hits(det, tp, up, vp)
     out = {"hit": hit, "det_sign": sign, "t": _ratio(tp, det), "u": _ratio(up, det),
            "v": _ratio(vp, det)}
     if values:

@@ -92,6 +92,8 @@ class RenderSettings:
     threads : int or None
         Threads of the compiled passes (default None: numba's setting, every core); the
         results do not depend on it.
+    record_rays : bool
+        Keep every issued ray in :attr:`RenderResult.rays` (for the exact reference).
     """
 
     width: int = 128
@@ -109,6 +111,7 @@ class RenderSettings:
     bound: float = 8.0
     progress: bool = True
     threads: int | None = None
+    record_rays: bool = False
 
     def __post_init__(self):
         for name in ("width", "height", "rows", "cols", "tris_per_sphere", "batch_spheres",
@@ -142,6 +145,13 @@ class RenderResult:
     stats : dict
     timings : dict
         Seconds per stage.
+    rays : dict or None
+        With ``RenderSettings.record_rays``: every ray the render issued, as the unit saw
+        it (:func:`raplas_hdl.host.reference.exact_reference` checks them): ``primary_o``,
+        ``primary_d`` (N, 3) and ``primary_yx`` (N, 2); ``shadow_o`` (S, 3), ``shadow_d``
+        (S, r, 3), ``shadow_tmax`` (S, r), ``shadow_own`` (S,), ``shadow_point`` (S,) (the
+        index of the shaded point, in ``np.nonzero(tri_id >= 0)`` order), ``shadow_tmin``;
+        ``loaded``: the IDs of the triangles the backend loaded.
     """
 
     image: np.ndarray
@@ -150,6 +160,7 @@ class RenderResult:
     visibility: np.ndarray
     stats: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
+    rays: dict | None = None
 
 
 class _Timer:
@@ -287,6 +298,8 @@ def _render(scene: Scene, backend: Backend, settings: RenderSettings):
     dir_img = np.zeros((H, W, 3))
     org = np.zeros(3)
 
+    rec = {k: [] for k in ("primary_o", "primary_d", "primary_yx", "shadow_o", "shadow_d",
+                           "shadow_tmax", "shadow_own", "shadow_point")}
     n_shadow_est = W * H if s.shadows else 0
     bar = tqdm(total=len(tiles) + n_shadow_est, unit="bundle", disable=not s.progress,
                desc=f"render {scene.name} [{backend.name}]", leave=False)
@@ -323,6 +336,10 @@ def _render(scene: Scene, backend: Backend, settings: RenderSettings):
                 t_img[y, x] = best_t[v]
                 dir_img[y, x] = batch.directions[v]
                 org = batch.origin[-1]
+                if s.record_rays:
+                    rec["primary_o"].append(np.repeat(batch.origin, v.sum(axis=1), axis=0))
+                    rec["primary_d"].append(batch.directions[v])
+                    rec["primary_yx"].append(np.stack([y, x], 1))
             bar.update(hi - lo)
 
         # 4. shading ---------------------------------------------------------------------
@@ -378,13 +395,19 @@ def _render(scene: Scene, backend: Backend, settings: RenderSettings):
                                                                 live)
                     with timer("shadow unit"):
                         ctr = backend.trace(batch, run_b, run_start, run_sph, best_t, best_tri,
-                                            eps, plan.tmax[lo:hi], own)
+                                            eps, plan.tmax[lo:hi], own, any_hit=True)
                         unit += ctr.sum(axis=0)
                         counts["early_out_pairs_skipped"] += int(ctr[:, 3].sum())
                     if s.early_out:
                         batch.enable &= ~(best_tri >= 0)
                     rnd += 1
                 vis[plan.point[lo:hi]] = 1.0 - (best_tri >= 0).mean(axis=1)
+                if s.record_rays:
+                    rec["shadow_o"].append(batch.origin)
+                    rec["shadow_d"].append(batch.directions)
+                    rec["shadow_tmax"].append(plan.tmax[lo:hi])
+                    rec["shadow_own"].append(own)
+                    rec["shadow_point"].append(plan.point[lo:hi])
                 bar.update(k)
 
         # 6. image -----------------------------------------------------------------------
@@ -418,7 +441,17 @@ def _render(scene: Scene, backend: Backend, settings: RenderSettings):
                           "triangles_dropped": hier["tris_dropped"].tolist(),
                           "leaves_to_unit": hier["leaves"]}
     stats["pixels_hit"] = int(hit_px.sum())
-    return RenderResult(img, tri_img, t_img, vis_img, stats, dict(timer.times))
+    if backend.mode == "certified":
+        cert = dict(getattr(backend, "certified", {}))
+        cert["uncertain_fraction"] = (cert.get("uncertain", 0) / stats["pairs_issued"]
+                                      if stats["pairs_issued"] else 0.0)
+        stats["certified"] = cert
+    rays = None
+    if s.record_rays:
+        rays = {k: np.concatenate(v) if v else np.zeros((0,)) for k, v in rec.items()}
+        rays["shadow_tmin"] = eps
+        rays["loaded"] = usable
+    return RenderResult(img, tri_img, t_img, vis_img, stats, dict(timer.times), rays)
 
 
 # -- output ------------------------------------------------------------------------------

@@ -1,0 +1,187 @@
+"""The certified pass: the unit's three-valued outcome, a float64 filter, an exact list.
+
+In ``certified`` mode the ray-triangle unit reports per pair *hit*, *miss* or *uncertain*
+(:mod:`raplas_hdl.model.certified`): a hit is a hit of the exact reference R, a miss is a
+miss of R. The pass turns that into R's answer per ray without exact arithmetic on the
+common path:
+
+1. the unit's misses are final;
+2. every other pair (a certified hit, which still needs its ``t`` to be ordered, or an
+   uncertain pair) goes through the float64 filter of R
+   (:func:`raplas_hdl.engine.exact_filter.filter_pair`): a decided miss, a decided hit with
+   an interval around ``t``, or undecided;
+3. decided hits are folded per ray: *nearest* (primary rays: the hit whose interval lies
+   wholly before the others'; ties to the lower triangle ID) or *any* (shadow rays: the
+   ray is blocked as soon as one hit is certainly inside ``[tmin, tmax]``, later pairs are
+   not even filtered);
+4. what the filter cannot decide (an undecided pair, a hit whose interval straddles
+   ``tmin`` or ``tmax``, two hits whose intervals overlap) goes to a *pending* list
+   ``(bundle, ray, triangle)``, which the host resolves in exact arithmetic with the ray's
+   folded hit (:func:`raplas_hdl.host.exact.exact_t`).
+
+The kernel runs a range of runs like :func:`raplas_hdl.engine.kernels.trace_model`; each
+bundle appears in one run of a pass, so each ray's state is written by one range only.
+Counters per run: the unit's eight (``hits`` counts the unit's certified hits), then
+``uncertain`` (the unit's uncertain pairs), ``filtered`` (pairs through the float64
+filter) and ``pending``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..fp.numba_cache import drop_stale_cache
+from .exact_filter import HIT, MISS, filter_pair
+from .kernels import N_COUNTERS, plane_masks
+from .unit_outcome import unit_outcome
+
+drop_stale_cache(__file__)
+
+__all__ = ["certified_pass", "trace_certified", "N_CERT_COUNTERS", "CERT_COUNTERS"]
+
+#: Extra counter columns after the unit's eight.
+CERT_COUNTERS = ("uncertain", "filtered", "pending")
+N_CERT_COUNTERS = N_COUNTERS + len(CERT_COUNTERS)
+
+
+@njit(cache=True)
+def _push(pend, npend, b, ray, tid):
+    k = npend
+    if k < pend.shape[0]:
+        pend[k, 0] = b
+        pend[k, 1] = ray
+        pend[k, 2] = tid
+    return npend + 1
+
+
+@njit(nogil=True, cache=True, error_model="numpy")
+def trace_certified(pn, pp, ro, rd, enable, keep_all, rows, cols, run_b, run_start, run_sph,
+                    sc, sr, tcount, tlist, v0, e1, e2, nn, cc, o64, d64, tri64, tmin, tmax,
+                    excl, any_hit, lo, hi, best_lo, best_hi, best_tri, counters, pend,
+                    e, m, r):
+    """Runs ``lo .. hi-1`` of a pass in certified mode (module docstring).
+
+    ``o64 (B, 3)`` and ``d64 (B*R, 3)`` are the encoded rays decoded to float64, ``tri64
+    (F, 3, 3)`` the original triangles. ``best_lo, best_hi, best_tri (B, R)``: each ray's
+    folded hit (interval of ``t`` and ID; -1 for none), updated in place. Pending entries
+    go to ``pend (cap, 3)``; returns how many there were (more than ``cap``: run the range
+    again with a larger buffer).
+    """
+    n_planes = rows + cols
+    n_rays = rows * cols
+    rm = np.empty(rows, np.bool_)
+    cm = np.empty(cols, np.bool_)
+    npend = 0
+    for u in range(lo, hi):
+        b = run_b[u]
+        base = b * n_planes
+        issued = 0
+        skipped = 0
+        before = npend
+        for c in range(4, N_COUNTERS + 3):
+            counters[u, c] = 0
+        ox, oy, oz = o64[b, 0], o64[b, 1], o64[b, 2]
+        for q in range(run_start[u], run_start[u + 1]):
+            s = run_sph[q]
+            plane_masks(pn, pp, base, rows, n_planes, keep_all[b], sc, sr, s, rm, cm, e, m, r)
+            nt = tcount[s]
+            for i in range(rows):
+                if not rm[i]:
+                    continue
+                for j in range(cols):
+                    if not cm[j]:
+                        continue
+                    ray = i * cols + j
+                    if not enable[b, ray]:
+                        skipped += nt
+                        continue
+                    di = b * n_rays + ray
+                    tmx = tmax[b, ray]
+                    for k in range(nt):
+                        tid = tlist[s, k]
+                        issued += 1
+                        outcome, cnt = unit_outcome(ro, b, rd, di, v0, e1, e2, nn, tid, e, m,
+                                                    r, cc)
+                        counters[u, 5] += cnt & 0xFF
+                        counters[u, 6] += (cnt >> 8) & 0xFF
+                        counters[u, 7] += (cnt >> 16) & 0xFF
+                        if outcome == 0:
+                            continue
+                        if outcome == 1:
+                            counters[u, 4] += 1
+                        else:
+                            counters[u, N_COUNTERS] += 1
+                        if tid == excl[b] or (any_hit and best_tri[b, ray] >= 0):
+                            continue
+                        counters[u, N_COUNTERS + 1] += 1
+                        st, tl, th = filter_pair(
+                            ox, oy, oz, d64[di, 0], d64[di, 1], d64[di, 2],
+                            tri64[tid, 0, 0], tri64[tid, 0, 1], tri64[tid, 0, 2],
+                            tri64[tid, 1, 0], tri64[tid, 1, 1], tri64[tid, 1, 2],
+                            tri64[tid, 2, 0], tri64[tid, 2, 1], tri64[tid, 2, 2])
+                        if st == MISS or (st == HIT and (th < tmin or tl > tmx)):
+                            continue
+                        if st != HIT or tl < tmin or th > tmx:
+                            npend = _push(pend, npend, b, ray, tid)
+                            continue
+                        bt = best_tri[b, ray]
+                        if bt < 0 or th < best_lo[b, ray]:
+                            best_lo[b, ray] = tl
+                            best_hi[b, ray] = th
+                            best_tri[b, ray] = tid
+                        elif tl <= best_hi[b, ray]:
+                            npend = _push(pend, npend, b, ray, tid)
+        n_sph = run_start[u + 1] - run_start[u]
+        counters[u, 0] = n_sph
+        counters[u, 1] = n_sph * n_planes
+        counters[u, 2] = issued
+        counters[u, 3] = skipped
+        counters[u, N_COUNTERS + 2] = npend - before
+    return npend
+
+
+def certified_pass(arith, scene, batch, run_b, run_start, run_sph, tri64, best_lo, best_hi,
+                   best_tri, tmin=0.0, tmax=None, exclude=None, any_hit=False):
+    """Runs of a pass in certified mode (module docstring).
+
+    ``arith`` is the model's :class:`~raplas_hdl.engine.passes.Arithmetic` (its ``extra``
+    holds the certified constants, its ``cull_tail`` the format and rounding); ``tri64``
+    the original triangles (F, 3, 3); other arguments as
+    :func:`~raplas_hdl.engine.passes.trace_pass`, with ``best_lo, best_hi`` the interval of
+    each ray's folded ``t``.
+
+    Returns
+    -------
+    counters : ndarray (U, N_CERT_COUNTERS) int64
+    pending : ndarray (n, 3) int64
+        ``(bundle, ray, triangle)`` for the host's exact resolution, in run order.
+    """
+    from ..parallel import run_chunks
+    from .passes import pass_arguments
+
+    head, run_b, work, tail = pass_arguments(scene, batch, run_b, run_start, run_sph, tmin,
+                                             tmax, exclude)
+    counters = np.zeros((run_b.size, N_CERT_COUNTERS), np.int64)
+    o64 = np.ascontiguousarray(batch.origin, np.float64)
+    d64 = np.ascontiguousarray(batch.directions, np.float64).reshape(-1, 3)
+    args = (*head, *arith.extra, o64, d64, np.ascontiguousarray(tri64, np.float64), *tail,
+            bool(any_hit))
+
+    def chunk(lo, hi):
+        cap = 1024
+        rows = run_b[lo:hi]
+        saved = best_lo[rows], best_hi[rows], best_tri[rows]
+        while True:
+            pend = np.empty((cap, 3), np.int64)
+            n = trace_certified(*args, lo, hi, best_lo, best_hi, best_tri, counters, pend,
+                                *arith.cull_tail)
+            if n <= cap:
+                return pend[:n]
+            # the buffer was too small: restore the range's rays and run it again
+            best_lo[rows], best_hi[rows], best_tri[rows] = saved
+            cap = n
+
+    parts = run_chunks(run_b.size, chunk, min_chunk=16, weights=work)
+    pending = np.concatenate(parts) if parts else np.zeros((0, 3), np.int64)
+    return counters, pending
