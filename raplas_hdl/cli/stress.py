@@ -17,7 +17,7 @@ from . import grammar as g
 __all__ = ["add_parser", "check", "run", "format_table"]
 
 COLUMNS = ("pairs", "unguaranteed", "r_hits", "unit_hits", "false_hits", "false_misses",
-           "edge_rays", "leaks", "t_rel_median", "t_rel_max")
+           "uncertain", "edge_rays", "leaks", "t_rel_median", "t_rel_max")
 
 #: Limits of the sizes (stated in --help).
 MAX_PER_FAMILY = 1_000_000
@@ -55,19 +55,21 @@ def add_parser(subparsers):
         description="The seeded stress families of the ray-triangle unit (golden model) "
                     "against the exact reference R: a table per format and mode.")
     g.add_format_option(r, multiple=True, default="FP24/rtz")
-    r.add_argument("--mode", type=g.choice(*MODES, "both", what="mode"),
-                   default="both", metavar="{paper,conservative,both}",
-                   help="ray-triangle mode(s) (default both)")
+    r.add_argument("--mode", type=g.choice(*MODES, "all", "both", what="mode"),
+                   default="all", metavar="{" + ",".join(MODES) + ",all}",
+                   help="ray-triangle mode(s) (default all; 'both' is an old name of all)")
     r.add_argument("--per-family", type=g.int_range(1, MAX_PER_FAMILY), default=1000,
                    metavar="N", help=f"rays per family, 1 to {MAX_PER_FAMILY:,} (default 1000)")
     r.add_argument("--seed", type=int, default=0, metavar="S", help="seed (default 0)")
     r.add_argument("--families", default=None, metavar="LIST",
                    help="comma-separated subset of the families (default: all)")
     r.add_argument("--margin-scale", type=g.float_range(0.0, 1e6, lo_open=True), default=1.0,
-                   metavar="S", help="scale s of the conservative margin, above 0 (default 1: "
-                                     "the derivation)")
+                   metavar="S", help="scale s of the conservative margin and of every certified "
+                                     "bound, above 0 (default 1: the derivation)")
     r.add_argument("--bisect", action="store_true",
-                   help="also find the smallest s with zero false misses (conservative mode)")
+                   help="also find the smallest s with zero false misses (conservative mode) "
+                        "and the largest s < 1 that mis-certifies a pair (certified mode: "
+                        "the negative control)")
     r.add_argument("--json", default=None, metavar="FILE.json",
                    help="write the results as JSON")
     r.set_defaults(_check_target=check_ray_triangle, _run_target=run_ray_triangle)
@@ -99,6 +101,11 @@ def add_parser(subparsers):
                    help=f"spheres per bundle, 1 to {MAX_SPHERES} (default 16)")
     c.add_argument("--seed", "--campaign-seed", dest="seed", type=int, default=2026,
                    metavar="S", help="seed (default 2026)")
+    c.add_argument("--certified-scale", type=g.float_range(0.0, 1.0, lo_open=True),
+                   default=1.0, metavar="S",
+                   help="factor on every bound of the certified mode, in (0, 1] (default 1: "
+                        "the guarantee; below the bisected factor the campaign must fail: "
+                        "the negative control)")
     c.add_argument("--shard-dir", "--out-dir", dest="shard_dir", default=CAMPAIGN_SHARDS,
                    metavar="DIR", help=f"shard directory (default {CAMPAIGN_SHARDS}; "
                                        "--out-dir is its old name)")
@@ -144,7 +151,8 @@ def check_ray_triangle(args) -> None:
     args.fmts = g.formats_from_args(args, default=("FP24/rtz",), default_roundings=("rtz",))
     args.family_list = None if args.families is None else _families(args.families)
     if args.bisect and args.mode == "paper":
-        raise g.UsageError("--bisect applies to the conservative mode; not with --mode paper")
+        raise g.UsageError("--bisect applies to the conservative and certified modes; not "
+                           "with --mode paper")
     if args.json:
         g.check_output_file(args.json, (".json",), "--json")
 
@@ -153,7 +161,7 @@ def run_ray_triangle(args) -> int:
     from ..verify import stress
 
     families = stress.FAMILIES if args.family_list is None else args.family_list
-    modes = MODES if args.mode == "both" else (args.mode,)
+    modes = MODES if args.mode in ("all", "both") else (args.mode,)
     results = []
     status = 0
     for fmt in args.fmts:
@@ -162,7 +170,7 @@ def run_ray_triangle(args) -> int:
         for mode in modes:
             table = stress.evaluate(cases, enc, mode, args.margin_scale)
             tot = stress.pooled(table)
-            print(f"\n{fmt} {mode}" + (f" s={args.margin_scale:g}" if mode == "conservative"
+            print(f"\n{fmt} {mode}" + (f" s={args.margin_scale:g}" if mode != "paper"
                                        else "") + f": {len(cases)} pairs, seed {args.seed}")
             print(format_table(table, tot))
             entry = {"format": str(fmt), "mode": mode, "seed": args.seed,
@@ -178,6 +186,19 @@ def run_ray_triangle(args) -> int:
                     print(f"smallest s with zero false misses: {b['s_min']:.4g}; false hits "
                           f"{b['false_hits_1']} at s=1 against {b['false_hits_min']} there "
                           f"(ratio {b['ratio']:.2f})")
+            if mode == "certified":
+                if tot["false_hits"] or tot["false_misses"] or tot["leaks"]:
+                    print("certified mode: MIS-CERTIFIED PAIRS INSIDE THE DOMAIN")
+                    status = 1
+                if args.bisect:
+                    b = stress.bisect_certified(cases, enc)
+                    entry["bisection"] = b
+                    print("negative control: " + (
+                        "no pair mis-certified down to s = {:.4g}".format(b["s_pass"])
+                        if b["s_fail"] is None else
+                        f"bounds x{b['s_fail']:.4g} mis-certify {b['wrong_at_fail']} pair(s); "
+                        f"x{b['s_pass']:.4g} none (slack of the bound: "
+                        f"{1 / b['s_fail']:.3g}x)"))
             results.append(entry)
     if args.json:
         with open(args.json, "w") as fh:
@@ -199,7 +220,8 @@ def check_campaign(args) -> None:
         formats=tuple(args.format_names), roundings=tuple(args.rounding_names),
         families=families, rays_per_family=args.rays_per_family,
         shard_rays=args.shard_rays, bundles=args.bundles, shard_bundles=args.shard_bundles,
-        spheres_per_bundle=args.spheres, seed=args.seed)
+        spheres_per_bundle=args.spheres, seed=args.seed,
+        certified_scale=args.certified_scale)
     out = args.out or CAMPAIGN_OUT
     args.results = args.results or os.path.join(out, "stress_campaign.json")
     args.report = args.report or os.path.join(out, "stress-campaign.md")
@@ -220,6 +242,8 @@ def _campaign_command(args) -> str:
               str(args.shard_rays), "--bundles", str(args.bundles), "--shard-bundles",
               str(args.shard_bundles), "--spheres", str(args.spheres), "--seed",
               str(args.seed), "--shard-dir", args.shard_dir]
+    if args.certified_scale != 1.0:
+        parts += ["--certified-scale", repr(args.certified_scale)]
     if args.jobs:
         parts += ["--jobs", str(args.jobs)]
     return " ".join(parts)
@@ -251,10 +275,13 @@ def run_campaign(args) -> int:
                           "shards_reused": info["reused"]})
     campaign.write_outputs(doc, args.results, args.report)
     tot, gu = doc["totals"], doc["guarantees"]
-    print(f"{tot['cases']:,} cases ({tot['raytri_pairs']:,} ray-triangle pairs x 2 modes, "
+    print(f"{tot['cases']:,} cases ({tot['raytri_pairs']:,} ray-triangle pairs x "
+          f"{len(MODES)} modes, "
           f"{tot['sphere_tests']:,} culling sphere tests); CPU {doc['cpu_s']:.0f} s")
     print(f"in-domain culling false rejections {gu['culling_false_rejections']}; conservative "
-          f"false misses {gu['conservative_false_misses']}, leaks {gu['conservative_leaks']}")
+          f"false misses {gu['conservative_false_misses']}, leaks {gu['conservative_leaks']}; "
+          f"certified mis-certified pairs {gu['certified_mis_certified']}, leaks "
+          f"{gu['certified_leaks']}")
     print(f"written {args.results} and {args.report}")
     if not gu["ok"]:
         print("GUARANTEE VIOLATED (see the report)")

@@ -5,9 +5,10 @@ Two tasks, over every format and rounding asked for (default FP16, FP20, FP24, F
 
 ``raytri``
     The ray-triangle stress families of :mod:`raplas_hdl.verify.stress` judged by the exact
-    reference R (:mod:`raplas_hdl.host.exact`), each pair evaluated in both modes of the
-    unit (``paper`` and ``conservative``, margin scale 1). R does not depend on the mode,
-    so one shard computes it once and evaluates both modes.
+    reference R (:mod:`raplas_hdl.host.exact`), each pair evaluated in every mode of the
+    unit (``paper``, ``conservative`` at margin scale 1, and ``certified`` with its bounds
+    times ``certified_scale``: 1 for the guarantee, below 1 for the negative control). R
+    does not depend on the mode, so one shard computes it once and evaluates every mode.
 ``culling``
     The plane-culling proof of ``tests/test_planesphere_culling.py`` at scale: seeded random
     bundles (1 to 8 rows and columns, origin within ``|O| <= O_MAX``) against spheres of
@@ -56,7 +57,7 @@ Top level:
                     (pairs with a triangle record inside the format's domain), ``skipped``
                     (no valid triangle record), ``unguaranteed`` (outside the domain),
                     ``r_hits``, ``unit_hits``, ``false_hits``, ``false_misses``,
-                    ``edge_rays``, ``leaks`` (all in domain, as
+                    ``uncertain``, ``edge_rays``, ``leaks`` (all in domain, as
                     :func:`raplas_hdl.verify.stress.evaluate`), ``t_rel_median``,
                     ``t_rel_p99``, ``t_rel_max`` (relative error of ``t`` over in-domain pairs
                     both hit; median and p99 are the upper edge of a histogram bin of width
@@ -76,8 +77,9 @@ Top level:
                     *without* inflation: shows that the check can fail), and ``kinds``: the
                     same keys per sphere kind (``random``, ``adversarial``).
 ``guarantees``      ``culling_false_rejections`` and ``conservative_false_misses``,
-                    ``conservative_leaks`` (in domain, summed over everything; all must be
-                    0) and ``ok`` (bool).
+                    ``conservative_leaks``, ``certified_mis_certified`` (certified hits R
+                    misses plus certified misses R hits), ``certified_leaks`` (in domain,
+                    summed over everything; all must be 0) and ``ok`` (bool).
 
 Nothing here imports Amaranth.
 """
@@ -111,7 +113,7 @@ __all__ = ["VERSION", "RUN_KEYS", "MODES", "KINDS", "CampaignParams", "Shard", "
 #: (:func:`results_of` drops them).
 RUN_KEYS = ("command", "machine", "date", "run", "cpu_s", "shard_wall_s")
 #: Version of the shard computations: bump it when a change alters any shard's result.
-VERSION = 1
+VERSION = 2
 #: Sphere kinds of the culling proof.
 KINDS = ("random", "adversarial")
 #: Bound on ``|O|`` of the culling proof's bundles (scene units), as in the test.
@@ -145,6 +147,10 @@ class CampaignParams:
         Bundles per culling shard.
     spheres_per_bundle : int
     seed : int
+    certified_scale : float
+        Factor on every bound of the certified mode (1: the guarantee; the negative control
+        runs below the factor :func:`raplas_hdl.verify.stress.bisect_certified` finds and
+        must fail).
     """
 
     formats: tuple = ("FP16", "FP20", "FP24", "FP32")
@@ -156,6 +162,7 @@ class CampaignParams:
     shard_bundles: int = 500
     spheres_per_bundle: int = 16
     seed: int = 2026
+    certified_scale: float = 1.0
 
     def __post_init__(self):
         from .stress import FAMILIES
@@ -167,6 +174,9 @@ class CampaignParams:
         for name in ("shard_rays", "shard_bundles", "spheres_per_bundle"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be at least 1, not {getattr(self, name)}")
+        if not (self.certified_scale > 0 and math.isfinite(self.certified_scale)):
+            raise ValueError(f"certified_scale must be a positive finite number, not "
+                             f"{self.certified_scale!r}")
         for r in self.roundings:
             if r not in ROUNDINGS:
                 raise ValueError(f"unknown rounding {r!r}; known: {', '.join(ROUNDINGS)}")
@@ -200,6 +210,7 @@ class Shard:
     seed: int
     spheres: int = 0
     version: int = VERSION
+    scale: float = 1.0
 
     def key(self) -> dict:
         return asdict(self)
@@ -229,7 +240,8 @@ def plan(params: CampaignParams) -> list[Shard]:
         for fam in params.families:
             for i in range(math.ceil(params.rays_per_family / params.shard_rays)):
                 n = min(params.shard_rays, params.rays_per_family - i * params.shard_rays)
-                shards.append(Shard("raytri", name, fam, i, n, params.seed))
+                shards.append(Shard("raytri", name, fam, i, n, params.seed,
+                                    scale=params.certified_scale))
     return shards
 
 
@@ -289,11 +301,11 @@ def quantile_from_hist(hist: dict, q: float, vmax: float = math.inf) -> float:
 
 
 _RT_COUNTS = ("cases", "in_domain", "skipped", "unguaranteed", "r_hits", "unit_hits",
-              "false_hits", "false_misses", "edge_rays", "leaks")
+              "false_hits", "false_misses", "uncertain", "edge_rays", "leaks")
 
 
 def raytri_shard(shard: Shard) -> dict:
-    """Generate the shard's pairs, compute R once, evaluate both modes.
+    """Generate the shard's pairs, compute R once, evaluate every mode.
 
     Returns
     -------
@@ -307,9 +319,11 @@ def raytri_shard(shard: Shard) -> dict:
     enc = stress.reference(cases, fmt)
     out = {}
     for mode in MODES:
-        row = stress.evaluate(cases, enc, mode)[shard.group]
-        hit, t = stress._unit(enc, mode, 1.0)
-        both = (enc.in_domain & hit & enc.r_hit & np.isfinite(t) & np.isfinite(enc.r_t)
+        scale = shard.scale if mode == "certified" else 1.0
+        row = stress.evaluate(cases, enc, mode, scale)[shard.group]
+        hit, t = stress._unit(enc, mode, scale)
+        ok = enc.cert_in_domain if mode == "certified" else enc.in_domain
+        both = (ok & hit & enc.r_hit & np.isfinite(t) & np.isfinite(enc.r_t)
                 & (enc.r_t != 0))
         rel = np.abs(t[both] - enc.r_t[both]) / np.abs(enc.r_t[both])
         tmax = float(rel.max()) if rel.size else 0.0
@@ -673,7 +687,10 @@ def merge(params: CampaignParams, out_dir="build/campaign", command="", run_info
             "conservative_false_misses": sum(r["false_misses"] for r in rt_rows
                                              if r["mode"] == "conservative"),
             "conservative_leaks": sum(r["leaks"] for r in rt_rows
-                                      if r["mode"] == "conservative")}
+                                      if r["mode"] == "conservative"),
+            "certified_mis_certified": sum(r["false_hits"] + r["false_misses"]
+                                           for r in rt_rows if r["mode"] == "certified"),
+            "certified_leaks": sum(r["leaks"] for r in rt_rows if r["mode"] == "certified")}
     guar["ok"] = not any(guar.values())
     return {
         "schema": 1, "version": VERSION, "params": asdict(params),
@@ -729,7 +746,8 @@ def markdown(doc: dict) -> str:
         f"and format ({p['shard_rays']} per shard); {p['bundles']} bundles per sphere kind "
         f"and format ({p['shard_bundles']} per shard, {p['spheres_per_bundle']} spheres each)",
         f"- cases: **{tot['cases']:,}** = {tot['raytri_pairs']:,} ray-triangle pairs (each "
-        f"in both modes: {tot['raytri_evaluations']:,} evaluations) + {tot['sphere_tests']:,} "
+        f"in {len(MODES)} modes: {tot['raytri_evaluations']:,} evaluations) + "
+        f"{tot['sphere_tests']:,} "
         f"(ray, sphere) tests of the culling proof ({tot['plane_tests']:,} plane tests)",
         "",
         "Reproduce (resumable: an interrupted run keeps its finished shards in `--out-dir`, and "
@@ -746,6 +764,10 @@ def markdown(doc: dict) -> str:
         f"- conservative mode, in domain: false misses "
         f"**{doc['guarantees']['conservative_false_misses']}**, leaks "
         f"**{doc['guarantees']['conservative_leaks']}**",
+        f"- certified mode (bounds x{p.get('certified_scale', 1.0):g}), in its domain: "
+        f"mis-certified pairs **{doc['guarantees'].get('certified_mis_certified', 0)}** "
+        f"(a certified hit that R misses or a certified miss that R hits), leaks "
+        f"**{doc['guarantees'].get('certified_leaks', 0)}**",
         "",
         "## Ray-triangle unit against R",
         "",
@@ -754,7 +776,11 @@ def markdown(doc: dict) -> str:
         "and the unit misses on every side). `t` error: relative error of `t'/det` against "
         "R's `t` over pairs both hit (median and p99 from a histogram with bins of 2^(1/16): "
         "upper bounds within 4.4 %). Unguaranteed: pairs outside the format's domain "
-        "(not counted in the other columns).",
+        "(not counted in the other columns). Certified mode: false hits / false misses are "
+        "*mis-certified* pairs (certified hit, R misses / certified miss, R hits); uncertain: "
+        "pairs left to the host; its domain is "
+        "`raplas_hdl.model.certified.certified_domain` (every vertex coordinate within "
+        "2^P, P = floor((emax - 3)/2)).",
         "",
         "Domains of the ray-triangle guarantee (`raplas_hdl.model.conservative.domain`): "
         "every coordinate at most 2^P in magnitude, every edge at least 2^-Lmin long: "
@@ -763,15 +789,15 @@ def markdown(doc: dict) -> str:
         "spread geometry over several binades around these limits, so a narrow format "
         "(FP16) has most of its pairs outside its domain.",
         "",
-        "| format | mode | cases | in domain | R hits | false hits | false misses | leaks / "
-        "edge rays | t rel. err. median | p99 | max | unguaranteed |",
-        "|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|",
+        "| format | mode | cases | in domain | R hits | false hits | false misses | uncertain "
+        "| leaks / edge rays | t rel. err. median | p99 | max | unguaranteed |",
+        "|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|",
     ]
     for r in doc["ray_triangle"]:
         lines.append(
             f"| {r['format']} | {r['mode']} | {r['cases']:,} | {r['in_domain']:,} | "
             f"{r['r_hits']:,} | {r['false_hits']:,} | {r['false_misses']:,} | "
-            f"{r['leaks']:,} / {r['edge_rays']:,} | {_e(r['t_rel_median'])} | "
+            f"{r.get('uncertain', 0):,} | {r['leaks']:,} / {r['edge_rays']:,} | {_e(r['t_rel_median'])} | "
             f"{_e(r['t_rel_p99'])} | {_e(r['t_rel_max'])} | {r['unguaranteed']:,} |")
     fams = list(doc["ray_triangle"][0]["families"]) if doc["ray_triangle"] else []
     for mode in MODES:
@@ -784,6 +810,14 @@ def markdown(doc: dict) -> str:
             cells = [f"{r['families'][f]['false_hits']} / {r['families'][f]['false_misses']}"
                      for f in fams]
             lines.append(f"| {r['format']} | " + " | ".join(cells) + " |")
+    lines += ["", "### Per family, certified mode: uncertain fraction (in domain)", "",
+              "| format | " + " | ".join(fams) + " |", "|---|" + "--:|" * len(fams)]
+    for r in doc["ray_triangle"]:
+        if r["mode"] != "certified":
+            continue
+        cells = [f"{c['uncertain'] / max(c['in_domain'], 1):.3f}"
+                 for c in (r["families"][f] for f in fams)]
+        lines.append(f"| {r['format']} | " + " | ".join(cells) + " |")
     lines += [
         "", "## Plane culling: the proof at scale", "",
         f"Random bundles (1-8 rows and columns, |O| <= {O_MAX:g}) against random and "

@@ -12,10 +12,17 @@ in a mode and compares with **R** (:func:`raplas_hdl.host.exact.exact_intersect_
                   unit hits on none;
 ``t_rel_*``       relative error of ``t = t'/det`` (host division in float64) against R's
                   ``t`` over the pairs both hit (median, 99th percentile, max).
+``uncertain``     certified mode: pairs whose outcome is *uncertain*; there ``false_hits``
+                  and ``false_misses`` count the **mis-certified** pairs (a certified hit
+                  that R misses, a certified miss that R hits: must be 0), and a leak is a
+                  ray that R hits on some side and the unit certifies as a miss on every
+                  side.
 
-Only pairs inside the format's domain (:func:`raplas_hdl.model.conservative.domain`)
-count; the others are reported as ``unguaranteed`` (and triangles the record builder
-rejects as ``skipped``).
+Only pairs inside the format's domain (:func:`raplas_hdl.model.conservative.domain`; for the
+certified mode :func:`raplas_hdl.model.certified.certified_domain`) count; the others are
+reported as ``unguaranteed`` (and triangles the record builder rejects as ``skipped``).
+:func:`bisect_certified` is the negative control of the certified bounds: the largest
+factor below 1 on every bound at which some pair is mis-certified.
 
 Families (``FAMILIES``): ``random``; ``shared_edge`` (two triangles of a quad, ray aimed
 at a point of the diagonal); ``shared_vertex`` (a fan of six triangles, ray aimed at the
@@ -29,19 +36,21 @@ the long edges); ``on_start`` (ray origin on the triangle, or just behind or in 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..fp.format import FPFormat
 from ..fp.model import decode, encode
+from ..model.certified import MAX_EXP_BITS, certified_domain
 from ..model.conservative import domain
 from ..model.ray_triangle import intersect
 from ..host.exact import exact_intersect_bits
 from ..host.triangles import make_triangles
 
 __all__ = ["FAMILIES", "StressCases", "generate", "reference", "evaluate", "pooled",
-           "bisect_scale", "vectors"]
+           "bisect_scale", "bisect_certified", "vectors"]
 
 FAMILIES = ("random", "shared_edge", "shared_vertex", "near_parallel", "grazing", "tiny",
             "huge", "far", "thin", "on_start")
@@ -315,6 +324,7 @@ class Encoded:
     in_domain: np.ndarray     # bool per pair (kept and inside the domain)
     r_hit: np.ndarray
     r_t: np.ndarray
+    cert_in_domain: np.ndarray | None = None    # kept and inside the certified domain
 
 
 def reference(cases: StressCases, fmt: FPFormat) -> Encoded:
@@ -338,11 +348,24 @@ def reference(cases: StressCases, fmt: FPFormat) -> Encoded:
     r_hit[kept] = r["hit"]
     r_t = np.full(len(cases), np.nan)
     r_t[kept] = r["t"]
+    cert_ok = np.zeros(len(cases), bool)
+    if fmt.exp_bits <= MAX_EXP_BITS:
+        verts = np.concatenate([cases.v0, cases.v1, cases.v2], 1)
+        cert_ok[kept] = ((np.abs(verts[kept]) <= certified_domain(fmt)).all(1)
+                         & np.isfinite(np.concatenate([od, dd], 1)[kept]).all(1))
     return Encoded(fmt, o_bits, d_bits, recs.v0_bits, recs.e1_bits, recs.e2_bits, recs.n_bits,
-                   kept, in_domain, r_hit, r_t)
+                   kept, in_domain, r_hit, r_t, cert_ok)
 
 
 def _unit(enc: Encoded, mode, margin_scale):
+    """The unit's hit and ``t`` per pair (all pairs; not kept: no hit, NaN)."""
+    hit, t, _ = unit_outcome(enc, mode, margin_scale)
+    return hit, t
+
+
+def unit_outcome(enc: Encoded, mode, margin_scale=1.0):
+    """:func:`_unit` and the certified outcome per pair (uint8; 2 where not kept; None in
+    the other modes)."""
     k = enc.kept
     res = intersect(enc.o_bits[k], enc.d_bits[k], enc.v0_bits, enc.e1_bits, enc.e2_bits,
                     enc.n_bits, enc.fmt, mode=mode, margin_scale=margin_scale)
@@ -352,7 +375,11 @@ def _unit(enc: Encoded, mode, margin_scale):
     t = np.full(n, np.nan)
     with np.errstate(divide="ignore", invalid="ignore"):
         t[k] = decode(res["t"], enc.fmt) / decode(res["det"], enc.fmt)
-    return hit, t
+    outcome = None
+    if "outcome" in res:
+        outcome = np.full(n, 2, np.uint8)
+        outcome[k] = res["outcome"]
+    return hit, t, outcome
 
 
 def evaluate(cases: StressCases, enc: Encoded, mode: str = "paper",
@@ -366,8 +393,14 @@ def evaluate(cases: StressCases, enc: Encoded, mode: str = "paper",
         ``unit_hits``, ``false_hits``, ``false_misses``, ``edge_rays``, ``leaks``,
         ``t_rel_median``, ``t_rel_p99``, ``t_rel_max`` (in-domain pairs only).
     """
-    hit, t = _unit(enc, mode, margin_scale)
+    hit, t, outcome = unit_outcome(enc, mode, margin_scale)
     ok = enc.in_domain
+    may_hit = hit                    # what a leak needs: no side that may be hit
+    wrong_hit, wrong_miss = hit & ~enc.r_hit, ~hit & enc.r_hit
+    if outcome is not None:
+        ok = enc.cert_in_domain
+        may_hit = outcome != 0
+        wrong_miss = (outcome == 0) & enc.r_hit
     kept = np.zeros(len(ok), bool)
     kept[enc.kept] = True
     out = {}
@@ -381,8 +414,9 @@ def evaluate(cases: StressCases, enc: Encoded, mode: str = "paper",
         row = {"pairs": int(sel.sum()), "skipped": int((sel & ~kept).sum()),
                "unguaranteed": int((sel & kept & ~ok).sum()),
                "r_hits": int((s & enc.r_hit).sum()), "unit_hits": int((s & hit).sum()),
-               "false_hits": int((s & hit & ~enc.r_hit).sum()),
-               "false_misses": int((s & ~hit & enc.r_hit).sum()),
+               "false_hits": int((s & wrong_hit).sum()),
+               "false_misses": int((s & wrong_miss).sum()),
+               "uncertain": 0 if outcome is None else int((s & (outcome == 2)).sum()),
                "edge_rays": 0, "leaks": 0,
                "t_rel_median": float(np.median(rel)) if rel.size else 0.0,
                "t_rel_p99": float(np.quantile(rel, 0.99)) if rel.size else 0.0,
@@ -397,7 +431,7 @@ def evaluate(cases: StressCases, enc: Encoded, mode: str = "paper",
             r_any = np.zeros(n_g, bool)
             np.logical_or.at(r_any, ids, enc.r_hit[gs])
             u_any = np.zeros(n_g, bool)
-            np.logical_or.at(u_any, ids, hit[gs])
+            np.logical_or.at(u_any, ids, may_hit[gs])
             present = np.zeros(n_g, bool)
             present[ids] = True
             rays = present & all_ok & r_any
@@ -410,7 +444,7 @@ def evaluate(cases: StressCases, enc: Encoded, mode: str = "paper",
 def pooled(table: dict) -> dict:
     """Sum of the count columns over the families (the t errors: max of the maxima)."""
     keys = ("pairs", "skipped", "unguaranteed", "r_hits", "unit_hits", "false_hits",
-            "false_misses", "edge_rays", "leaks")
+            "false_misses", "uncertain", "edge_rays", "leaks")
     out = {k: sum(row[k] for row in table.values()) for k in keys}
     out["t_rel_max"] = max((row["t_rel_max"] for row in table.values()), default=0.0)
     return out
@@ -450,6 +484,48 @@ def bisect_scale(cases: StressCases, enc: Encoded, lo: float = 2.0 ** -16, hi: f
     return {"s_min": float(s_best), "false_hits_min": int(fhm), "false_hits_1": int(fh1),
             "ratio": float(fh1 / fhm) if fhm else (float("inf") if fh1 else 1.0),
             "lo_passes": bool(at_lo["false_misses"] == 0)}
+
+
+def bisect_certified(cases: StressCases, enc: Encoded, lo: float = 2.0 ** -12,
+                     steps: int = 14) -> dict:
+    """The negative control of the certified bounds: bisect (in log2) the factor ``s`` on
+    every bound between ``lo`` and 1 for the largest ``s`` at which some in-domain pair is
+    mis-certified (a certified hit that R misses or a certified miss that R hits).
+
+    Returns
+    -------
+    dict
+        ``s_fail`` (the largest failing factor found; None when even ``lo`` passes),
+        ``s_pass`` (the smallest passing factor found), ``wrong_at_fail`` (mis-certified
+        pairs at ``s_fail``), ``uncertain_at_1`` and ``uncertain_at_fail`` (pooled).
+
+    Raises
+    ------
+    ValueError
+        When the bounds as derived (``s = 1``) already mis-certify a pair.
+    """
+    def wrong(s):
+        tot = pooled(evaluate(cases, enc, "certified", s))
+        return tot["false_hits"] + tot["false_misses"], tot["uncertain"]
+
+    w1, u1 = wrong(1.0)
+    if w1:
+        raise ValueError(f"the certified bounds mis-certify {w1} pairs at scale 1")
+    w_lo, u_lo = wrong(lo)
+    if not w_lo:
+        return {"s_fail": None, "s_pass": lo, "wrong_at_fail": 0, "uncertain_at_1": u1,
+                "uncertain_at_fail": None}
+    a, b = math.log2(lo), 0.0
+    best = (w_lo, u_lo)
+    for _ in range(steps):
+        mid = 0.5 * (a + b)
+        w, u = wrong(2.0 ** mid)
+        if w:
+            a, best = mid, (w, u)
+        else:
+            b = mid
+    return {"s_fail": float(2.0 ** a), "s_pass": float(2.0 ** b), "wrong_at_fail": int(best[0]),
+            "uncertain_at_1": int(u1), "uncertain_at_fail": int(best[1])}
 
 
 def vectors(fmt: FPFormat, count: int, seed: int = 0, special_rate: float = 0.02,
