@@ -232,7 +232,8 @@ def fp_expected(op: str, fmt, a, b, sub=None) -> tuple[np.ndarray, np.ndarray]:
 
 def fp_cosim(op: str, fmt, a, b, sub=None, *, simulator: str, stages: int | None = None,
              mode: str = "batch", valid_density: float = 0.7, stall_density: float = 0.2,
-             seed: int = 1, expected=None, timeout_s: float | None = None) -> dict:
+             seed: int = 1, expected=None, timeout_s: float | None = None,
+             multiplier: str = "generic") -> dict:
     """Run operand arrays through the FP unit's Verilog and compare with the model.
 
     Parameters
@@ -256,6 +257,9 @@ def fp_cosim(op: str, fmt, a, b, sub=None, *, simulator: str, stages: int | None
         Probability that ``i_valid`` is high, and that ``en`` is low, in a cycle.
     expected : (bits, flags), optional
         Expected results (default: :func:`fp_expected`); flags may be None (not checked).
+    multiplier : str
+        ``fp-mul``: ``"generic"`` or ``"virtex4"`` (DSP48 primitives, simulated with
+        Yosys's model, :func:`raplas_hdl.rtl.dsp48.dsp48_sim_model`).
 
     Returns
     -------
@@ -275,8 +279,13 @@ def fp_cosim(op: str, fmt, a, b, sub=None, *, simulator: str, stages: int | None
     if op == "fp-add":
         cols["sub"] = (np.zeros(a.shape, np.uint32) if sub is None
                        else np.asarray(sub).astype(np.uint32))
-    verilog, latency = fp_verilog(op, fmt, stages)
+    verilog, latency = fp_verilog(op, fmt, stages, multiplier)
     key = f"{spec.dut}-{fmt.name}-s{stages if stages is not None else 'd'}"
+    if op == "fp-mul" and multiplier != "generic":
+        from raplas_hdl.rtl.dsp48 import dsp48_sim_model
+
+        verilog += "\n" + dsp48_sim_model()
+        key += f"-{multiplier}"
     if mode == "batch":
         out, info = run_batch(simulator, spec, verilog, key, cols, valid_density,
                               stall_density, seed, timeout_s=timeout_s)
