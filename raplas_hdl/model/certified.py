@@ -48,7 +48,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.extending import intrinsic
 
 from ..fp.format import FLAG_OVERFLOW, FPFormat, check_format
 from ..fp.kernels import neg_k, rmode_code
@@ -133,14 +135,40 @@ def certified_constants(fmt: FPFormat, scale: float = 1.0,
     return np.array([s, min(j, fmt.man_bits), k], dtype=np.float64)
 
 
+# -- float64 bit patterns (the bound floats are handled through them, without libm calls) --
+@intrinsic
+def _f2i(typingctx, x):
+    """The bits of a float64 as an int64."""
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.IntType(64))
+    return types.int64(types.float64), codegen
+
+
+@intrinsic
+def _i2f(typingctx, x):
+    """The float64 of an int64's bits."""
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.DoubleType())
+    return types.float64(types.int64), codegen
+
+
+@njit(cache=True)
+def _pow2(n):
+    """``2.0**n`` for ``-1022 <= n <= 1023`` (every exponent the bounds use for
+    ``exp_bits <= 9``)."""
+    return _i2f((np.int64(n) + 1023) << 52)
+
+
 # -- bound floats: non-negative values of k+1 significant bits, every operation rounds up --
 @njit(cache=True)
 def _ru(x, k):
-    """``x >= 0`` rounded up to ``k + 1`` significant bits (0, inf and NaN unchanged)."""
-    if x == 0.0 or not math.isfinite(x):
+    """``x >= 0`` rounded up to ``k + 1`` significant bits (0, inf and NaN unchanged; ``x``
+    is a normal float64)."""
+    b = _f2i(x)
+    if b == 0 or (b >> 52) >= 2047:
         return x
-    mant, ex = math.frexp(x)
-    return math.ldexp(math.ceil(math.ldexp(mant, k + 1)), ex - k - 1)
+    mask = (np.int64(1) << (52 - k)) - 1
+    return _i2f((b + mask) & ~mask)
 
 
 @njit(cache=True)
@@ -153,8 +181,7 @@ def _badd(a, b, k):
     err = (a - (s - bb)) + (b - bb)           # a + b = s + err exactly (two-sum)
     r = _ru(s, k)
     if err > 0.0 and r == s:                  # s already on the grid, the sum above it
-        mant, ex = math.frexp(s)
-        r = s + math.ldexp(1.0, ex - k - 1)
+        r = _i2f(_f2i(s) + (np.int64(1) << (52 - k)))
     return r
 
 
@@ -174,9 +201,9 @@ def _value(x, e, m):
     if field == 0:
         return 0.0
     bias = (np.int64(1) << (e - 1)) - 1
-    sig = (x & ((np.int64(1) << m) - 1)) | (np.int64(1) << m)
-    v = math.ldexp(float(sig), field - bias - m)
-    return -v if (x >> (e + m)) & 1 else v
+    bits = (((field - bias + 1023) << 52) | ((x & ((np.int64(1) << m) - 1)) << (52 - m))
+            | (((x >> (e + m)) & 1) << 63))
+    return _i2f(bits)
 
 
 @njit(cache=True)
@@ -189,7 +216,7 @@ def _upper(x, e, m, j):
         return 0.0
     bias = (np.int64(1) << (e - 1)) - 1
     lead = ((x & ((np.int64(1) << m) - 1)) >> (m - j)) | (np.int64(1) << j)
-    return math.ldexp(float(lead + 1), field - bias - j)
+    return float(lead + 1) * _pow2(field - bias - j)
 
 
 @njit(cache=True)
@@ -205,7 +232,7 @@ def _is_zero(x, e, m):
 
 @njit(cache=True)
 def _eta(e):
-    return math.ldexp(1.0, 2 - (np.int64(1) << (e - 1)))           # 2**emin
+    return _pow2(2 - (np.int64(1) << (e - 1)))                     # 2**emin
 
 
 @njit(cache=True)
@@ -215,9 +242,9 @@ def _input_bound(x, e, m, r, slack, k):
     if _is_zero(x, e, m):
         b = _eta(e)
     else:
-        b = math.ldexp(1.0, _exp(x, e, m) - m - (1 if r == 1 else 0))
+        b = _pow2(_exp(x, e, m) - m - (1 if r == 1 else 0))
     if slack:
-        b = _ru(b + math.ldexp(b, -INPUT_SLACK_EXP), k)
+        b = _ru(b + b * _pow2(-INPUT_SLACK_EXP), k)
     return b
 
 
@@ -225,11 +252,11 @@ def _input_bound(x, e, m, r, slack, k):
 def _rnd_mul(p, e, m, r):
     if _is_zero(p, e, m):
         return _eta(e)
-    return math.ldexp(1.0, _exp(p, e, m) - m - (1 if r == 1 else 0))
+    return _pow2(_exp(p, e, m) - m - (1 if r == 1 else 0))
 
 
 @njit(cache=True)
-def _rnd_add(a, b, s, e, m, r):
+def _rnd_add(a, b, s, e, m, r, k):
     """Rounding error bound of ``s = a + b`` (operand patterns as the adder sees them)."""
     if _is_zero(a, e, m) or _is_zero(b, e, m):
         return 0.0                                      # x + 0 = x in every rounding
@@ -238,10 +265,10 @@ def _rnd_add(a, b, s, e, m, r):
         top = max(_exp(a, e, m), _exp(b, e, m))
         if not z:
             top = max(top, _exp(s, e, m))
-        return math.ldexp(1.0, top - m) + (_eta(e) if z else 0.0)
+        return _badd(_pow2(top - m), _eta(e), k) if z else _pow2(top - m)
     if z:
         return _eta(e)
-    return math.ldexp(1.0, _exp(s, e, m) - m - (1 if r == 1 else 0))
+    return _pow2(_exp(s, e, m) - m - (1 if r == 1 else 0))
 
 
 @njit(cache=True)
@@ -255,7 +282,7 @@ def _mul_b(a, ba, b, bb, p, e, m, r, j, k):
 @njit(cache=True)
 def _add_b(a, ba, b, bb, s, e, m, r, k):
     """Bound of ``s = add(a, b)``."""
-    return _badd(_badd(ba, bb, k), _rnd_add(a, b, s, e, m, r), k)
+    return _badd(_badd(ba, bb, k), _rnd_add(a, b, s, e, m, r, k), k)
 
 
 @njit(cache=True)
