@@ -35,13 +35,13 @@ from __future__ import annotations
 
 from importlib import resources
 
-from amaranth.hdl import Cat, ClockSignal, Const, Instance, Module, Signal
+from amaranth.hdl import Cat, ClockSignal, Const, Instance, Module, Signal, Value
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from .pipeline import delay
 
-__all__ = ["DSP48Mul", "PipelinedMul", "make_multiplier", "multiplier_latency", "dsp48_count",
+__all__ = ["DSP48Mul", "PipelinedMul", "dsp48", "make_multiplier", "multiplier_latency", "dsp48_count",
            "dsp48_sim_model", "LIMB", "TARGETS"]
 
 #: Largest unsigned operand width of one DSP48 multiply (18-bit signed inputs).
@@ -52,6 +52,9 @@ TARGETS = ("generic", "virtex4")
 
 #: DSP48 ``OPMODE`` for ``P = A * B``: X = M (01), Y = M (01), Z = 0 (000).
 OPMODE_MULTIPLY = 0b000_01_01
+
+#: DSP48 ``OPMODE`` for ``P = C +- (A * B + CIN)``: X = M (01), Y = M (01), Z = C (011).
+OPMODE_MULTIPLY_ADD = 0b011_01_01
 
 
 def _check_width(width):
@@ -74,6 +77,84 @@ def multiplier_latency(width: int) -> int:
 def dsp48_count(width: int) -> int:
     """DSP48 primitives used by :class:`DSP48Mul` for ``width``-bit operands."""
     return 1 if _check_width(width) <= LIMB else 4
+
+
+def _operand(value, name):
+    value = Value.cast(value)
+    if len(value) > LIMB:
+        raise ValueError(f"DSP48 operand {name} has {len(value)} bits; at most {LIMB} "
+                         "(unsigned, in an 18-bit signed port)")
+    return Cat(value, Const(0, 18 - len(value)))
+
+
+def dsp48(m, name: str, a, b, *, en, c=None, subtract=0, carryin=0) -> Signal:
+    """Instantiate one Virtex-4 ``DSP48`` with AREG/BREG, MREG and PREG in use; return ``P``.
+
+    Without ``c``: ``P = a * b`` (``OPMODE`` X=Y=M, Z=0), the product register path of
+    :class:`DSP48Mul`: ``P`` holds the product of the operands presented three enabled
+    clock edges earlier.
+
+    With ``c``: ``P = c + (a * b + carryin)`` when ``subtract`` is 0 and
+    ``P = c - (a * b + carryin)`` when it is 1 (``OPMODE`` X=Y=M, Z=C; ``CARRYINSEL`` = 00,
+    the fabric carry-in). ``c``, ``subtract`` and ``carryin`` go through their own DSP48
+    registers (``CREG``, ``SUBTRACTREG``, ``CARRYINREG``), which sit level with ``MREG``: they
+    are presented **one clock after** ``a`` and ``b`` (two enabled edges before ``P``).
+
+    Parameters
+    ----------
+    m : Module
+        Receives the instance as submodule ``name``.
+    a, b : Value
+        Unsigned operands of at most 17 bits (zero-extended to the 18-bit signed ports).
+    en : Value
+        Clock enable of every register used (``CEA``, ``CEB``, ``CEM``, ``CEP``, and with
+        ``c`` also ``CEC`` and ``CECINSUB``).
+    c : Value, optional
+        Non-negative addend of up to 47 bits (zero-extended to 48).
+    subtract, carryin : Value or int
+        Only with ``c``.
+
+    Returns
+    -------
+    Signal(48)
+        The DSP48's ``P`` output (two's complement).
+
+    Raises
+    ------
+    ValueError
+        If an operand is wider than 17 bits or ``c`` wider than 47.
+    """
+    a, b = _operand(a, "a"), _operand(b, "b")
+    p = Signal(48, name=f"{name}_p")
+    zero = Const(0, 1)
+    if c is None:
+        regs = dict(p_CREG=0, p_SUBTRACTREG=0, p_CARRYINREG=0)
+        ports = dict(i_C=Const(0, 48), i_CARRYIN=zero, i_OPMODE=Const(OPMODE_MULTIPLY, 7),
+                     i_SUBTRACT=zero, i_CEC=zero, i_CECINSUB=zero)
+    else:
+        c = Value.cast(c)
+        if len(c) > 47:
+            raise ValueError(f"DSP48 addend c has {len(c)} bits; at most 47")
+        regs = dict(p_CREG=1, p_SUBTRACTREG=1, p_CARRYINREG=1)
+        ports = dict(i_C=Cat(c, Const(0, 48 - len(c))), i_CARRYIN=Value.cast(carryin)[0],
+                     i_OPMODE=Const(OPMODE_MULTIPLY_ADD, 7),
+                     i_SUBTRACT=Value.cast(subtract)[0], i_CEC=en, i_CECINSUB=en)
+    m.submodules[name] = Instance(
+        "DSP48",
+        p_AREG=1, p_BREG=1, p_CREG=regs["p_CREG"], p_MREG=1, p_PREG=1, p_OPMODEREG=0,
+        p_SUBTRACTREG=regs["p_SUBTRACTREG"], p_CARRYINREG=regs["p_CARRYINREG"],
+        p_CARRYINSELREG=0, p_B_INPUT="DIRECT", p_LEGACY_MODE="MULT18X18S",
+        i_CLK=ClockSignal("sync"),
+        i_A=a, i_B=b,
+        i_C=ports["i_C"], i_BCIN=Const(0, 18), i_PCIN=Const(0, 48),
+        i_CARRYIN=ports["i_CARRYIN"], i_OPMODE=ports["i_OPMODE"],
+        i_SUBTRACT=ports["i_SUBTRACT"], i_CARRYINSEL=Const(0, 2),
+        i_CEA=en, i_CEB=en, i_CEM=en, i_CEP=en, i_CEC=ports["i_CEC"], i_CECARRYIN=zero,
+        i_CECINSUB=ports["i_CECINSUB"], i_CECTRL=zero,
+        i_RSTA=zero, i_RSTB=zero, i_RSTC=zero, i_RSTM=zero, i_RSTCARRYIN=zero,
+        i_RSTCTRL=zero, i_RSTP=zero,
+        o_P=p)
+    return p
 
 
 class _MulBase(wiring.Component):
@@ -118,24 +199,7 @@ class DSP48Mul(_MulBase):
 
     def _dsp(self, m, name, a, b, en):
         """One DSP48 computing ``a * b`` (each at most 17 bits), registered three times."""
-        p = Signal(48, name=f"{name}_p")
-        zero = Const(0, 1)
-        m.submodules[name] = Instance(
-            "DSP48",
-            p_AREG=1, p_BREG=1, p_CREG=0, p_MREG=1, p_PREG=1, p_OPMODEREG=0,
-            p_SUBTRACTREG=0, p_CARRYINREG=0, p_CARRYINSELREG=0, p_B_INPUT="DIRECT",
-            p_LEGACY_MODE="MULT18X18S",
-            i_CLK=ClockSignal("sync"),
-            i_A=Cat(a, Const(0, 18 - len(a))), i_B=Cat(b, Const(0, 18 - len(b))),
-            i_C=Const(0, 48), i_BCIN=Const(0, 18), i_PCIN=Const(0, 48),
-            i_CARRYIN=zero, i_OPMODE=Const(OPMODE_MULTIPLY, 7), i_SUBTRACT=zero,
-            i_CARRYINSEL=Const(0, 2),
-            i_CEA=en, i_CEB=en, i_CEM=en, i_CEP=en, i_CEC=zero, i_CECARRYIN=zero,
-            i_CECINSUB=zero, i_CECTRL=zero,
-            i_RSTA=zero, i_RSTB=zero, i_RSTC=zero, i_RSTM=zero, i_RSTCARRYIN=zero,
-            i_RSTCTRL=zero, i_RSTP=zero,
-            o_P=p)
-        return p[:len(a) + len(b)]
+        return dsp48(m, name, a, b, en=en)[:len(a) + len(b)]
 
     def elaborate(self, platform):
         m = Module()

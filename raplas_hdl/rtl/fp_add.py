@@ -45,6 +45,14 @@ gives:
 4. ``round`` + ``pack``: the result and its flags, on the output registers.
 
 ``stages`` can be anything from 1 (all seven steps in one clock) to 7 (one step each).
+
+**Target.** ``target="generic"`` (the default) is the above, all in the fabric.
+``target="virtex4"`` builds the adder of :mod:`.fp_add_dsp48` instead: the alignment shift,
+the significand add and the normalising shift in two Virtex-4 ``DSP48`` primitives, bit for
+bit the same results and flags, ``latency`` 7 whatever ``stages`` (which is still checked);
+formats with ``man_bits <= 16`` only. ``multiplier=`` is accepted as another name for
+``target`` (the keyword the unit registry and the FP units hand their ``target`` option
+to). :func:`fp_add_latency` gives the latency without building the unit.
 """
 
 from __future__ import annotations
@@ -57,13 +65,52 @@ from .fp_common import (check_format, leading_zeros, pack, round_significand,
                         shift_right_sticky, unpack)
 from .pipeline import Step, build_pipeline, group_steps, place_registers, wire
 
-__all__ = ["FPAdd"]
+__all__ = ["FPAdd", "TARGETS", "fp_add_latency"]
+
+#: Adder targets: all in the fabric, or shifts and add in Virtex-4 DSP48 (:mod:`.fp_add_dsp48`).
+TARGETS = ("generic", "virtex4")
 
 #: (name, weight) of each combinational step, in datapath order.
 ADD_STEPS = (("unpack", 3), ("align", 3), ("add", 2), ("lzc", 2), ("normalise", 3),
              ("round", 2), ("pack", 1))
 
 _SPECIALS = ("nan", "invalid", "inf")
+
+
+def _check_target(target, multiplier):
+    if multiplier is not None:
+        if target != "generic" and target != multiplier:
+            raise ValueError(f"target={target!r} and multiplier={multiplier!r} disagree; "
+                             "give one of them")
+        target = multiplier
+    if target not in TARGETS:
+        raise ValueError(f"target must be one of {', '.join(TARGETS)}, not {target!r}")
+    return target
+
+
+def adder_ports(width: int) -> dict:
+    """The ports of :class:`FPAdd` (both targets) for ``width``-bit patterns."""
+    return {"a": In(width), "b": In(width), "sub": In(1), "i_valid": In(1), "en": In(1),
+            "o": Out(width), "flags": Out(3), "o_valid": Out(1)}
+
+
+def fp_add_latency(fmt, stages: int = 4, target: str = "generic") -> int:
+    """Latency of ``FPAdd(fmt, stages, target)``, without building it: ``stages`` for the
+    generic adder, :data:`.fp_add_dsp48.LATENCY` (7) for ``virtex4``.
+
+    Raises
+    ------
+    ValueError
+        As :class:`FPAdd` does.
+    """
+    from .fp_add_dsp48 import LATENCY, check_dsp48_format
+
+    place_registers([w for _, w in ADD_STEPS], stages)
+    if _check_target(target, None) == "virtex4":
+        check_dsp48_format(fmt)
+        return LATENCY
+    check_format(fmt)
+    return stages
 
 
 class FPAdd(wiring.Component):
@@ -79,7 +126,12 @@ class FPAdd(wiring.Component):
     fmt : FPFormat
         Format and rounding (``rtz``, ``rne`` or ``chop``).
     stages : int
-        Pipeline depth, 1 to 7 (default 4, as in the paper).
+        Pipeline depth, 1 to 7 (default 4, as in the paper). The ``virtex4`` adder's depth
+        is set by its DSP48 registers (latency 7); ``stages`` is checked but not used.
+    target : {"generic", "virtex4"}
+        ``virtex4``: shifts and significand add in two DSP48 (:mod:`.fp_add_dsp48`).
+    multiplier : {"generic", "virtex4"}, optional
+        Another name for ``target``.
 
     Attributes
     ----------
@@ -101,20 +153,20 @@ class FPAdd(wiring.Component):
     Raises
     ------
     ValueError
-        If ``fmt`` is not an :class:`FPFormat` or ``stages`` is out of range.
+        If ``fmt`` is not an :class:`FPFormat`, ``stages`` is out of range, ``target`` is
+        unknown, or (``virtex4``) the significand is wider than 17 bits.
     """
 
-    def __init__(self, fmt, stages: int = 4):
+    def __init__(self, fmt, stages: int = 4, target: str = "generic", *,
+                 multiplier: str | None = None):
         self._fmt = check_format(fmt)
+        self._target = _check_target(target, multiplier)
+        self._latency = fp_add_latency(fmt, stages, self._target)
         self._steps = tuple(Step(name, getattr(self, f"_step_{name}"), weight)
                             for name, weight in ADD_STEPS)
         self._registered = place_registers([s.weight for s in self._steps], stages)
         self._stages = stages
-        w = fmt.width
-        super().__init__({
-            "a": In(w), "b": In(w), "sub": In(1), "i_valid": In(1), "en": In(1),
-            "o": Out(w), "flags": Out(3), "o_valid": Out(1),
-        })
+        super().__init__(adder_ports(fmt.width))
 
     @property
     def fmt(self):
@@ -125,13 +177,21 @@ class FPAdd(wiring.Component):
         return self._stages
 
     @property
+    def target(self) -> str:
+        return self._target
+
+    @property
     def latency(self) -> int:
-        """Enabled clock edges from an input to its result (equal to ``stages``)."""
-        return self._stages
+        """Enabled clock edges from an input to its result (``stages``; 7 for ``virtex4``)."""
+        return self._latency
 
     @property
     def stage_steps(self) -> tuple[tuple[str, ...], ...]:
         """The names of the combinational steps in each pipeline stage."""
+        if self._target == "virtex4":
+            from .fp_add_dsp48 import STAGE_STEPS
+
+            return STAGE_STEPS
         return group_steps(self._steps, self._registered)
 
     # -- combinational steps -----------------------------------------------------------
@@ -198,6 +258,14 @@ class FPAdd(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
+        if self._target == "virtex4":
+            from .fp_add_dsp48 import FPAddDSP48
+
+            m.submodules.dsp48 = unit = FPAddDSP48(self._fmt)
+            m.d.comb += [getattr(unit, k).eq(getattr(self, k))
+                         for k in ("a", "b", "sub", "i_valid", "en")]
+            m.d.comb += [getattr(self, k).eq(getattr(unit, k)) for k in ("o", "flags", "o_valid")]
+            return m
         out, valid = build_pipeline(
             m, self._steps, {"a": self.a, "b": self.b, "sub": self.sub},
             self._registered, en=self.en, valid=self.i_valid)
