@@ -34,7 +34,7 @@ from numba import njit
 from ..fp.numba_cache import drop_stale_cache
 from .exact_filter import HIT, MISS, filter_pair
 from .kernels import N_COUNTERS, plane_masks
-from .unit_outcome import unit_outcome
+from ..model.certified import pair_certified
 
 drop_stale_cache(__file__)
 
@@ -101,8 +101,8 @@ def trace_certified(pn, pp, ro, rd, enable, keep_all, rows, cols, run_b, run_sta
                     for k in range(nt):
                         tid = tlist[s, k]
                         issued += 1
-                        outcome, cnt = unit_outcome(ro, b, rd, di, v0, e1, e2, nn, tid, e, m,
-                                                    r, cc)
+                        outcome, _, _, cnt = pair_certified(ro, b, rd, di, v0, e1, e2, nn,
+                                                            tid, e, m, r, cc)
                         counters[u, 5] += cnt & 0xFF
                         counters[u, 6] += (cnt >> 8) & 0xFF
                         counters[u, 7] += (cnt >> 16) & 0xFF

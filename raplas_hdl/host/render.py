@@ -529,6 +529,12 @@ def format_summary(result: RenderResult, comparison: dict | None = None) -> str:
         (f"  events    overflow {st['events']['overflow']:,}, underflow "
         f"{st['events']['underflow']:,}, invalid {st['events']['invalid']:,} (operations)"),
     ]
+    if "certified" in st:
+        c = st["certified"]
+        lines.append(f"  certified uncertain {c['uncertain']:,} pairs "
+                     f"({100.0 * c['uncertain_fraction']:.3f} % of issued), certified hits "
+                     f"{c['certified_hits']:,}; float64 filter {c['filtered']:,} pairs, "
+                     f"exact {c['exact']:,} pairs in {c['exact_s']:.3f}s")
     if "points_behind_light" in st:
         lines.append(f"  shading points without a shadow bundle: behind the light "
                      f"{st['points_behind_light']:,}, facing away {st['points_facing_away']:,}")
