@@ -116,3 +116,58 @@ def test_shipped_meshes_load_by_name():
     assert "Stanford" in notes and "licen" in notes.lower()
     scene = get_scene("teapot")
     assert scene.n_triangles > 6000 and scene.name == "teapot"
+
+
+def test_scenes_without_materials_keep_one_shared_material():
+    """Backward compatibility: a scene built without a materials table has ``(material,)``
+    and material ID 0 on every triangle; ``material_at`` gives its constants per triangle."""
+    from raplas_hdl.host.scenes import Material
+
+    for name in SCENES:
+        scene = get_scene(name)
+        assert scene.materials == (scene.material,) and scene.material == Material()
+        assert scene.material_ids.shape == (scene.n_triangles,)
+        assert not scene.material_ids.any()
+        per = scene.material_at([0, scene.n_triangles - 1])
+        assert per.ambient.tolist() == [Material().ambient] * 2
+        assert per.shininess.tolist() == [Material().shininess] * 2
+
+
+def test_material_ids_are_checked():
+    from raplas_hdl.host.camera import Camera
+    from raplas_hdl.host.scenes import AreaLight, Material, Scene
+
+    cam = Camera((0, 0, 5), (0, 0, 0))
+    light = AreaLight((0, 3, 0), (1, 0, 0), (0, 0, 1))
+    v, f = np.eye(3), [[0, 1, 2]]
+    mats = (Material(), Material(reflectivity=0.5, name="mirror"))
+    scene = Scene("x", v, f, (1, 1, 1), cam, light, materials=mats, material_ids=[1])
+    assert scene.material_at([0]).reflectivity.tolist() == [0.5]
+    assert scene.normalised(8.0).materials == mats
+    with pytest.raises(ValueError, match="outside the 2 materials"):
+        Scene("x", v, f, (1, 1, 1), cam, light, materials=mats, material_ids=[2])
+    with pytest.raises(ValueError, match="material_ids must have shape"):
+        Scene("x", v, f, (1, 1, 1), cam, light, materials=mats, material_ids=[0, 1])
+
+
+def test_mesh_up_axis(tmp_path):
+    import trimesh
+
+    trimesh.creation.box(extents=(1.0, 0.5, 4.0)).export(tmp_path / "tall.ply")
+    for up, height in (((0, 1, 0), 0.5), ((0, 0, 1), 4.0), ((0, 0, -1), 4.0), ((1, 0, 0), 1.0)):
+        scene = mesh_scene(tmp_path / "tall.ply", up=up, floor=False)
+        ext = np.ptp(scene.vertices, axis=0)
+        assert ext[1] == pytest.approx(2.0 * height / 4.0), up      # largest side scaled to 2
+        assert scene.vertices[:, 1].min() == pytest.approx(0.0)      # standing on y = 0
+
+
+def test_shipped_scene_files_load_by_name():
+    import os
+
+    from raplas_hdl.host.scenes import SCENE_DIR, SCENE_FILES
+
+    assert "showcase" in SCENE_FILES
+    assert all(os.path.dirname(p) == SCENE_DIR for p in SCENE_FILES.values())
+    for name in SCENE_FILES:
+        scene = get_scene(name)
+        assert scene.name == name and np.abs(scene.points_of_interest()).max() <= 8.0

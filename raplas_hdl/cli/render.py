@@ -8,8 +8,19 @@ from pathlib import Path
 from ..model.modes import MODES
 from . import grammar as g
 
-__all__ = ["add_parser", "add_render_options", "check", "check_scene", "run",
-           "scene_from_args", "settings_from_args", "_size", "_lattice", "_jsonable"]
+__all__ = [
+    "_jsonable",
+    "_lattice",
+    "_size",
+    "add_parser",
+    "add_render_options",
+    "add_view_options",
+    "check",
+    "check_scene",
+    "run",
+    "scene_from_args",
+    "settings_from_args",
+]
 
 #: Limits of the render options (stated in --help, checked while parsing).
 MAX_TRIS_PER_SPHERE = 4096
@@ -71,9 +82,9 @@ def add_view_options(p):
     """``--camera``, ``--look-at``, ``--up``, ``--fov``, ``--light``: override a scene's
     view and light (in the scene's own units, before the load normalisation)."""
     v = p.add_argument_group(
-        "view overrides", "In the scene's own units (for a mesh file: standing on the floor "
-        "y = 0, scaled to a height of about 2). A value starting with '-' is written with "
-        "'=': --up=-z.")
+        "view overrides", "In the scene's own units (a mesh file stands on the floor y = 0, "
+        "centred on x = z = 0, its largest side 2). A value starting with '-' is written "
+        "with '=': --up=-z. See docs/scenes.md.")
     v.add_argument("--camera", type=_point, default=None, metavar="X,Y,Z",
                    help="camera position")
     v.add_argument("--look-at", type=_point, default=None, metavar="X,Y,Z",

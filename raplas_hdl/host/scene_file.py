@@ -54,8 +54,17 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .camera import Camera
-from .scenes import (MESH_SUFFIXES, MESHES, AreaLight, Material, Scene, _box, _Builder,
-                     _quad_grid, load_mesh)
+from .scenes import (
+    MESH_SUFFIXES,
+    MESHES,
+    AreaLight,
+    Material,
+    Scene,
+    _box,
+    _Builder,
+    _quad_grid,
+    load_mesh,
+)
 
 __all__ = ["PRIMITIVES", "SceneFileError", "check_scene_file", "load_scene_file",
            "mesh_transform", "override_scene", "parse_axis"]
@@ -312,9 +321,9 @@ def _read(path) -> tuple[str, dict]:
     except tomllib.TOMLDecodeError as exc:
         msg = str(exc)       # "Invalid value (at line 3, column 7)"
         m = re.search(r"\(at line (\d+), column (\d+)\)$", msg)
-        if m:
-            msg = f"line {m.group(1)}, column {m.group(2)}: {msg[:m.start()].strip()}"
-        raise SceneFileError(f"{label}: TOML syntax error: {msg}") from None
+        at = f"line {m.group(1)}, column {m.group(2)}: " if m else ""
+        msg = msg[:m.start()].strip() if m else msg
+        raise SceneFileError(f"{label}: {at}TOML syntax error: {msg}") from None
 
 
 def _camera(w: _Where, doc: dict, overrides: dict) -> Camera:
@@ -332,7 +341,7 @@ def _camera(w: _Where, doc: dict, overrides: dict) -> Camera:
         return Camera(**values)
     except ValueError as exc:
         key = next((k for k in ("up", "fov") if k in str(exc)), "look_at")
-        extra = f" (with the overrides of {', '.join(given)})" if given else ""
+        extra = f" (with the overridden {', '.join(given)})" if given else ""
         raise t.error(key, f"{exc}{extra}") from None
 
 
@@ -624,7 +633,7 @@ def override_scene(scene: Scene, camera=None, look_at=None, up=None, fov=None,
     try:
         cam = Camera(**{k: getattr(c, k) if v is None else v for k, v in values.items()})
     except ValueError as exc:
-        raise ValueError(f"scene {scene.name!r} with the overrides of {', '.join(given)}: "
+        raise ValueError(f"scene {scene.name!r} with the overridden {', '.join(given)}: "
                          f"{exc}") from None
     lt = scene.light if light is None else scene.light.moved(light)
     return replace(scene, camera=cam, light=lt)

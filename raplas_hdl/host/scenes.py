@@ -37,12 +37,12 @@ from .camera import Camera
 
 __all__ = [
     "DEFAULT_BOUND",
-    "MESH_DIR",
     "MESHES",
+    "MESH_DIR",
+    "SCENES",
     "SCENE_DIR",
     "SCENE_FILES",
     "SCENE_SUFFIXES",
-    "SCENES",
     "AreaLight",
     "Material",
     "Scene",
