@@ -67,3 +67,43 @@ def test_domain_and_constants():
     with pytest.raises(ValueError, match="certified mode only"):
         intersect(np.zeros((1, 3), np.uint32), *[np.zeros((1, 3), np.uint32)] * 5,
                   FPFormat(7, 16), bound_variant="exp")
+
+
+def test_special_values_are_uncertain():
+    """NaN, infinite and overflowing pairs (random and special patterns) are never decided;
+    the pair function called from compiled code gives intersect's results."""
+    from numba import njit
+
+    from raplas_hdl.fp.kernels import rmode_code
+
+    fmt = FPFormat(7, 16, "rne")
+    vec = stress.vectors(fmt, 3000, seed=4, special_rate=0.05, random_rate=0.2)
+    arrs = [vec[k] for k in ("o", "d", "v0", "e1", "e2", "n")]
+    res = intersect(*arrs, fmt, mode="certified")
+    bad = (res["flags"] & 5) != 0                   # overflow or invalid
+    assert bad.sum() > 100
+    assert (res["outcome"][bad] == 2).all()
+    cc = certified.certified_constants(fmt)
+
+    @njit
+    def run(o, d, v0, e1, e2, nn, cc, e, m, r):
+        out = np.empty((o.shape[0], 3), np.int64)
+        for i in range(o.shape[0]):
+            oc, tp, det, cnt = certified.pair_certified(o, i, d, i, v0, e1, e2, nn, i, e, m,
+                                                        r, cc)
+            out[i, 0], out[i, 1], out[i, 2] = oc, tp, det
+        return out
+
+    got = run(*arrs, cc, fmt.exp_bits, fmt.man_bits, rmode_code(fmt))
+    assert np.array_equal(got[:, 0], res["outcome"])
+    assert np.array_equal(got[:, 1], res["t"]) and np.array_equal(got[:, 2], res["det"])
+
+
+def test_scale_only_shrinks_the_decided_set():
+    fmt = FPFormat(7, 16, "rtz")
+    _, enc, full = _run(fmt, 60, 8)
+    _, _, half = _run(fmt, 60, 8, scale=0.5)
+    # a smaller bound decides at least every pair the full bound decides, the same way
+    decided = full["outcome"] != 2
+    assert np.array_equal(half["outcome"][decided], full["outcome"][decided])
+    assert (half["outcome"] != 2).sum() >= decided.sum()
