@@ -236,6 +236,8 @@ def _line(text, needle):
     ("edge_v = [0.0, 0.0, 105.0]", "edge_v = [260.0, 0.0, 0.0]",
      r"line {n}: \[\[light\]\] #1 edge_v: .*not parallel"),
     ('type = "area"', 'type = "spot"', r"line {n}: \[\[light\]\] #1 type: unknown value 'spot'"),
+    ('type = "area"', 'type = "point"',
+     r"line {n1}: \[\[light\]\] #1 corner: unknown key \(expected one of type, position, size"),
     ("ior = 1.5", "ior = 0.5", r"line {n}: \[materials.glass\] ior: must be from 1 to 4"),
     ("transparency = 0.85", "transparency = 0.95",
      r"line {n}: \[materials.glass\] transparency: reflectivity \+ transparency must be at most 1"),
@@ -261,7 +263,7 @@ def test_errors_name_file_line_and_key(tmp_path, old, new, message):
     n = _line(text, new) if new else _line(BASE, old)
     path = _write(tmp_path, text, "bad.toml")
     mesh8 = text.rindex("[[mesh]]")
-    message = message.format(n=n, camera=_line(BASE, "[camera]"),
+    message = message.format(n=n, n1=n + 1, camera=_line(BASE, "[camera]"),
                              mesh8=text[:mesh8].count("\n") + 1)
     with pytest.raises(SceneFileError, match=re.escape(str(path)) + ": " + message):
         check_scene_file(path)
@@ -272,6 +274,8 @@ def test_errors_of_whole_tables(tmp_path):
         (BASE + '\n[[light]]\ntype = "point"\nposition = [1, 2, 3]\n', r"2 lights"),
         (BASE.split("[[mesh]]")[0], r"missing \[\[mesh\]\]"),
         (BASE.replace("[camera]", "[[camera]]"), r"write \[camera\], not \[\[camera\]\]"),
+        ('mesh = "box"\n' + BASE.split("[[mesh]]")[0],
+         r"mesh: must be an array of tables \(\[\[mesh\]\]\), not a string"),
         ("", r"missing table \[camera\]"),
     ]
     for text, message in cases:

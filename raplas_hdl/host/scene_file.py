@@ -119,7 +119,7 @@ def parse_axis(text) -> tuple:
 
 # -- where an error is ------------------------------------------------------------------
 
-_HEADER = re.compile(r"^\s*(\[\[?)\s*([^\]]+?)\s*\]\]?")
+_HEADER = re.compile(r"""^\s*(\[\[?)\s*([A-Za-z0-9_\-."' ]+?)\s*\]\]?\s*(#.*)?$""")
 _KEY = re.compile(r"""^\s*(?:"([^"]+)"|'([^']+)'|([A-Za-z0-9_-]+))\s*=""")
 
 
@@ -358,8 +358,8 @@ def _light(w: _Where, doc: dict, camera_up) -> dict:
         raise w.error(("light", 1), f"{len(lights)} lights: the renderer shades and shadows "
                                     "with one light; give one [[light]]")
     path = ("light", 0)
-    kind = _Table(w, path, lights[0], ("type", *_LIGHT_KEYS["area"], *_LIGHT_KEYS["point"]),
-                  ("type",)).string("type", choices=tuple(_LIGHT_KEYS))
+    kind = _Table(w, path, lights[0], tuple(lights[0]), ("type",)).string(   # type first
+        "type", choices=tuple(_LIGHT_KEYS))
     t = _Table(w, path, lights[0], _LIGHT_KEYS[kind],
                ("corner", "edge_u", "edge_v") if kind == "area" else ("position",))
     colour = np.asarray(t.colour("colour", [1.0, 1.0, 1.0]))
@@ -496,8 +496,10 @@ def check_scene_file(path, camera=None, look_at=None, up=None, fov=None,
     meshes = doc.get("mesh")
     if meshes is None:
         raise w.error((), "missing [[mesh]] (at least one)")
-    if not isinstance(meshes, list):
+    if isinstance(meshes, dict):
         raise w.error(("mesh",), "must be an array of tables: write [[mesh]], not [mesh]")
+    if not isinstance(meshes, list):
+        raise w.error(("mesh",), f"must be an array of tables ([[mesh]]), not {_kind(meshes)}")
     if not meshes:
         raise w.error(("mesh",), "is empty: give at least one [[mesh]]")
     base = os.path.dirname(os.path.abspath(label))
