@@ -31,7 +31,9 @@ centre); ``near_parallel`` (det near 0); ``grazing`` (target at a relative dista
 geometry at that scale);
 ``huge`` (edges near the domain's maximum); ``far`` (geometry near the domain's
 bound, far from the origin); ``thin`` (aspect ratios ``2**6`` to ``2**16``, targets near
-the long edges); ``on_start`` (ray origin on the triangle, or just behind or in front).
+the long edges); ``on_start`` (ray origin on the triangle, or just behind or in front);
+``flush`` (edges near ``2**(emin/2)``, so that N, det and t' are near the format's flush
+level and some of their products flush to zero: the certified bounds' flush terms).
 """
 
 from __future__ import annotations
@@ -53,7 +55,7 @@ __all__ = ["FAMILIES", "StressCases", "generate", "reference", "evaluate", "pool
            "bisect_scale", "bisect_certified", "vectors"]
 
 FAMILIES = ("random", "shared_edge", "shared_vertex", "near_parallel", "grazing", "tiny",
-            "huge", "far", "thin", "on_start")
+            "huge", "far", "thin", "on_start", "flush")
 
 
 @dataclass
@@ -228,6 +230,14 @@ def _fam_on_start(rng, n, fmt):
     return _single(rng, n, scale, rng.uniform(-4, 4, (n, 3)), (p, tri), dist=scale * off)
 
 
+def _fam_flush(rng, n, fmt):
+    tri = _tri_local(rng, n)
+    p = _bary_point(tri, rng.uniform(-0.2, 1.2, n), rng.uniform(-0.2, 1.2, n))
+    scale = 2.0 ** (fmt.emin / 2 + rng.uniform(-1, 4, n))
+    centre = rng.uniform(-1, 1, (n, 3)) * (scale * 2.0 ** rng.uniform(0, 6, n))[:, None]
+    return _single(rng, n, scale, centre, (p, tri), dist=scale * 2.0 ** rng.uniform(0, 6, n))
+
+
 def _fam_shared_edge(rng, n, fmt):
     """Quads split along a diagonal: rays aimed at the diagonal hit (in R) one or both."""
     z = np.zeros(n)
@@ -268,7 +278,7 @@ def _fam_shared_vertex(rng, n, fmt, k=6):
 
 _GEN = {"random": _fam_random, "grazing": _fam_grazing, "near_parallel": _fam_near_parallel,
         "tiny": _fam_tiny, "huge": _fam_huge, "far": _fam_far, "thin": _fam_thin,
-        "on_start": _fam_on_start, "shared_edge": _fam_shared_edge,
+        "on_start": _fam_on_start, "shared_edge": _fam_shared_edge, "flush": _fam_flush,
         "shared_vertex": _fam_shared_vertex}
 
 
