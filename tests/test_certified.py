@@ -107,3 +107,14 @@ def test_scale_only_shrinks_the_decided_set():
     decided = full["outcome"] != 2
     assert np.array_equal(half["outcome"][decided], full["outcome"][decided])
     assert (half["outcome"] != 2).sum() >= decided.sum()
+
+
+def test_rtl_mode_check():
+    from raplas_hdl.model.modes import RTL_MODES, check_rtl_mode
+
+    assert check_rtl_mode("conservative") == "conservative"
+    assert "certified" not in RTL_MODES
+    with pytest.raises(ValueError, match="RTL has no certified mode"):
+        check_rtl_mode("certified")
+    with pytest.raises(ValueError, match="mode must be one of"):
+        check_rtl_mode("bogus")

@@ -11,9 +11,11 @@ campaigns and the CLI.
 
 from __future__ import annotations
 
-__all__ = ["MODES", "check_mode"]
+__all__ = ["MODES", "RTL_MODES", "check_mode", "check_rtl_mode"]
 
 MODES = ("paper", "conservative", "certified")
+#: The modes the RTL implements (the certified mode exists in the golden model only).
+RTL_MODES = ("paper", "conservative")
 
 
 def check_mode(mode) -> str:
@@ -26,4 +28,19 @@ def check_mode(mode) -> str:
     """
     if mode not in MODES:
         raise ValueError(f"mode must be one of {', '.join(MODES)}, not {mode!r}")
+    return mode
+
+
+def check_rtl_mode(mode) -> str:
+    """``mode`` if the RTL implements it (:data:`RTL_MODES`).
+
+    Raises
+    ------
+    ValueError
+        For an unknown mode, or one the RTL does not have yet, naming it.
+    """
+    check_mode(mode)
+    if mode not in RTL_MODES:
+        raise ValueError(f"the RTL has no {mode} mode yet (RTL modes: {', '.join(RTL_MODES)}); "
+                         f"it exists in the golden model only")
     return mode
