@@ -81,11 +81,12 @@ def test_reference_sees_the_errors_of_the_other_modes():
     assert compare_reference(result, ref)["tri_id_differ"] > 0
 
 
-def test_filtered_reference_equals_exact_reference():
+@pytest.mark.parametrize("method", ["filtered", "tree"])
+def test_fast_references_equal_exact_reference(method):
     scene = get_scene("soup")
-    result = render(scene, ModelBackend(FP24, mode="certified"), SMALL)
+    result = render(scene, ModelBackend(FP24, mode="conservative"), SMALL)
     a = exact_reference(result, scene.triangles, "exact")
-    b = exact_reference(result, scene.triangles, "filtered")
+    b = exact_reference(result, scene.triangles, method)
     assert (a["tri_id"] == b["tri_id"]).all()
     assert np.array_equal(a["visibility"], b["visibility"], equal_nan=True)
 

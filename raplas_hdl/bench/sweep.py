@@ -393,10 +393,10 @@ class _SweepModel(ModelBackend):
             self._warming = False
 
     def trace(self, batch, run_b, run_start, run_sph, best_t, best_tri, tmin=0.0, tmax=None,
-              exclude=None):
+              exclude=None, any_hit=False):
         if self._warming:
             return super().trace(batch, run_b, run_start, run_sph, best_t, best_tri, tmin,
-                                 tmax, exclude)
+                                 tmax, exclude, any_hit)
         run_b = np.ascontiguousarray(run_b, np.int64)
         run_start = np.ascontiguousarray(run_start, np.int64)
         run_sph = np.ascontiguousarray(run_sph, np.int64)
@@ -416,7 +416,7 @@ class _SweepModel(ModelBackend):
         for lo, hi in zip(cut[:-1], cut[1:]):
             rs = run_start[lo:hi + 1]
             c = super().trace(batch, run_b[lo:hi], rs - rs[0], run_sph[rs[0]:rs[-1]], best_t,
-                              best_tri, tmin, tmax, exclude)
+                              best_tri, tmin, tmax, exclude, any_hit)
             counters[lo:hi] = c
             self._account(batch, c)
             if self.pair_budget is not None and self.pairs_issued > self.pair_budget:

@@ -391,7 +391,7 @@ class ModelBackend(Backend):
         from ..engine.certified import CERT_COUNTERS, certified_pass
         from .resolve import resolve_pending
 
-        if not any_hit and (best_tri >= 0).any():
+        if not any_hit and (best_tri[np.asarray(run_b, np.int64)] >= 0).any():
             raise ValueError("a certified nearest-hit pass starts from rays without a hit")
         lo = np.where(best_tri >= 0, best_t, np.inf)
         hi = lo.copy()

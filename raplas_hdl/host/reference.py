@@ -12,7 +12,11 @@ brute force, without culling and without the unit, from
   pairs a second: the test scenes);
 - ``method="filtered"``: every pair through the float64 filter of R
   (:mod:`raplas_hdl.engine.exact_filter`) in compiled code, the pairs it cannot decide or
-  order in exact arithmetic (:func:`raplas_hdl.host.resolve.resolve_pending`): meshes.
+  order in exact arithmetic (:func:`raplas_hdl.host.resolve.resolve_pending`);
+- ``method="tree"``: as ``filtered``, over the triangles of the leaf spheres of a sphere
+  hierarchy that the ray's *line* passes within (float64 distance test, radii recomputed
+  here to contain their triangles and children with a relative slack of ``1e-9``, far
+  above float64's error on these few operations): meshes.
 """
 
 from __future__ import annotations
@@ -31,12 +35,14 @@ __all__ = ["exact_reference", "compare_reference"]
 
 
 @njit(nogil=True, cache=True)
-def _brute(o, d, tri, ids, tmin, tmax, excl, any_hit, lo, hi, best_lo, best_hi, best_tri,
-           pend):
-    """Rays ``lo .. hi-1`` (bundle ``b``, one ray each) against every triangle ``ids``."""
+def _brute(o, d, tri, ids, start, per_ray, tmin, tmax, excl, any_hit, lo, hi, best_lo,
+           best_hi, best_tri, pend):
+    """Rays ``lo .. hi-1`` (bundle ``b``, one ray each) against the triangles ``ids`` (every
+    ray all of them; ``per_ray``: ray ``b`` those of ``ids[start[b]:start[b+1]]``)."""
     n = 0
     for b in range(lo, hi):
-        for k in range(ids.size):
+        k0, k1 = (start[b], start[b + 1]) if per_ray else (0, ids.size)
+        for k in range(k0, k1):
             tid = ids[k]
             if tid == excl[b]:
                 continue
@@ -63,7 +69,72 @@ def _brute(o, d, tri, ids, tmin, tmax, excl, any_hit, lo, hi, best_lo, best_hi, 
     return n
 
 
-def _filtered(o, d, tris, ids, tmin, tmax, excl, any_hit):
+@njit(cache=True)
+def _near_line(c, r, o, d, dd):
+    """The line ``o + t d`` passes within ``r`` (with slack) of ``c``."""
+    px, py, pz = c[0] - o[0], c[1] - o[1], c[2] - o[2]
+    qx = py * d[2] - pz * d[1]
+    qy = pz * d[0] - px * d[2]
+    qz = px * d[1] - py * d[0]
+    rr = r * (1.0 + 1e-9) + 1e-9 * (abs(px) + abs(py) + abs(pz))
+    return qx * qx + qy * qy + qz * qz <= rr * rr * dd
+
+
+@njit(nogil=True, cache=True)
+def _tree_candidates(o, d, centres, radii, child_start, child_index, node_leaf, leaf_tris,
+                     lo, hi, count, out):
+    """Per ray ``lo .. hi-1``: the triangles of the leaves its line passes near; ``count``
+    (rays + 1 prefix, filled for the range) and ``out`` (None on a counting run)."""
+    stack = np.empty(4096, np.int64)
+    for i in range(lo, hi):
+        dd = d[i, 0] * d[i, 0] + d[i, 1] * d[i, 1] + d[i, 2] * d[i, 2]
+        n = 0
+        top = 0
+        stack[0] = 0
+        top = 1
+        while top:
+            top -= 1
+            k = stack[top]
+            if not _near_line(centres[k], radii[k], o[i], d[i], dd):
+                continue
+            leaf = node_leaf[k]
+            if leaf >= 0:
+                for j in range(leaf_tris.shape[1]):
+                    t = leaf_tris[leaf, j]
+                    if t >= 0:
+                        if out.shape[0]:
+                            out[count[i] + n] = t
+                        n += 1
+                continue
+            for c in range(child_start[k], child_start[k + 1]):
+                stack[top] = child_index[c]
+                top += 1
+        if not out.shape[0]:
+            count[i + 1] = n
+
+
+def _safe_tree(tris, ids):
+    """A sphere hierarchy over triangles ``ids`` whose radii contain their triangles and
+    children in float64 with room (module docstring)."""
+    from .spheres import build_sphere_tree
+
+    tree = build_sphere_tree(tris[ids], 8, 8)
+    c = tree.centres
+    r = np.zeros(len(c))
+    lt = tree.leaf_tris
+    for leaf, node in enumerate(tree.leaf_node):
+        v = tris[ids[lt[leaf][lt[leaf] >= 0]]].reshape(-1, 3)
+        r[node] = np.sqrt(((v - c[node]) ** 2).sum(axis=1).max())
+    for node in np.argsort(-tree.depth, kind="stable"):
+        kids = tree.child_index[tree.child_start[node]:tree.child_start[node + 1]]
+        if kids.size:
+            r[node] = (np.sqrt(((c[kids] - c[node]) ** 2).sum(axis=1)) + r[kids]).max()
+        r[node] = r[node] * (1.0 + 1e-9) + 1e-300
+    leaf_tris = np.where(lt >= 0, ids[np.maximum(lt, 0)], -1)
+    return tree, r, leaf_tris
+
+
+def _filtered(o, d, tris, ids, tmin, tmax, excl, any_hit, tree=None):
     n = len(o)
     best_lo = np.full((n, 1), np.inf)
     best_hi = best_lo.copy()
@@ -72,13 +143,27 @@ def _filtered(o, d, tris, ids, tmin, tmax, excl, any_hit):
     d = np.ascontiguousarray(d, np.float64)
     tmx = np.ascontiguousarray(np.asarray(tmax, np.float64).reshape(n, 1))
 
+    if tree is not None:
+        t, radii, leaf_tris = tree
+        count = np.zeros(n + 1, np.int64)
+        args = (o, d, t.centres, radii, t.child_start, t.child_index, t.node_leaf, leaf_tris)
+        run_chunks(n, lambda lo, hi: _tree_candidates(*args, lo, hi, count,
+                                                      np.zeros(0, np.int64)), min_chunk=256)
+        np.cumsum(count, out=count)
+        cand = np.empty(count[-1], np.int64)
+        run_chunks(n, lambda lo, hi: _tree_candidates(*args, lo, hi, count, cand),
+                   min_chunk=256)
+    else:
+        count = np.arange(n + 1, dtype=np.int64) * 0
+        cand = ids
+
     def chunk(lo, hi):
         cap = 4096
         while True:
             pend = np.empty((cap, 3), np.int64)
             saved = best_lo[lo:hi].copy(), best_hi[lo:hi].copy(), best_tri[lo:hi].copy()
-            k = _brute(o, d, tris, ids, float(tmin), tmx, excl, any_hit, lo, hi, best_lo,
-                       best_hi, best_tri, pend)
+            k = _brute(o, d, tris, cand, count, tree is not None, float(tmin), tmx, excl,
+                       any_hit, lo, hi, best_lo, best_hi, best_tri, pend)
             if k <= cap:
                 return pend[:k]
             best_lo[lo:hi], best_hi[lo:hi], best_tri[lo:hi] = saved
@@ -123,7 +208,7 @@ def exact_reference(result, tris, method: str = "exact") -> dict:
         Rendered with ``RenderSettings(record_rays=True)``.
     tris : ndarray (F, 3, 3)
         The scene's triangles as the render loaded them (normalised scene coordinates).
-    method : ``"exact"`` or ``"filtered"``
+    method : ``"exact"``, ``"filtered"`` or ``"tree"``
 
     Returns
     -------
@@ -133,12 +218,17 @@ def exact_reference(result, tris, method: str = "exact") -> dict:
     if result.rays is None:
         raise ValueError("the render did not record its rays (RenderSettings(record_rays="
                          "True))")
-    if method not in ("exact", "filtered"):
-        raise ValueError(f"method must be 'exact' or 'filtered', not {method!r}")
-    fn = _exact if method == "exact" else _filtered
+    if method not in ("exact", "filtered", "tree"):
+        raise ValueError(f"method must be 'exact', 'filtered' or 'tree', not {method!r}")
     rays = result.rays
     tris = np.ascontiguousarray(tris, np.float64)
     ids = np.asarray(rays["loaded"], np.int64)
+    fn = _exact if method == "exact" else _filtered
+    if method == "tree":
+        tree = _safe_tree(tris, ids)
+
+        def fn(*a):
+            return _filtered(*a, tree=tree)
     po, pd, yx = rays["primary_o"], rays["primary_d"], rays["primary_yx"]
     n = len(po)
     tri_id = np.full(result.tri_id.shape, -1, np.int64)
