@@ -1,0 +1,148 @@
+"""Stages 1 and 2: the command / plane loader and the sphere feeder.
+
+Run position -> [run-list read] -> [Sphere Memory read] -> ``o``, a 2-stage stall pipeline,
+one sphere per cycle, then the run's marker; before a run whose bank's planes are not the
+array's, the drain and the plane load (see ``docs/intersection-unit.md``).
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Module, Mux, Signal
+from amaranth.lib import data, stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from ...model.memory_image import UnitConfig
+from ...model.records import PLANE
+from ..records import struct_layout
+from .memories import read_ports
+from .streams import cmd_layout, sphere_layout, tag_layout
+
+__all__ = ["SphereFeeder"]
+
+
+class SphereFeeder(wiring.Component):
+    """Accepts runs on ``cmd``; loads the run's planes into the array when they are stale;
+    sends the run's spheres, then its marker, on ``o``.
+
+    Parameters
+    ----------
+    config : UnitConfig
+    capacity : int
+        More than the spheres the array can hold between its ``i`` and ``o`` handshakes.
+
+    Members
+    -------
+    cmd : In(stream.Signature(cmd_layout))
+        Runs; ``ready`` while the feeder is idle.
+    o : Out(stream.Signature(sphere_layout))
+        Spheres for the array; ``id`` is a :func:`~.streams.tag_layout`.
+    pw_en, pw_addr, pw_data : Out(1), Out(range(rows + cols)), Out(PLANE layout)
+        The array's plane write port.
+    rlist, sphere, plane : Out(read_signature(...))
+        Run-list, Sphere Memory and Plane Memory read ports.
+    plane_written : In(2)
+        Bit b: the host writes a plane of bank b this cycle (the bank goes stale).
+    retired : In(1)
+        A sphere left the array (its ``o`` handshake).
+    spheres : Out(1)
+        A sphere of a run (not a marker) enters the array this cycle.
+    """
+
+    def __init__(self, config: UnitConfig, capacity: int):
+        self._cfg = config
+        self._capacity = capacity
+        super().__init__({
+            **read_ports(config, "rlist", "sphere", "plane"),
+            "cmd": In(stream.Signature(cmd_layout(config))),
+            "o": Out(stream.Signature(sphere_layout(config))),
+            "pw_en": Out(1), "pw_addr": Out(range(config.n_planes)),
+            "pw_data": Out(struct_layout(PLANE, config)),
+            "plane_written": In(2), "retired": In(1), "spheres": Out(1),
+        })
+
+    def elaborate(self, platform):
+        cfg = self._cfg
+        m = Module()
+        n_planes, sid_bits, w = cfg.n_planes, cfg.sphere_id_bits, cfg.fmt.width
+        tag = tag_layout(cfg)
+        run = Signal(cmd_layout(cfg))         # the run being fed
+        pos = Signal(cfg.run_count_bits)      # its next position
+        f1 = Signal(data.StructLayout({"v": 1, "ind": 1, "sid": sid_bits, "tag": tag}))
+        f2 = Signal(data.StructLayout({"v": 1, "tag": tag}))
+        adv = Signal()                        # the pipeline moves
+        issue = Signal()
+        issue_marker = Signal()
+        m.d.comb += adv.eq(~f2.v | self.o.ready)
+
+        # a plane write makes that bank's planes stale in the array
+        dirty = Signal(2, init=0b11)
+        new_dirty = Signal(2)
+        loaded_bank = Signal()
+        m.d.comb += new_dirty.eq(dirty | self.plane_written)
+        m.d.sync += dirty.eq(new_dirty)
+        # spheres between the array's input and output handshakes: the planes may change
+        # only when none is left
+        in_array = Signal(range(self._capacity))
+        m.d.sync += in_array.eq(in_array + (self.o.valid & self.o.ready) - self.retired)
+        drained = Signal()
+        m.d.comb += drained.eq((in_array == 0) & ~f1.v & ~f2.v)
+
+        ld_k = Signal(range(n_planes))
+        ld_v = Signal()
+        ld_kd = Signal(range(n_planes))
+        m.d.sync += [ld_v.eq(0), ld_kd.eq(ld_k)]
+        with m.FSM(name="feeder"):
+            with m.State("START"):
+                # one state change after reset, so that every simulator evaluates the
+                # processes that depend on the state (Icarus does not run them at time 0)
+                m.next = "IDLE"
+            with m.State("IDLE"):
+                m.d.comb += self.cmd.ready.eq(1)
+                with m.If(self.cmd.valid):
+                    p = self.cmd.payload
+                    m.d.sync += [run.eq(p), pos.eq(0)]
+                    stale = (p.bank != loaded_bank) | new_dirty.bit_select(p.bank, 1)
+                    with m.If(stale):
+                        m.next = "DRAIN"
+                    with m.Else():
+                        m.next = "FEED"
+            with m.State("DRAIN"):
+                with m.If(drained):
+                    m.d.sync += [ld_k.eq(0), loaded_bank.eq(run.bank)]
+                    m.next = "LOAD"
+            with m.State("LOAD"):
+                m.d.comb += self.plane.addr.eq(Mux(run.bank, ld_k + n_planes, ld_k))
+                m.d.sync += [ld_k.eq(ld_k + 1), ld_v.eq(1)]
+                with m.If(ld_k == 0):
+                    # the bank is clean from the first read on (a write after it re-dirties)
+                    m.d.sync += dirty.eq(new_dirty & Mux(run.bank, 0b01, 0b10))
+                with m.If(ld_k == n_planes - 1):
+                    m.next = "FEED"
+            with m.State("FEED"):
+                m.d.comb += [issue.eq(1), issue_marker.eq(pos == run.count)]
+                with m.If(adv):
+                    m.d.sync += pos.eq(pos + 1)
+                    with m.If(issue_marker):
+                        m.next = "IDLE"
+        m.d.comb += [self.pw_en.eq(ld_v), self.pw_addr.eq(ld_kd),
+                     self.pw_data.eq(self.plane.data)]
+
+        # position -> f1 (run-list read) -> f2 (Sphere Memory read)
+        sid_direct = Signal(sid_bits)
+        m.d.comb += [sid_direct.eq(run.first + pos),
+                     self.rlist.addr.eq(Mux(run.bank, sid_direct + cfg.max_spheres,
+                                            sid_direct)),
+                     self.rlist.en.eq(adv)]
+        f1_sid = Signal(sid_bits)
+        m.d.comb += [f1_sid.eq(Mux(f1.ind, self.rlist.data, f1.sid)),
+                     self.sphere.addr.eq(f1_sid), self.sphere.en.eq(adv)]
+        with m.If(adv):
+            m.d.sync += [f1.v.eq(issue), f1.ind.eq(run.indirect), f1.sid.eq(sid_direct),
+                         f1.tag.marker.eq(issue_marker), f1.tag.bank.eq(run.bank),
+                         f1.tag.keep_all.eq(run.keep_all),
+                         f2.v.eq(f1.v), f2.tag.eq(f1.tag), f2.tag.sphere.eq(f1_sid)]
+        m.d.comb += [self.o.valid.eq(f2.v), self.o.payload.id.eq(f2.tag),
+                     self.o.payload.c.eq(self.sphere.data[:3 * w]),
+                     self.o.payload.r.eq(self.sphere.data[3 * w:4 * w]),
+                     self.spheres.eq(f2.v & self.o.ready & ~f2.tag.marker)]
+        return m
