@@ -75,7 +75,7 @@ def add_parser(subparsers):
     g.add_format_option(p, field_widths=True)
     src = p.add_mutually_exclusive_group()
     src.add_argument("--vectors", metavar="FILE",
-                     help="cases with expected results (formats above; not intersection-unit)")
+                     help="cases with expected results (formats above)")
     src.add_argument("--random", type=g.int_range(1, MAX_CASES), metavar="N", default=None,
                      help=f"N seeded random cases checked against the model, 1 to "
                           f"{MAX_CASES:,} (intersection-unit: runs, at most {MAX_RUNS:,}); "
@@ -205,8 +205,6 @@ def check(args) -> None:
         g.reject(args, ("valid_density",), "to intersection-unit (its harness presents each "
                                            "command until taken; --stall-density sets the "
                                            "result back-pressure)")
-        g.reject(args, ("vectors", "write_vectors"), "to intersection-unit (its cases are "
-                                                     "runs on a random scene: use --random N)")
         if args.options.get("target") == "virtex4":
             raise g.UsageError("--target virtex4 is not available for intersection-unit in "
                                "cosim yet (its live harness builds the generic unit)")
@@ -305,9 +303,15 @@ def run(args) -> int:
     return 1 if bad else 0
 
 
+def _rate(x: float) -> str:
+    return f"{x:,.0f}" if x >= 100 else f"{x:.3g}"
+
+
 def _print_rate(info, total) -> None:
-    print(f"cases/s: {info['vectors_per_s']:,.0f} (simulator run {info['run_s']:.2f} s, "
-          f"{info['cycles']} cycles; build {info['build_s']:.1f} s; total {total:.1f} s)")
+    run_s = info["run_s"]
+    cps = f", {_rate(info['cycles'] / run_s)} cycles/s" if run_s > 0 else ""
+    print(f"cases/s: {_rate(info['vectors_per_s'])} (simulator run {run_s:.2f} s, "
+          f"{info['cycles']} cycles{cps}; build {info['build_s']:.1f} s; total {total:.1f} s)")
 
 
 def _run_fp(args) -> int:

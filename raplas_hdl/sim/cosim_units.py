@@ -45,7 +45,7 @@ __all__ = ["COSIM_UNITS", "UnitCosim", "compare", "plane_wrapper_verilog", "unit
 #: minute, runs near the -O2 speed for these designs). Icarus builds with -g2005
 #: (:data:`raplas_hdl.sim.unit_driver.ICARUS_ARGS`: under -g2012 an ``always @*`` whose
 #: inputs never change stays X; a time-shared array then loses its first plane write).
-VERILATOR_ARGS = ("--output-split", "0", "-CFLAGS", "-O1")
+VERILATOR_ARGS = ()
 #: Sphere IDs of the plane-sphere array (its default).
 SPHERE_ID_BITS = 16
 #: Ray and triangle IDs of the ray-triangle unit (its defaults).
@@ -267,11 +267,12 @@ class UnitCosim:
 def _batch(simulator, spec, text, key, columns, valid_density, stall_density, seed,
            timeout_s):
     from .harness import run_batch
-    from .unit_driver import ICARUS_ARGS
+    from .unit_driver import ICARUS_ARGS, _verilator_pch_fix
 
-    return run_batch(simulator, spec, text, key, columns, valid_density, stall_density, seed,
-                     timeout_s=timeout_s,
-                     build_args=VERILATOR_ARGS if simulator == "verilator" else ICARUS_ARGS)
+    with _verilator_pch_fix(simulator):
+        return run_batch(simulator, spec, text, key, columns, valid_density, stall_density,
+                         seed, timeout_s=timeout_s,
+                         build_args=VERILATOR_ARGS if simulator == "verilator" else ICARUS_ARGS)
 
 
 def _key(*parts) -> str:
@@ -653,8 +654,11 @@ class IntersectionCosim(UnitCosim):
 
         kw = {k: self.options[k] for k in ("rows", "cols", "testers", "tris_per_sphere",
                                            "mode") if k in self.options}
-        self.config = UnitConfig(fmt=fmt, max_triangles=256, max_spheres=256, **kw)
+        # the memories of tests/test_unit_harness.py's unit (one build serves both)
+        self.config = UnitConfig(fmt=fmt, max_triangles=256, max_spheres=128, fifo_depth=8,
+                                 **kw)
         self.header_params = {"rows": self.config.rows, "cols": self.config.cols,
+                              "tris_per_sphere": self.config.tris_per_sphere,
                               "mode": self.config.mode}
 
     def random(self, n, seed):
@@ -664,7 +668,9 @@ class IntersectionCosim(UnitCosim):
 
         cfg = self.config
         rng = np.random.default_rng([seed, 41])
-        scene = random_scene(cfg, 160, seed=seed, size=1.2, extent=4.0, empty_spheres=2)
+        # at most 60 triangles per list entry: the spheres fit Sphere Memory
+        scene = random_scene(cfg, min(160, 60 * cfg.tris_per_sphere), seed=seed, size=1.2,
+                             extent=4.0, empty_spheres=2)
         runs = []
         for k in range(n):
             s = int(rng.integers(0, scene.n_spheres))
@@ -693,12 +699,143 @@ class IntersectionCosim(UnitCosim):
 
         return {"runs": run_runs(self.config, cases["scene"], cases["runs"])}
 
-    def read(self, path):
-        raise ValueError("intersection-unit takes --random only (a vectors file for a whole "
-                         "scene is not defined yet)")
+    def _kinds(self):
+        """T, S (the scene), B, PL, RAY (a bundle), RUN, SPH (a run and its sphere list),
+        BEAT, CTR (its expected result stream and counters)."""
+        from raplas_hdl.model.records import COUNTERS, RESULT
 
-    def write(self, path, cases, expected):
-        raise ValueError("intersection-unit takes no --write-vectors")
+        cfg, w = self.config, self.config.fmt.width
+        xyz = lambda v: tuple((f"{v}{c}", w) for c in "xyz")
+        res = RESULT.bind(cfg)
+        return {
+            "T": LineKind("T", xyz("v0") + xyz("e1") + xyz("e2") + xyz("n")),
+            "S": LineKind("S", xyz("c") + (("r", w), ("count", cfg.count_bits))
+                          + tuple((f"tri{k}", cfg.tri_id_bits)
+                                  for k in range(cfg.tris_per_sphere))),
+            "B": LineKind("B", ()),
+            "PL": LineKind("PL", xyz("n") + (("p", w),)),
+            "RAY": LineKind("RAY", xyz("o") + xyz("d") + (("enable", 1),)),
+            "RUN": LineKind("RUN", (("bundle", 32), ("keep_all", 1), ("all", 1))),
+            "SPH": LineKind("SPH", (("id", cfg.sphere_id_bits),)),
+            "BEAT": LineKind("BEAT", tuple((s.name, s.width) for s in res.fields)),
+            "CTR": LineKind("CTR", tuple((n, 32) for n in COUNTERS.names if n != "cycles")),
+        }
+
+    @property
+    def kinds(self):
+        return tuple(self._kinds().values())
+
+    def from_items(self, path, items):
+        from raplas_hdl.model.memory_image import BundleMemory, SceneMemory
+        from raplas_hdl.model.records import RESULT
+
+        cfg, k = self.config, self._kinds()
+        by = {t: [] for t in k}
+        bundles, runs, exp = [], [], []
+        cur_b = cur_run = None
+
+        def close_bundle(lineno):
+            if cur_b is None:
+                return
+            pl, ry = cur_b
+            if len(pl) != cfg.n_planes or len(ry) != cfg.n_rays:
+                raise ValueError(f"{path}:{lineno}: bundle {len(bundles)} has {len(pl)} PL and "
+                                 f"{len(ry)} RAY lines, not {cfg.n_planes} and {cfg.n_rays}")
+            pl, ry = np.array(pl, np.uint32), np.array(ry, np.uint32)
+            bundles.append(BundleMemory(pl[:, :3], pl[:, 3], ry[:, :3], ry[:, 3:6],
+                                        ry[:, 6].astype(bool)))
+            return
+
+        def close_run(lineno):
+            if cur_run is None:
+                return
+            b, keep, ids, beats, ctr = cur_run
+            if ctr is None:
+                raise ValueError(f"{path}:{lineno}: run {len(runs)} has no CTR line")
+            stream = np.zeros(len(beats), RESULT.dtype())
+            for j, (name, _) in enumerate(k["BEAT"].fields):
+                stream[name] = [v[j] for v in beats]
+            runs.append((bundles[b], ids, keep))
+            exp.append((stream, ctr))
+
+        for lineno, tag, v in items:
+            if tag in ("T", "S"):
+                if bundles or cur_b is not None:
+                    raise ValueError(f"{path}:{lineno}: {tag} lines (the scene) come before "
+                                     "the bundles")
+                by[tag].append(v)
+            elif tag == "B":
+                cur_b = close_bundle(lineno)
+                cur_b = ([], [])
+            elif tag in ("PL", "RAY"):
+                if cur_b is None:
+                    raise ValueError(f"{path}:{lineno}: a {tag} line outside a bundle (B line)")
+                cur_b[0 if tag == "PL" else 1].append(v)
+            elif tag == "RUN":
+                cur_b = close_bundle(lineno)
+                close_run(lineno)
+                if v[0] >= len(bundles):
+                    raise ValueError(f"{path}:{lineno}: RUN names bundle {v[0]}; the file "
+                                     f"has {len(bundles)} so far")
+                cur_run = [v[0], bool(v[1]), None if v[2] else [], [], None]
+            elif cur_run is None or cur_run[4] is not None and tag != "CTR":
+                raise ValueError(f"{path}:{lineno}: a {tag} line outside a run (RUN ... CTR)")
+            elif tag == "SPH":
+                if cur_run[2] is None or cur_run[3]:
+                    raise ValueError(f"{path}:{lineno}: SPH lines follow a RUN with ALL 0, "
+                                     "before its BEAT lines")
+                cur_run[2].append(v[0])
+            elif tag == "BEAT":
+                cur_run[3].append(v)
+            else:       # CTR
+                if cur_run[4] is not None:
+                    raise ValueError(f"{path}:{lineno}: a second CTR line for one run")
+                cur_run[4] = dict(zip([n for n, _ in k["CTR"].fields], v))
+        close_run(items[-1][0])
+        if not by["T"] or not by["S"]:
+            raise ValueError(f"{path}: no scene (T and S lines)")
+        if not runs:
+            raise ValueError(f"{path}: no cases (RUN lines)")
+        t = np.array(by["T"], np.uint32)
+        sp = np.array(by["S"], np.uint32)
+        scene = SceneMemory(t[:, 0:3], t[:, 3:6], t[:, 6:9], t[:, 9:12], sp[:, 0:3], sp[:, 3],
+                            sp[:, 5:], sp[:, 4])
+        scene.check(cfg)
+        runs = [(b, None if ids is None else np.array(ids, np.int64), keep)
+                for b, ids, keep in runs]
+        for b, ids, _ in runs:
+            b.check(cfg)
+            if ids is not None and ids.size and ids.max() >= scene.n_spheres:
+                raise ValueError(f"{path}: a run names sphere {int(ids.max())}; the scene "
+                                 f"has {scene.n_spheres}")
+        return {"scene": scene, "runs": runs}, {"runs": exp}
+
+    def blocks(self, cases, expected):
+        k, sc = self._kinds(), cases["scene"]
+        cols = lambda kind, arr: {n: arr[:, j] for j, (n, _) in enumerate(kind.fields)}
+        out = [(k["T"], cols(k["T"], np.concatenate([sc.v0, sc.e1, sc.e2, sc.n], 1))),
+               (k["S"], cols(k["S"], np.concatenate(
+                   [sc.centres, sc.radii[:, None], sc.tri_counts[:, None],
+                    _pad(sc.tri_lists, self.config.tris_per_sphere)], 1)))]
+        index = {}
+        for b, _, _ in cases["runs"]:
+            if id(b) in index:
+                continue
+            index[id(b)] = len(index)
+            out.append((k["B"], {}))
+            out.append((k["PL"], cols(k["PL"], np.concatenate([b.plane_n, b.plane_p[:, None]],
+                                                             1))))
+            out.append((k["RAY"], cols(k["RAY"], np.concatenate(
+                [b.ray_o, b.ray_d, b.enable[:, None].astype(np.uint32)], 1))))
+        for (b, ids, keep), (stream, ctr) in zip(cases["runs"], expected["runs"]):
+            out.append((k["RUN"], {"bundle": [index[id(b)]], "keep_all": [int(keep)],
+                                   "all": [int(ids is None)]}))
+            if ids is not None and len(ids):
+                out.append((k["SPH"], {"id": np.asarray(ids)}))
+            if len(stream):
+                out.append((k["BEAT"], {n: stream[n] for n, _ in k["BEAT"].fields}))
+            out.append((k["CTR"], {n: [ctr[n]] for n, _ in k["CTR"].fields}))
+        return out
 
     def simulate(self, cases, simulator, *, valid_density, stall_density, seed,
                  timeout_s=None):
@@ -759,6 +896,13 @@ class IntersectionCosim(UnitCosim):
         what = "every sphere" if ids is None else f"{len(ids)} spheres"
         return (f"run {i}: {int(b.enable.sum())} of {b.enable.size} rays enabled, {what}"
                 + (", keep_all" if keep else ""))
+
+
+def _pad(a, width: int) -> np.ndarray:
+    """``a`` (n, <= width) padded with zero columns to ``width``."""
+    out = np.zeros((a.shape[0], width), np.uint32)
+    out[:, :a.shape[1]] = a
+    return out
 
 
 _CLASSES = {c.name: c for c in (TesterCosim, ArrayCosim, RayTriangleCosim,

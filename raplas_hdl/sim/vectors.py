@@ -175,6 +175,9 @@ def write_lines(path, unit: str, fmt, params: dict, kinds, blocks) -> None:
     with open(path, "w", encoding="utf-8") as fh:
         fh.write(f"# {unit} {fmt.name}{extra}: {tag_text} (hex)\n")
         for kind, cols in blocks:
+            if not kind.fields:
+                fh.write(f"{kind.tag}\n")
+                continue
             arr = np.stack([np.asarray(cols[n], dtype=np.uint64) for n, _ in kind.fields],
                            axis=1)
             prefix = f"{kind.tag} " if kind.tag else ""
