@@ -197,3 +197,37 @@ def test_bad_target_or_format_names_the_problem():
     with pytest.raises(ValueError, match="stages"):
         FPAdd(FP24, 8, target="virtex4")
     assert fp_add_latency(FP32) == 4          # the generic adder takes every format
+
+
+# -- synthesis --------------------------------------------------------------------------------
+
+def test_fp16_synthesises_to_two_dsp48_and_fewer_luts(tmp_path):
+    """Fresh Yosys runs (``synth_xilinx -family xc4v``): two DSP48, and fewer LUTs, slices
+    and path cells than the generic adder of the same format."""
+    from raplas_hdl.synth.report import adder_option_rows
+
+    generic, v4 = adder_option_rows([FP16], ("rtz",), cache_dir=tmp_path)
+    assert (generic["target"], v4["target"]) == ("generic", "virtex4")
+    assert not v4["cached"] and (generic["dsp48"], v4["dsp48"]) == (0, 2), v4["cells_by_type"]
+    assert v4["latency"] == LATENCY and generic["latency"] == 4
+    assert v4["luts"] < generic["luts"] and v4["slices_est"] < generic["slices_est"]
+    assert v4["path_cells"] < generic["path_cells"]
+    assert adder_option_rows([FP32], ("rtz",), cached_only=True) == []   # does not fit
+
+
+def test_cli_synth_fp_add_target(tmp_path, capsys, monkeypatch):
+    from raplas_hdl.cli import main
+
+    monkeypatch.setenv("RAPLAS_BUILD", str(tmp_path))
+    out = tmp_path / "add.md"
+    assert main(["synth", "fp-add", "--target", "virtex4", "--format", "E4M3",
+                 "-o", str(out)]) == 0
+    text = out.read_text()
+    assert "| fp-add (target=virtex4) | E4M3 | rtz | 7 | 2 |" in text
+    capsys.readouterr()
+    assert main(["synth", "fp-add", "--target", "xc7"]) == 2
+    assert "target must be one of generic, virtex4" in capsys.readouterr().err
+    assert main(["synth", "fp-add", "--target", "virtex4", "--format", "FP32"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("raplas-hdl synth: error: the DSP48 adder") and "not 24" in err
+    assert len(err.strip().splitlines()) == 1
