@@ -10,6 +10,11 @@ Two components with one interface, so that a unit picks its target with a parame
   (bit for bit, under Icarus with the ``DSP48`` model Yosys ships in
   ``share/xilinx/cells_sim.v``: ``tests/test_dsp48.py``).
 
+:func:`dsp48` is the one place that instantiates the primitive (its ports and attributes
+as Yosys's ``cells_sim.v`` models them): the plain multiply of :class:`DSP48Mul`, or
+``P = C +- (A*B + CARRYIN)`` with ``CREG``/``SUBTRACTREG``/``CARRYINREG``, the form the
+DSP48 adder (:mod:`.fp_add_dsp48`) uses for its shifts and significand add.
+
 Interface (both): ``a``, ``b``: ``In(width)`` unsigned; ``en``: ``In(1)`` clock enable (all
 registers hold while it is 0); ``p``: ``Out(2*width)``, the exact product of the operands
 presented ``latency`` enabled clock edges earlier. Domain ``sync``; the data registers have

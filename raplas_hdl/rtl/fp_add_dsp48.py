@@ -20,12 +20,14 @@ low ``D`` bits of ``P``, no sticky logic. Two cases need more than a 17-bit one-
 * ``d >= M+3`` (``y`` lies wholly below the guard bit): ``B = 0`` and ``CARRYIN`` = "y is
   not zero".
 
-``CARRYIN`` adds (or, with ``SUBTRACT``, takes) one unit of ``P``'s last place. The exact
-result lies strictly between two multiples of ``2^k``, ``P`` without the carry-in on one
-of them: ``k >= 1`` is the weight of ``B``'s last place after a pre-shift (hence ``B >= 2``),
-``k = D-2`` when ``d >= M+3``. The carry-in moves ``P`` strictly inside that interval, and
-the interval holds no rounding boundary: ``k <= D-2``, while the result's guard bit weighs
-at least ``2^(D-2)`` (these sums need at most one place of left normalisation). So the correct rounding of ``P`` equals that of the exact
+``CARRYIN`` adds (or, with ``SUBTRACT``, takes) one unit of ``P``'s last place. Without
+it ``P`` is a multiple of ``2^k`` and the exact result lies strictly between ``P`` and the
+next multiple of ``2^k`` in the direction of ``y``'s sign: after a pre-shift ``k`` is the
+weight of ``B``'s lowest possible bit, ``k >= 1`` (hence ``B >= 2``); for ``d >= M+3`` the
+dropped ``y`` is below ``2^(D-2)``, so take ``k = D-2``. With ``k >= 1`` the carry-in puts
+``P`` strictly inside that interval, and the interval holds no rounding boundary:
+``k <= D-2``, while the result's guard bit weighs at least ``2^(D-2)`` (these sums need at
+most one place of left normalisation). So ``P`` rounds as the exact result does. So the correct rounding of ``P`` equals that of the exact
 result, which is what the generic adder computes with its floor-and-sticky datapath.
 
 ``chop`` drops ``y``'s bits below its own last place before the add. For an addition that
