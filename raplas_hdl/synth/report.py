@@ -532,7 +532,9 @@ def _render_dsp48_adder(rows) -> list[str]:
            "leading-zero count, a 3:1 multiplexer and the packing. Results and flags bit "
            "for bit those of the generic adder (`tests/test_fp_add_dsp48.py`: E4M3 every "
            "pair in all roundings under Verilator and Icarus with Yosys's `DSP48` model; "
-           "FP16, FP20, FP24 100,000 pairs each as `full` tests). Latency 7 instead of 4 "
+           "FP16, FP20, FP24 100,000 random and special pairs each under Verilator and FP24 "
+           "8,000 under Icarus as `full` tests, all with random gaps and clock-enable "
+           "stalls). Latency 7 instead of 4 "
            "(the DSP48's AREG/BREG, MREG and PREG, twice, and the output register). "
            "Formats with up to 16 fraction bits (FP32's 24-bit significand does not fit "
            "one DSP48 operand).", "",
