@@ -19,7 +19,7 @@ Plus: latency and errors in Python, and the Yosys mapping (two DSP48, fewer LUTs
 import numpy as np
 import pytest
 from amaranth.back import verilog
-from amaranth.hdl import Cat, Module
+from amaranth.hdl import Cat, Const, Module
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -174,7 +174,8 @@ def test_fp24_random_icarus():
 
 @pytest.mark.parametrize("fmt", [E4M3, FP16, FP20, FP24, FPFormat(8, 15), FPFormat(2, 1)])
 def test_latency_and_selection(fmt):
-    for kw in ({"target": "virtex4"}, {"multiplier": "virtex4"}, {"stages": 2, "target": "virtex4"}):
+    for kw in ({"target": "virtex4"}, {"multiplier": "virtex4"},
+               {"stages": 2, "target": "virtex4"}):
         unit = FPAdd(fmt, **kw)
         assert (unit.target, unit.latency) == ("virtex4", LATENCY)
         assert len(unit.stage_steps) == LATENCY == fp_add_latency(fmt, 4, "virtex4")
@@ -231,3 +232,13 @@ def test_cli_synth_fp_add_target(tmp_path, capsys, monkeypatch):
     err = capsys.readouterr().err
     assert err.startswith("raplas-hdl synth: error: the DSP48 adder") and "not 24" in err
     assert len(err.strip().splitlines()) == 1
+
+
+def test_dsp48_helper_refuses_wide_operands():
+    from raplas_hdl.rtl.dsp48 import dsp48
+
+    m = Module()
+    with pytest.raises(ValueError, match="operand a has 18 bits; at most 17"):
+        dsp48(m, "d", Const(0, 18), Const(0, 4), en=Const(1, 1))
+    with pytest.raises(ValueError, match="addend c has 48 bits; at most 47"):
+        dsp48(m, "d", Const(0, 4), Const(0, 4), en=Const(1, 1), c=Const(0, 48))

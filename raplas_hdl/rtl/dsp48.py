@@ -46,8 +46,8 @@ from amaranth.lib.wiring import In, Out
 
 from .pipeline import delay
 
-__all__ = ["DSP48Mul", "PipelinedMul", "dsp48", "make_multiplier", "multiplier_latency", "dsp48_count",
-           "dsp48_sim_model", "LIMB", "TARGETS"]
+__all__ = ["DSP48Mul", "PipelinedMul", "dsp48", "make_multiplier", "multiplier_latency",
+           "dsp48_count", "dsp48_sim_model", "LIMB", "TARGETS"]
 
 #: Largest unsigned operand width of one DSP48 multiply (18-bit signed inputs).
 LIMB = 17

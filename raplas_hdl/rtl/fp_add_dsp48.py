@@ -27,8 +27,8 @@ weight of ``B``'s lowest possible bit, ``k >= 1`` (hence ``B >= 2``); for ``d >=
 dropped ``y`` is below ``2^(D-2)``, so take ``k = D-2``. With ``k >= 1`` the carry-in puts
 ``P`` strictly inside that interval, and the interval holds no rounding boundary:
 ``k <= D-2``, while the result's guard bit weighs at least ``2^(D-2)`` (these sums need at
-most one place of left normalisation). So ``P`` rounds as the exact result does. So the correct rounding of ``P`` equals that of the exact
-result, which is what the generic adder computes with its floor-and-sticky datapath.
+most one place of left normalisation). So the correct rounding of ``P`` equals that of the
+exact result, which is what the generic adder computes with its floor-and-sticky datapath.
 
 ``chop`` drops ``y``'s bits below its own last place before the add. For an addition that
 is ``floor(P / 2^D)``; for a subtraction ``x - floor(y/2^d) = ceil(x - y/2^d)``, so ``C``
