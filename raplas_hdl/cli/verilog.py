@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from ..model.modes import MODES
+from ..model.modes import RTL_MODES
 from . import grammar as g
 
 #: The units and their options as the command line states them: option -> (argparse
@@ -28,7 +28,7 @@ UNIT_LIMITS = {
     "fifo_depth": {"board-top": (2, 1024, 16)},
 }
 CHOICE_OPTIONS = {
-    "mode": (MODES, "paper",
+    "mode": (RTL_MODES, "paper",
              ("ray-triangle", "intersection-unit", "board-top")),
     "target": (("generic", "virtex4"), "generic",
                ("fp-mul", "plane-sphere-tester", "plane-sphere", "ray-triangle",

@@ -43,7 +43,7 @@ from amaranth.lib.fifo import SyncFIFO
 from amaranth.lib.wiring import In, Out
 
 from ..fp.format import FLAG_OVERFLOW, FPFormat, check_format
-from ..model.modes import MODES, check_mode
+from ..model.modes import MODES, check_rtl_mode
 from ..model.conservative import MARGIN_NAMES, margin_constants
 from ..model.records import EVENT_COUNT_BITS, PAIR, RT_RESULT
 from .fp_add import FPAdd
@@ -128,7 +128,7 @@ class RayTriangleUnit(wiring.Component):
                  ray_id_bits: int = 16, tri_id_bits: int = 16, add_stages: int = 4,
                  mul_stages: int = 3, multiplier: str = "generic"):
         check_format(fmt)
-        check_mode(mode)
+        check_rtl_mode(mode)
         for name, bits in (("ray_id_bits", ray_id_bits), ("tri_id_bits", tri_id_bits)):
             if not isinstance(bits, int) or isinstance(bits, bool) or not 1 <= bits <= 64:
                 raise ValueError(f"{name} must be an integer from 1 to 64, not {bits!r}")
