@@ -415,7 +415,7 @@ def _render(scene: Scene, backend: Backend, settings: RenderSettings):
             img = np.empty((H, W, 3))
             img[:] = np.asarray(scene.background, float)
             col = phong(pts, nrm, scene.colours[tri_h], np.asarray(scene.camera.position, float),
-                        scene.light, scene.material, vis)
+                        scene.light, scene.material_at(tri_h), vis)
             img[ys, xs] = col
             d = dir_img.reshape(-1, 3)
             sees = _light_hits(np.asarray(scene.camera.position, float), d, scene.light,
