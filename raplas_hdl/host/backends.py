@@ -411,11 +411,19 @@ class ModelBackend(Backend):
 
     def usable(self, tris):
         """Triangles that :func:`raplas_hdl.host.triangles.make_triangles` keeps (not
-        non-finite, degenerate, flushed, or outside the format's domain)."""
+        non-finite, degenerate, flushed, or outside the format's domain). The certified
+        mode's domain is its own (:func:`raplas_hdl.model.certified.certified_domain`: a
+        bound on the coordinates, no minimum edge, its bounds cover flushes)."""
         from .triangles import make_triangles
 
         tris = np.asarray(tris, dtype=np.float64)
-        rec = make_triangles(tris, self.fmt, on_bad="skip", check_domain=True)
+        if self.mode == "certified":
+            from ..model.certified import certified_domain
+
+            rec = make_triangles(tris, self.fmt, on_bad="skip",
+                                 max_coord=certified_domain(self.fmt))
+        else:
+            rec = make_triangles(tris, self.fmt, on_bad="skip", check_domain=True)
         self._records = (tris, rec)
         ok = np.zeros(len(tris), bool)
         ok[rec.ids] = True

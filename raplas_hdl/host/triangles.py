@@ -134,7 +134,8 @@ class TriangleRecords:
 
 
 def make_triangles(vertices, fmt: FPFormat, *, on_bad: str = "raise",
-                   check_domain: bool = False) -> TriangleRecords:
+                   check_domain: bool = False, max_coord: float | None = None
+                   ) -> TriangleRecords:
     """Build encoded triangle records from vertices.
 
     Parameters
@@ -147,6 +148,9 @@ def make_triangles(vertices, fmt: FPFormat, *, on_bad: str = "raise",
         Raise on the first bad triangle, or leave bad triangles out and count them.
     check_domain : bool
         Also treat triangles outside the format's domain as bad (``out_of_domain``).
+    max_coord : float, optional
+        Also treat triangles with a coordinate beyond this bound as ``out_of_domain`` (the
+        certified mode's domain, which has no minimum edge).
 
     Raises
     ------
@@ -176,6 +180,8 @@ def make_triangles(vertices, fmt: FPFormat, *, on_bad: str = "raise",
         edges = np.stack([np.linalg.norm(x, axis=1) for x in (e1, e2, e3)], axis=1)
         short = (edges < dom.min_edge).any(axis=1)
         reason[(reason == "") & (too_far | short)] = "out_of_domain"
+    if max_coord is not None:
+        reason[(reason == "") & (np.abs(safe) > max_coord).any(axis=(1, 2))] = "out_of_domain"
     bad = reason != ""
     if on_bad == "raise" and bad.any():
         i = int(np.flatnonzero(bad)[0])
