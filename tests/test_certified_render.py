@@ -112,3 +112,16 @@ def test_pending_pairs_are_resolved_exactly():
     assert best_tri[0, 0] == 0
     assert np.isclose(best_t[0, 0] * np.linalg.norm(batch.directions[0, 0]), 4.0)
     assert backend.certified["exact"] >= 2
+
+
+def test_certified_renders_fp16_where_the_paper_domain_ends():
+    """terrain's triangles are outside FP16's domain for paper and conservative mode (edges
+    under the minimum); the certified mode has no minimum edge and still gives R's image."""
+    scene = get_scene("terrain")
+    with pytest.raises(ValueError, match="no usable triangle"):
+        render(scene, ModelBackend(FP16, mode="paper"), SMALL)
+    result = render(scene, ModelBackend(FP16, mode="certified"), SMALL)
+    assert result.stats["skipped_triangles"]["out_of_domain"] == 0
+    ref = exact_reference(result, scene.triangles, "tree")
+    assert compare_reference(result, ref) == {"pixels": 256, "tri_id_differ": 0,
+                                              "visibility_differ": 0}
