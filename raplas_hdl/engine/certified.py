@@ -34,7 +34,8 @@ from numba import njit
 from ..fp.numba_cache import drop_stale_cache
 from .exact_filter import HIT, MISS, filter_pair
 from .kernels import N_COUNTERS, plane_masks
-from ..model.certified import pair_certified
+from ..model.certified import block_certified, block_scratch, gather, pair_certified
+from ..model.ray_triangle import BLOCK
 
 drop_stale_cache(__file__)
 
@@ -55,33 +56,77 @@ def _push(pend, npend, b, ray, tid):
     return npend + 1
 
 
+@njit(cache=True, error_model="numpy")
+def _tail(outcome, cnt, u, b, ray, di, tid, o64, d64, tri64, tmin, tmax, excl, any_hit,
+          best_lo, best_hi, best_tri, counters, pend, npend):
+    """One pair's outcome into run ``u``'s counters and ray ``(b, ray)``'s state: the filter,
+    the fold and the pending list (module docstring); returns the new pending count."""
+    counters[u, 5] += cnt & 0xFF
+    counters[u, 6] += (cnt >> 8) & 0xFF
+    counters[u, 7] += (cnt >> 16) & 0xFF
+    if outcome == 0:
+        return npend
+    if outcome == 1:
+        counters[u, 4] += 1
+    else:
+        counters[u, N_COUNTERS] += 1
+    if tid == excl[b] or (any_hit and best_tri[b, ray] >= 0):
+        return npend
+    counters[u, N_COUNTERS + 1] += 1
+    st, tl, th = filter_pair(
+        o64[b, 0], o64[b, 1], o64[b, 2], d64[di, 0], d64[di, 1], d64[di, 2],
+        tri64[tid, 0, 0], tri64[tid, 0, 1], tri64[tid, 0, 2],
+        tri64[tid, 1, 0], tri64[tid, 1, 1], tri64[tid, 1, 2],
+        tri64[tid, 2, 0], tri64[tid, 2, 1], tri64[tid, 2, 2])
+    tmx = tmax[b, ray]
+    if st == MISS or (st == HIT and (th < tmin or tl > tmx)):
+        return npend
+    if st != HIT or tl < tmin or th > tmx:
+        counters[u, N_COUNTERS + 2] += 1
+        return _push(pend, npend, b, ray, tid)
+    bt = best_tri[b, ray]
+    if bt < 0 or th < best_lo[b, ray]:
+        best_lo[b, ray] = tl
+        best_hi[b, ray] = th
+        best_tri[b, ray] = tid
+        return npend
+    if tl <= best_hi[b, ray]:
+        counters[u, N_COUNTERS + 2] += 1
+        return _push(pend, npend, b, ray, tid)
+    return npend
+
+
 @njit(nogil=True, cache=True, error_model="numpy")
 def trace_certified(pn, pp, ro, rd, enable, keep_all, rows, cols, run_b, run_start, run_sph,
                     sc, sr, tcount, tlist, v0, e1, e2, nn, cc, o64, d64, tri64, tmin, tmax,
                     excl, any_hit, lo, hi, best_lo, best_hi, best_tri, counters, pend,
-                    e, m, r):
+                    e, m, r, block):
     """Runs ``lo .. hi-1`` of a pass in certified mode (module docstring).
 
     ``o64 (B, 3)`` and ``d64 (B*R, 3)`` are the encoded rays decoded to float64, ``tri64
     (F, 3, 3)`` the original triangles. ``best_lo, best_hi, best_tri (B, R)``: each ray's
     folded hit (interval of ``t`` and ID; -1 for none), updated in place. Pending entries
     go to ``pend (cap, 3)``; returns how many there were (more than ``cap``: run the range
-    again with a larger buffer).
+    again with a larger buffer). ``block``: the unit's pairs a block at a time
+    (:func:`~raplas_hdl.model.certified.block_certified`), then each lane's filter, fold
+    and pending entry in stream order; else one pair at a time
+    (:func:`~raplas_hdl.model.certified.pair_certified`). Both give the same results.
     """
     n_planes = rows + cols
     n_rays = rows * cols
     rm = np.empty(rows, np.bool_)
     cm = np.empty(cols, np.bool_)
+    g, w, gb, res = block_scratch()
+    lanes = np.empty((5, BLOCK), np.int64)          # bundle, ray, direction row, triangle, run
+    n = 0
     npend = 0
     for u in range(lo, hi):
         b = run_b[u]
         base = b * n_planes
         issued = 0
         skipped = 0
-        before = npend
         for c in range(4, N_COUNTERS + 3):
             counters[u, c] = 0
-        ox, oy, oz = o64[b, 0], o64[b, 1], o64[b, 2]
         for q in range(run_start[u], run_start[u + 1]):
             s = run_sph[q]
             plane_masks(pn, pp, base, rows, n_planes, keep_all[b], sc, sr, s, rm, cm, e, m, r)
@@ -97,59 +142,61 @@ def trace_certified(pn, pp, ro, rd, enable, keep_all, rows, cols, run_b, run_sta
                         skipped += nt
                         continue
                     di = b * n_rays + ray
-                    tmx = tmax[b, ray]
                     for k in range(nt):
                         tid = tlist[s, k]
                         issued += 1
-                        outcome, _, _, cnt = pair_certified(ro, b, rd, di, v0, e1, e2, nn,
-                                                            tid, e, m, r, cc)
-                        counters[u, 5] += cnt & 0xFF
-                        counters[u, 6] += (cnt >> 8) & 0xFF
-                        counters[u, 7] += (cnt >> 16) & 0xFF
-                        if outcome == 0:
+                        if not block:
+                            outcome, _, _, cnt = pair_certified(ro, b, rd, di, v0, e1, e2,
+                                                                nn, tid, e, m, r, cc)
+                            npend = _tail(outcome, cnt, u, b, ray, di, tid, o64, d64, tri64,
+                                          tmin, tmax, excl, any_hit, best_lo, best_hi,
+                                          best_tri, counters, pend, npend)
                             continue
-                        if outcome == 1:
-                            counters[u, 4] += 1
-                        else:
-                            counters[u, N_COUNTERS] += 1
-                        if tid == excl[b] or (any_hit and best_tri[b, ray] >= 0):
-                            continue
-                        counters[u, N_COUNTERS + 1] += 1
-                        st, tl, th = filter_pair(
-                            ox, oy, oz, d64[di, 0], d64[di, 1], d64[di, 2],
-                            tri64[tid, 0, 0], tri64[tid, 0, 1], tri64[tid, 0, 2],
-                            tri64[tid, 1, 0], tri64[tid, 1, 1], tri64[tid, 1, 2],
-                            tri64[tid, 2, 0], tri64[tid, 2, 1], tri64[tid, 2, 2])
-                        if st == MISS or (st == HIT and (th < tmin or tl > tmx)):
-                            continue
-                        if st != HIT or tl < tmin or th > tmx:
-                            npend = _push(pend, npend, b, ray, tid)
-                            continue
-                        bt = best_tri[b, ray]
-                        if bt < 0 or th < best_lo[b, ray]:
-                            best_lo[b, ray] = tl
-                            best_hi[b, ray] = th
-                            best_tri[b, ray] = tid
-                        elif tl <= best_hi[b, ray]:
-                            npend = _push(pend, npend, b, ray, tid)
+                        gather(g, n, ro, b, rd, di, v0, e1, e2, nn, tid)
+                        lanes[0, n], lanes[1, n], lanes[2, n] = b, ray, di
+                        lanes[3, n], lanes[4, n] = tid, u
+                        n += 1
+                        if n == BLOCK:
+                            npend = _flush(g, w, gb, res, n, lanes, ro, rd, v0, e1, e2, nn,
+                                           cc, o64, d64, tri64, tmin, tmax, excl, any_hit,
+                                           best_lo, best_hi, best_tri, counters, pend, npend,
+                                           e, m, r)
+                            n = 0
         n_sph = run_start[u + 1] - run_start[u]
         counters[u, 0] = n_sph
         counters[u, 1] = n_sph * n_planes
         counters[u, 2] = issued
         counters[u, 3] = skipped
-        counters[u, N_COUNTERS + 2] = npend - before
+    if n:
+        npend = _flush(g, w, gb, res, n, lanes, ro, rd, v0, e1, e2, nn, cc, o64, d64, tri64,
+                       tmin, tmax, excl, any_hit, best_lo, best_hi, best_tri, counters, pend,
+                       npend, e, m, r)
+    return npend
+
+
+@njit(cache=True, error_model="numpy")
+def _flush(g, w, gb, res, n, lanes, ro, rd, v0, e1, e2, nn, cc, o64, d64, tri64, tmin, tmax,
+           excl, any_hit, best_lo, best_hi, best_tri, counters, pend, npend, e, m, r):
+    """The block's pairs, then each lane's tail in order; returns the pending count."""
+    block_certified(g, w, gb, res, n, lanes[0], lanes[2], lanes[3], ro, rd, v0, e1, e2, nn,
+                    e, m, r, cc)
+    for q in range(n):
+        npend = _tail(res[0, q], res[5, q], lanes[4, q], lanes[0, q], lanes[1, q],
+                      lanes[2, q], lanes[3, q], o64, d64, tri64, tmin, tmax, excl, any_hit,
+                      best_lo, best_hi, best_tri, counters, pend, npend)
     return npend
 
 
 def certified_pass(arith, scene, batch, run_b, run_start, run_sph, tri64, best_lo, best_hi,
-                   best_tri, tmin=0.0, tmax=None, exclude=None, any_hit=False):
+                   best_tri, tmin=0.0, tmax=None, exclude=None, any_hit=False, block=True):
     """Runs of a pass in certified mode (module docstring).
 
     ``arith`` is the model's :class:`~raplas_hdl.engine.passes.Arithmetic` (its ``extra``
     holds the certified constants, its ``cull_tail`` the format and rounding); ``tri64``
     the original triangles (F, 3, 3); other arguments as
     :func:`~raplas_hdl.engine.passes.trace_pass`, with ``best_lo, best_hi`` the interval of
-    each ray's folded ``t``.
+    each ray's folded ``t``; ``block`` False runs the unit's pairs one at a time (the
+    reference of the block path: the same results).
 
     Returns
     -------
@@ -175,7 +222,7 @@ def certified_pass(arith, scene, batch, run_b, run_start, run_sph, tri64, best_l
         while True:
             pend = np.empty((cap, 3), np.int64)
             n = trace_certified(*args, lo, hi, best_lo, best_hi, best_tri, counters, pend,
-                                *arith.cull_tail)
+                                *arith.cull_tail, bool(block))
             if n <= cap:
                 return pend[:n]
             # the buffer was too small: restore the range's rays and run it again

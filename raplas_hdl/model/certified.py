@@ -54,14 +54,16 @@ from llvmlite import ir
 from numba import njit, types
 from numba.extending import intrinsic
 
+from ..fp.fast import common_add, common_mul
 from ..fp.format import FLAG_OVERFLOW, FPFormat, check_format
 from ..fp.kernels import neg_k, rmode_code
 from ..fp.numba_cache import drop_stale_cache
 from ..parallel import run_chunks
-from .ray_triangle import _add, _mul, _sub, _tally, store
+from .ray_triangle import BLOCK, _add, _mul, _sub, _tally, store, vpair
 
 __all__ = ["VARIANTS", "DEFAULT_VARIANT", "N_OPS", "MAX_EXP_BITS", "certified_constants",
-           "certified_domain", "check_certified_format", "pair_certified", "intersect_certified"]
+           "certified_domain", "check_certified_format", "pair_certified", "intersect_certified",
+           "block_certified", "block_scratch", "gather", "N_BOUND_ROWS", "N_RES_ROWS"]
 
 #: Bound variants: name -> (j leading fraction bits read from each |x|, k fraction bits of
 #: the bound float).
@@ -238,23 +240,39 @@ def _eta(e):
 
 
 @njit(cache=True)
-def _input_bound(x, e, m, r, slack, k):
-    """Bound of an encoded input against its original value: ulp (rne: ulp/2), eta for a
-    zero pattern; times ``1 + 2**-INPUT_SLACK_EXP`` when ``slack``."""
-    if _is_zero(x, e, m):
-        b = _eta(e)
-    else:
-        b = _pow2(_exp(x, e, m) - m - (1 if r == 1 else 0))
+def _ulp(x, e, m, r):
+    """ulp (rne: ulp/2) of a pattern that is not zero."""
+    return _pow2(_exp(x, e, m) - m - (1 if r == 1 else 0))
+
+
+@njit(cache=True)
+def _slack(b, slack, k):
+    """``b``, times ``1 + 2**-INPUT_SLACK_EXP`` rounded up when ``slack``."""
     if slack:
         b = _ru(b + b * _pow2(-INPUT_SLACK_EXP), k)
     return b
 
 
 @njit(cache=True)
+def _input_bound(x, e, m, r, slack, k):
+    """Bound of an encoded input against its original value: ulp (rne: ulp/2), eta for a
+    zero pattern; times ``1 + 2**-INPUT_SLACK_EXP`` when ``slack``."""
+    return _slack(_eta(e) if _is_zero(x, e, m) else _ulp(x, e, m, r), slack, k)
+
+
+@njit(cache=True)
 def _rnd_mul(p, e, m, r):
     if _is_zero(p, e, m):
         return _eta(e)
-    return _pow2(_exp(p, e, m) - m - (1 if r == 1 else 0))
+    return _ulp(p, e, m, r)
+
+
+@njit(cache=True)
+def _rnd_add_nz(a, b, s, e, m, r):
+    """:func:`_rnd_add` when none of ``a, b, s`` is a zero pattern."""
+    if r == 2:                                          # chop: ulp of the largest
+        return _pow2(max(max(_exp(a, e, m), _exp(b, e, m)), _exp(s, e, m)) - m)
+    return _ulp(s, e, m, r)
 
 
 @njit(cache=True)
@@ -262,23 +280,27 @@ def _rnd_add(a, b, s, e, m, r, k):
     """Rounding error bound of ``s = a + b`` (operand patterns as the adder sees them)."""
     if _is_zero(a, e, m) or _is_zero(b, e, m):
         return 0.0                                      # x + 0 = x in every rounding
-    z = _is_zero(s, e, m)
+    if not _is_zero(s, e, m):
+        return _rnd_add_nz(a, b, s, e, m, r)
     if r == 2:                                          # chop: ulp of the largest
         top = max(_exp(a, e, m), _exp(b, e, m))
-        if not z:
-            top = max(top, _exp(s, e, m))
-        return _badd(_pow2(top - m), _eta(e), k) if z else _pow2(top - m)
-    if z:
-        return _eta(e)
-    return _pow2(_exp(s, e, m) - m - (1 if r == 1 else 0))
+        return _badd(_pow2(top - m), _eta(e), k)
+    return _eta(e)
+
+
+@njit(cache=True)
+def _mul_bound(a, ba, b, bb, rnd, e, m, j, k):
+    """``U(a) B_b + (U(b) + B_b) B_a + rnd``, the bound of ``mul(a, b)`` with rounding
+    term ``rnd``."""
+    t1 = _bmul(_upper(a, e, m, j), bb, k)
+    t2 = _bmul(_badd(_upper(b, e, m, j), bb, k), ba, k)
+    return _badd(_badd(t1, t2, k), rnd, k)
 
 
 @njit(cache=True)
 def _mul_b(a, ba, b, bb, p, e, m, r, j, k):
     """Bound of the product ``p = mul(a, b)``: ``U(a) B_b + (U(b) + B_b) B_a + rnd``."""
-    t1 = _bmul(_upper(a, e, m, j), bb, k)
-    t2 = _bmul(_badd(_upper(b, e, m, j), bb, k), ba, k)
-    return _badd(_badd(t1, t2, k), _rnd_mul(p, e, m, r), k)
+    return _mul_bound(a, ba, b, bb, _rnd_mul(p, e, m, r), e, m, j, k)
 
 
 @njit(cache=True)
@@ -366,7 +388,14 @@ def pair_full(o, oi, d, di, v0, e1, e2, nn, ti, e, m, r, cc):
         special = special or ((np.int64(x) >> m) & emf) == emf
     if special or (cnt & 0xFF) != 0:
         return np.uint8(2), tp, up, vp, det, cnt
-    sc = cc[0]
+    oc = _outcome(det, tp, up, vp, w, gdet, gt, gu, gv, gw, cc[0], e, m)
+    return oc, tp, up, vp, det, cnt
+
+
+@njit(cache=True)
+def _outcome(det, tp, up, vp, w, gdet, gt, gu, gv, gw, sc, e, m):
+    """Outcome (uint8) of finite results without overflow from their bounds, each scaled
+    by ``sc`` (module docstring)."""
     d_ge, d_gt, d_le, d_lt = _classify(det, gdet * sc, e, m)
     t_ge, t_gt, t_le, t_lt = _classify(tp, gt * sc, e, m)
     u_ge, u_gt, u_le, u_lt = _classify(up, gu * sc, e, m)
@@ -374,11 +403,11 @@ def pair_full(o, oi, d, di, v0, e1, e2, nn, ti, e, m, r, cc):
     w_ge, w_gt, w_le, w_lt = _classify(w, gw * sc, e, m)
     if ((d_gt and u_ge and v_ge and w_ge and t_ge)
             or (d_lt and u_le and v_le and w_le and t_le)):
-        return np.uint8(1), tp, up, vp, det, cnt
+        return np.uint8(1)
     if ((d_le or u_lt or v_lt or w_lt or t_lt)
             and (d_ge or u_gt or v_gt or w_gt or t_gt)):
-        return np.uint8(0), tp, up, vp, det, cnt
-    return np.uint8(2), tp, up, vp, det, cnt
+        return np.uint8(0)
+    return np.uint8(2)
 
 
 @njit(cache=True)
@@ -393,19 +422,195 @@ def pair_certified(o, oi, d, di, v0, e1, e2, nn, ti, e, m, r, cc):
     return out, tp, det, cnt
 
 
+# -- pairs a block at a time ------------------------------------------------------------------
+# The values of a block come from :func:`~raplas_hdl.model.ray_triangle.vpair` (the 34
+# operations as vector loops of the common case, BLOCK lanes); their bounds from the loops
+# below, one per stage of :func:`pair_full`, over every lane. In a lane whose operations all
+# took the common case every operand and result is a normal number and no flag is raised, so
+# no zero test of the bound terms applies (:func:`_rnd_add_nz`, :func:`_ulp`), the counts are
+# 0 and no result is special: the lane's bounds are :func:`pair_full`'s, bit for bit. The
+# products and partial sums of the dot products, which vpair does not keep, are recomputed
+# with the same common-case kernels. Every other lane is recomputed alone by
+# :func:`pair_full`. Rows of the bound block ``gb`` (float64, (N_BOUND_ROWS, BLOCK)):
+_BV, _B1, _B2, _BN = 0, 3, 6, 9        # input bounds of V0, E1, E2, N (x, y, z)
+_GT = 12                               # T = V0 - O (x, y, z)
+_GDET, _GTP = 15, 16
+_GQ = 17                               # Q = D x T (x, y, z)
+_GU, _GV, _GS, _GW, _ZERO = 20, 21, 22, 23, 24
+N_BOUND_ROWS = 25
+#: Rows of a block's results ``res`` (int64, (6, BLOCK)): outcome, t', u', v', det, counts.
+N_RES_ROWS = 6
+
+
+@njit(cache=True)
+def _vinput(x, out, slack, n, e, m, r, k):
+    for q in range(n):
+        out[q] = _slack(_ulp(x[q], e, m, r), slack, k)
+
+
+@njit(cache=True)
+def _vsub_b(a, ba, b, s, out, n, e, m, r, k):
+    """Bound of ``s = sub(a, b)``, ``b`` exact."""
+    for q in range(n):
+        out[q] = _badd(_badd(ba[q], 0.0, k), _rnd_add_nz(a[q], b[q], s[q], e, m, r), k)
+
+
+@njit(cache=True)
+def _mul_nz(a, ba, b, bb, p, e, m, r, j, k):
+    return _mul_bound(a, ba, b, bb, _ulp(p, e, m, r), e, m, j, k)
+
+
+@njit(cache=True)
+def _add_nz(a, ba, b, bb, s, e, m, r, k):
+    return _badd(_badd(ba, bb, k), _rnd_add_nz(a, b, s, e, m, r), k)
+
+
+@njit(cache=True)
+def _vdot_b(a0, a1, a2, ba0, ba1, ba2, b0, b1, b2, bb0, bb1, bb2, s, out, n, e, m, r, j, k):
+    """Bound of ``s = (a0*b0 + a1*b1) + a2*b2`` (:func:`_dot_b`)."""
+    for q in range(n):
+        p0 = common_mul(a0[q], b0[q], e, m, r)
+        p1 = common_mul(a1[q], b1[q], e, m, r)
+        p2 = common_mul(a2[q], b2[q], e, m, r)
+        s01 = common_add(p0, p1, e, m, r)
+        q0 = _mul_nz(a0[q], ba0[q], b0[q], bb0[q], p0, e, m, r, j, k)
+        q1 = _mul_nz(a1[q], ba1[q], b1[q], bb1[q], p1, e, m, r, j, k)
+        q2 = _mul_nz(a2[q], ba2[q], b2[q], bb2[q], p2, e, m, r, j, k)
+        g01 = _add_nz(p0, q0, p1, q1, s01, e, m, r, k)
+        out[q] = _add_nz(s01, g01, p2, q2, s[q], e, m, r, k)
+
+
+@njit(cache=True)
+def _vcross_b(a, b, bb, c, d, bd, x, out, n, e, m, r, j, k):
+    """Bound of ``x = a*b - c*d``, ``a, c`` exact (:func:`_cross_b`)."""
+    for q in range(n):
+        p = common_mul(a[q], b[q], e, m, r)
+        pq = common_mul(c[q], d[q], e, m, r)
+        gp = _mul_nz(b[q], bb[q], a[q], 0.0, p, e, m, r, j, k)
+        gq = _mul_nz(d[q], bd[q], c[q], 0.0, pq, e, m, r, j, k)
+        out[q] = _add_nz(p, gp, pq, gq, x[q], e, m, r, k)
+
+
+@njit(cache=True)
+def vbounds(g, w, gb, n, e, m, r, cc):
+    """The bounds of a block after :func:`~raplas_hdl.model.ray_triangle.vpair` (``g``
+    the operands, ``w`` its results, conservative layout), into ``gb``; exact for the lanes
+    whose ``w[11]`` is not negative."""
+    j = np.int64(cc[1])
+    k = np.int64(cc[2])
+    for c in range(3):
+        _vinput(g[6 + c], gb[_BV + c], False, n, e, m, r, k)
+        _vinput(g[9 + c], gb[_B1 + c], True, n, e, m, r, k)
+        _vinput(g[12 + c], gb[_B2 + c], True, n, e, m, r, k)
+        _vinput(g[15 + c], gb[_BN + c], True, n, e, m, r, k)
+        _vsub_b(g[6 + c], gb[_BV + c], g[c], w[6 + c], gb[_GT + c], n, e, m, r, k)
+    z = gb[_ZERO]
+    z[:] = 0.0
+    bn = gb[_BN], gb[_BN + 1], gb[_BN + 2]
+    _vdot_b(g[15], g[16], g[17], *bn, g[3], g[4], g[5], z, z, z, w[3], gb[_GDET], n,
+            e, m, r, j, k)
+    _vdot_b(g[15], g[16], g[17], *bn, w[6], w[7], w[8], gb[_GT], gb[_GT + 1], gb[_GT + 2],
+            w[0], gb[_GTP], n, e, m, r, j, k)
+    tx, ty, tz = w[6], w[7], w[8]
+    gtx, gty, gtz = gb[_GT], gb[_GT + 1], gb[_GT + 2]
+    _vcross_b(g[4], tz, gtz, g[5], ty, gty, w[9], gb[_GQ], n, e, m, r, j, k)
+    _vcross_b(g[5], tx, gtx, g[3], tz, gtz, w[10], gb[_GQ + 1], n, e, m, r, j, k)
+    _vcross_b(g[3], ty, gty, g[4], tx, gtx, w[12], gb[_GQ + 2], n, e, m, r, j, k)
+    gq = gb[_GQ], gb[_GQ + 1], gb[_GQ + 2]
+    _vdot_b(g[12], g[13], g[14], gb[_B2], gb[_B2 + 1], gb[_B2 + 2], w[9], w[10], w[12], *gq,
+            w[1], gb[_GU], n, e, m, r, j, k)
+    _vdot_b(g[9], g[10], g[11], gb[_B1], gb[_B1 + 1], gb[_B1 + 2], w[9], w[10], w[12], *gq,
+            w[2], gb[_GV], n, e, m, r, j, k)
+    gu, gv, gs, gw = gb[_GU], gb[_GV], gb[_GS], gb[_GW]
+    for q in range(n):
+        gs[q] = _add_nz(w[1, q], gu[q], w[2, q], gv[q], w[4, q], e, m, r, k)
+        gw[q] = _add_nz(w[3, q], gb[_GDET, q], w[4, q], gs[q], w[5, q], e, m, r, k)
+
+
+@njit(cache=True)
+def gather(g, q, o, oi, d, di, v0, e1, e2, nn, ti):
+    """Lane ``q`` of a block's operands ``g`` (18, BLOCK): ray row ``oi`` of ``o``, ``di``
+    of ``d``, triangle row ``ti`` (the layout of
+    :func:`~raplas_hdl.model.ray_triangle.vpair`)."""
+    g[0:3, q] = o[oi]
+    g[3:6, q] = d[di]
+    g[6:9, q] = v0[ti]
+    g[9:12, q] = e1[ti]
+    g[12:15, q] = e2[ti]
+    g[15:18, q] = nn[ti]
+
+
+@njit(cache=True)
+def block_certified(g, w, gb, res, n, lane_o, lane_d, lane_t, o, d, v0, e1, e2, nn, e, m, r,
+                    cc):
+    """:func:`pair_full` over a block of ``n`` lanes whose operands :func:`gather` put in
+    ``g``: lane ``q`` is the pair (``o`` row ``lane_o[q]``, ``d`` row ``lane_d[q]``, triangle
+    row ``lane_t[q]``). ``w`` (13, BLOCK) int64 and ``gb`` (N_BOUND_ROWS, BLOCK) float64 are
+    scratch; ``res`` (N_RES_ROWS, BLOCK) int64 receives per lane the outcome, t', u', v',
+    det and the packed counts, the same bits as :func:`pair_full`."""
+    vpair(g, w, n, True, e, m, r)
+    vbounds(g, w, gb, n, e, m, r, cc)
+    sc = cc[0]
+    for q in range(n):
+        if w[11, q] >= 0:
+            res[0, q] = _outcome(w[3, q], w[0, q], w[1, q], w[2, q], w[5, q], gb[_GDET, q],
+                                 gb[_GTP, q], gb[_GU, q], gb[_GV, q], gb[_GW, q], sc, e, m)
+            res[1, q] = w[0, q]
+            res[2, q] = w[1, q]
+            res[3, q] = w[2, q]
+            res[4, q] = w[3, q]
+            res[5, q] = 0
+        else:
+            oc, tp, up, vp, det, cnt = pair_full(o, lane_o[q], d, lane_d[q], v0, e1, e2, nn,
+                                                 lane_t[q], e, m, r, cc)
+            res[0, q] = oc
+            res[1, q] = tp
+            res[2, q] = up
+            res[3, q] = vp
+            res[4, q] = det
+            res[5, q] = cnt
+
+
+@njit(cache=True)
+def block_scratch():
+    """Scratch arrays ``(g, w, gb, res)`` of :func:`block_certified`."""
+    return (np.empty((18, BLOCK), np.int64), np.empty((13, BLOCK), np.int64),
+            np.empty((N_BOUND_ROWS, BLOCK), np.float64), np.empty((N_RES_ROWS, BLOCK), np.int64))
+
+
 @njit(nogil=True, cache=True)
 def _loop(o, d, v0, e1, e2, nn, cc, lo, hi, outc, t_o, u_o, v_o, det_o, cnt_o, e, m, r):
+    """Pairs ``lo .. hi-1`` one at a time (:func:`pair_full`)."""
     for i in range(lo, hi):
         oc, tp, up, vp, det, cnt = pair_full(o, i, d, i, v0, e1, e2, nn, i, e, m, r, cc)
         outc[i] = oc
         store(i, tp, up, vp, det, cnt, t_o, u_o, v_o, det_o, cnt_o)
 
 
+@njit(nogil=True, cache=True)
+def _block_loop(o, d, v0, e1, e2, nn, cc, lo, hi, outc, t_o, u_o, v_o, det_o, cnt_o, e, m,
+                r):
+    """Pairs ``lo .. hi-1`` a block at a time (:func:`block_certified`)."""
+    g, w, gb, res = block_scratch()
+    lane = np.empty(BLOCK, np.int64)
+    for start in range(lo, hi, BLOCK):
+        n = min(BLOCK, hi - start)
+        for q in range(n):
+            lane[q] = start + q
+            gather(g, q, o, start + q, d, start + q, v0, e1, e2, nn, start + q)
+        block_certified(g, w, gb, res, n, lane, lane, lane, o, d, v0, e1, e2, nn, e, m, r, cc)
+        for q in range(n):
+            outc[start + q] = res[0, q]
+            store(start + q, np.uint32(res[1, q]), np.uint32(res[2, q]), np.uint32(res[3, q]),
+                  np.uint32(res[4, q]), res[5, q], t_o, u_o, v_o, det_o, cnt_o)
+
+
 def intersect_certified(arrs, fmt: FPFormat, scale: float = 1.0,
-                        variant: str = DEFAULT_VARIANT) -> dict:
+                        variant: str = DEFAULT_VARIANT, block: bool = True) -> dict:
     """The certified mode over validated pair arrays ``(o, d, v0, e1, e2, n)`` (uint32,
     shape (n, 3) each); :func:`raplas_hdl.model.ray_triangle.intersect` is the public
-    entry. Returns ``outcome`` (uint8), ``t``, ``u``, ``v``, ``det`` (uint32) and
+    entry. ``block``: a block at a time (:func:`block_certified`), else one pair at a time
+    (:func:`pair_full`); the results are the same bits. Returns ``outcome`` (uint8), ``t``, ``u``, ``v``, ``det`` (uint32) and
     ``event_counts`` (uint8, (n, 3))."""
     cc = certified_constants(fmt, scale, variant)
     count = arrs[0].shape[0]
@@ -413,7 +618,8 @@ def intersect_certified(arrs, fmt: FPFormat, scale: float = 1.0,
     outs = [np.empty(count, dtype=np.uint32) for _ in range(4)]
     counts = np.empty((count, 3), dtype=np.uint8)
     key = (np.int64(fmt.exp_bits), np.int64(fmt.man_bits), np.int64(rmode_code(fmt)))
-    run_chunks(count, lambda lo, hi: _loop(*arrs, cc, lo, hi, outc, *outs, counts, *key))
+    loop = _block_loop if block else _loop
+    run_chunks(count, lambda lo, hi: loop(*arrs, cc, lo, hi, outc, *outs, counts, *key))
     return {"outcome": outc, "t": outs[0], "u": outs[1], "v": outs[2], "det": outs[3],
             "event_counts": counts}
 
