@@ -42,6 +42,15 @@ def serve(port, words):
     return ram
 
 
+async def wait_until(ctx, done, limit=5000):
+    """Clock until ``done()`` holds; fail after ``limit`` cycles (a stage that stopped)."""
+    for _ in range(limit):
+        if done():
+            return
+        await ctx.tick()
+    raise AssertionError(f"no progress in {limit} cycles")
+
+
 async def put(ctx, stream, payload):
     """Offer ``payload`` on ``stream``, ``valid`` held until the transfer."""
     ctx.set(stream.payload.as_value(), payload)
@@ -197,15 +206,13 @@ def test_feeder_sends_the_runs_spheres_and_loads_stale_planes(scene, bundles):
         for k, (first, count, bank, ind, keep, dirty) in enumerate(runs):
             if dirty is not None:
                 # the host rewrites a bank's planes only when its runs have left
-                while len(taken) < sum(r[1] + 1 for r in runs[:k]):
-                    await ctx.tick()
+                await wait_until(ctx, lambda: len(taken) >= sum(r[1] + 1 for r in runs[:k]))
                 ctx.set(dut.plane_written, 1 << dirty)
                 await ctx.tick()
                 ctx.set(dut.plane_written, 0)
             await put(ctx, dut.cmd, cmd.pack({"first": first, "count": count, "bank": bank,
                                               "indirect": ind, "keep_all": keep}))
-        while len(taken) < sum(r[1] + 1 for r in runs):
-            await ctx.tick()
+        await wait_until(ctx, lambda: len(taken) >= sum(r[1] + 1 for r in runs))
 
     async def watch(ctx):
         cycle = 0
@@ -267,8 +274,7 @@ def test_selector_matches_enumerate_pairs(scene, bundles, bank):
             await put(ctx, dut.i, pack(masks, id=tag, row_mask=bits(rows[k]),
                                        col_mask=bits(cols[k])))
         await put(ctx, dut.i, pack(masks, id=pack(tags, marker=1, bank=bank)))
-        while not jobs or not unpack(jl, jobs[-1])["marker"]:
-            await ctx.tick()
+        await wait_until(ctx, lambda: jobs and unpack(jl, jobs[-1])["marker"])
 
     async def watch_skips(ctx):
         async for _, _, v in ctx.tick().sample(dut.skipped):
@@ -308,8 +314,7 @@ def test_fetch_pairs_carry_the_model_records(scene, bundles):
             await put(ctx, dut.i, pack(jl, ray=ray, sid=s, bank=b,
                                        ntris=scene.tri_counts[s]))
         await put(ctx, dut.i, pack(jl, ray=3, sid=1, marker=1))
-        while not pairs or not pairs[-1] >> rb & 1:
-            await ctx.tick()
+        await wait_until(ctx, lambda: pairs and pairs[-1] >> rb & 1)
         assert not ctx.get(dut.overflow)
 
     words = scene_words(cfg, scene)
@@ -358,8 +363,8 @@ def test_framing_gives_the_models_result_stream():
     async def bench(ctx):
         for word in inputs:
             await put(ctx, dut.i, word)
-        while sum(b >> RESULT.bind(cfg)["last"].offset & 1 for b in out) < len(ref):
-            await ctx.tick()
+        last = RESULT.bind(cfg)["last"].offset
+        await wait_until(ctx, lambda: sum(b >> last & 1 for b in out) >= len(ref))
 
     async def watch_events(ctx):
         async for _, _, ev in ctx.tick().sample(dut.events.as_value()):
