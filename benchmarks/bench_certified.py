@@ -12,7 +12,11 @@ is wrong. The conservative margins (``raplas_hdl.model.conservative``) used as t
 Writes ``docs/results/certified.json``. The machine is shared: CPU time is reported beside
 wall time.
 
-Usage: ``python benchmarks/bench_certified.py [--tiles 40] [--seed 13] [--out PATH]``
+``--speed``: only the speed rows, printed: pairs per CPU-second of paper mode, of the
+certified mode one pair at a time (``block=False``, the path before the block path) and a
+block at a time, on the same pairs at FP24/rtz and FP16/rtz, each the best of three runs.
+
+Usage: ``python benchmarks/bench_certified.py [--tiles 40] [--seed 13] [--out PATH] [--speed]``
 """
 
 from __future__ import annotations
@@ -116,16 +120,44 @@ def _timed(fn, repeat=3):
     return best_w, best_c
 
 
+def speed_row(name, o, d, tri):
+    """Pairs per CPU-second (and wall second) of paper mode and of the certified mode one
+    pair at a time and a block at a time, on ``(o, d, tri)`` in format ``name``."""
+    from raplas_hdl.fp.format import parse_format
+    from raplas_hdl.model.ray_triangle import _vec
+
+    fmt = parse_format(name)
+    arrs, _ = _encoded(o, d, tri, fmt)
+    vec = [_vec(a, fmt, "x") for a in arrs]
+    runs = {"paper": lambda: intersect(*arrs, fmt, mode="paper"),
+            "certified_pairs": lambda: certified.intersect_certified(vec, fmt, block=False),
+            "certified_block": lambda: certified.intersect_certified(vec, fmt, block=True)}
+    row = {"format": name, "pairs": int(len(arrs[0]))}
+    for key, fn in runs.items():
+        fn()                                                                # compiled
+        w, c = _timed(fn)
+        row[f"{key}_pairs_per_cpu_s"] = len(arrs[0]) / c
+        row[f"{key}_pairs_per_s_wall"] = len(arrs[0]) / w
+    return row
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--tiles", type=int, default=40)
     ap.add_argument("--seed", type=int, default=13)
     ap.add_argument("--out", default="docs/results/certified.json")
+    ap.add_argument("--speed", action="store_true",
+                    help="print only the speed rows (paper, certified per pair, per block)")
     args = ap.parse_args(argv)
     from raplas_hdl.fp.format import parse_format
     from numba import get_num_threads
 
     o, d, tri = bunny_pairs(args.tiles, args.seed)
+    if args.speed:
+        for name in ("FP24/rtz", "FP16/rtz"):
+            print(json.dumps(speed_row(name, o, d, tri) | {"threads": get_num_threads()}),
+                  flush=True)
+        return
     rows = []
     for name in FORMATS:
         fmt = parse_format(name)

@@ -442,27 +442,66 @@ N_BOUND_ROWS = 25
 N_RES_ROWS = 6
 
 
+# Branch-free forms of the bound operations for those lanes (LLVM vectorises their loops):
+# every bound there is finite (below 2**800 for exp_bits <= 9) and non-negative, and every
+# pattern normal, so the tests of :func:`_ru`, :func:`_badd` and :func:`_upper` for zero,
+# infinite and NaN values never apply; the results are the same floats.
+@njit(cache=True)
+def _ru_nz(x, k):
+    """:func:`_ru` of a finite ``x >= 0``."""
+    mask = (np.int64(1) << (52 - k)) - 1
+    return _i2f((_f2i(x) + mask) & ~mask)
+
+
+@njit(cache=True)
+def _badd_nz(a, b, k):
+    """:func:`_badd` of finite bound floats with a finite sum."""
+    s = a + b
+    bb = s - a
+    err = (a - (s - bb)) + (b - bb)
+    r = _ru_nz(s, k)
+    bump = np.int64((err > 0.0) & (r == s))
+    return _i2f(_f2i(r) + (bump << (52 - k)))
+
+
+@njit(cache=True)
+def _upper_nz(x, e, m, j):
+    """:func:`_upper` of a pattern that is not zero, built as float64 bits: exponent ``ex``,
+    fraction the ``j`` leading bits plus one unit of the ``j``-th (a carry adds into the
+    exponent)."""
+    x = np.int64(x)
+    field = (x >> m) & ((np.int64(1) << e) - 1)
+    bias = (np.int64(1) << (e - 1)) - 1
+    lead = (x & ((np.int64(1) << m) - 1)) >> (m - j)
+    return _i2f((((field - bias + 1023) << 52) | (lead << (52 - j))) + (np.int64(1) << (52 - j)))
+
+
+@njit(cache=True)
+def _mul_nz(a, ba, b, bb, p, e, m, r, j, k):
+    """:func:`_mul_b` of normal patterns (:func:`_mul_bound`)."""
+    t1 = _ru_nz(_upper_nz(a, e, m, j) * bb, k)
+    t2 = _ru_nz(_badd_nz(_upper_nz(b, e, m, j), bb, k) * ba, k)
+    return _badd_nz(_badd_nz(t1, t2, k), _ulp(p, e, m, r), k)
+
+
+@njit(cache=True)
+def _add_nz(a, ba, b, bb, s, e, m, r, k):
+    """:func:`_add_b` of normal patterns."""
+    return _badd_nz(_badd_nz(ba, bb, k), _rnd_add_nz(a, b, s, e, m, r), k)
+
+
 @njit(cache=True)
 def _vinput(x, out, slack, n, e, m, r, k):
     for q in range(n):
-        out[q] = _slack(_ulp(x[q], e, m, r), slack, k)
+        b = _ulp(x[q], e, m, r)
+        out[q] = _ru_nz(b + b * _pow2(-INPUT_SLACK_EXP), k) if slack else b
 
 
 @njit(cache=True)
 def _vsub_b(a, ba, b, s, out, n, e, m, r, k):
     """Bound of ``s = sub(a, b)``, ``b`` exact."""
     for q in range(n):
-        out[q] = _badd(_badd(ba[q], 0.0, k), _rnd_add_nz(a[q], b[q], s[q], e, m, r), k)
-
-
-@njit(cache=True)
-def _mul_nz(a, ba, b, bb, p, e, m, r, j, k):
-    return _mul_bound(a, ba, b, bb, _ulp(p, e, m, r), e, m, j, k)
-
-
-@njit(cache=True)
-def _add_nz(a, ba, b, bb, s, e, m, r, k):
-    return _badd(_badd(ba, bb, k), _rnd_add_nz(a, b, s, e, m, r), k)
+        out[q] = _add_nz(a[q], ba[q], b[q], 0.0, s[q], e, m, r, k)
 
 
 @njit(cache=True)
@@ -547,12 +586,19 @@ def block_certified(g, w, gb, res, n, lane_o, lane_d, lane_t, o, d, v0, e1, e2, 
     ``g``: lane ``q`` is the pair (``o`` row ``lane_o[q]``, ``d`` row ``lane_d[q]``, triangle
     row ``lane_t[q]``). ``w`` (13, BLOCK) int64 and ``gb`` (N_BOUND_ROWS, BLOCK) float64 are
     scratch; ``res`` (N_RES_ROWS, BLOCK) int64 receives per lane the outcome, t', u', v',
-    det and the packed counts, the same bits as :func:`pair_full`."""
+    det and the packed counts, the same bits as :func:`pair_full` (a block with fewer than
+    a quarter of its lanes in the common case is recomputed lane by lane, without the
+    vector bounds)."""
     vpair(g, w, n, True, e, m, r)
-    vbounds(g, w, gb, n, e, m, r, cc)
+    common = 0
+    for q in range(n):
+        common += w[11, q] >= 0
+    vector = 4 * common >= n          # else every lane is recomputed alone: no bounds
+    if vector:
+        vbounds(g, w, gb, n, e, m, r, cc)
     sc = cc[0]
     for q in range(n):
-        if w[11, q] >= 0:
+        if vector and w[11, q] >= 0:
             res[0, q] = _outcome(w[3, q], w[0, q], w[1, q], w[2, q], w[5, q], gb[_GDET, q],
                                  gb[_GTP, q], gb[_GU, q], gb[_GV, q], gb[_GW, q], sc, e, m)
             res[1, q] = w[0, q]
