@@ -137,10 +137,13 @@ def test_engine_block_equals_pairs(monkeypatch, name, fmt):
         "exact_s": blk.stats["certified"]["exact_s"]}
 
 
-@pytest.mark.parametrize("any_hit", [False, True])
-def test_pass_block_equals_pairs_with_pending(any_hit):
+@pytest.mark.parametrize("any_hit,lanes", [(False, None), (True, None), (False, 8)])
+def test_pass_block_equals_pairs_with_pending(monkeypatch, any_hit, lanes):
     """Rays through the shared edges of a fan of triangles (the float64 filter leaves
-    them pending): the same counters, pending list (in order) and folded hits."""
+    them pending): the same counters, pending list (in order) and folded hits; also with
+    a lane list too short for a run (it grows) and several lists per range."""
+    if lanes:
+        monkeypatch.setattr(engine_certified, "LANES", lanes)
     from raplas_hdl.engine.passes import round_runs
     from raplas_hdl.host.spheres import build_sphere_tree
 

@@ -34,8 +34,7 @@ from numba import njit
 from ..fp.numba_cache import drop_stale_cache
 from .exact_filter import HIT, MISS, filter_pair
 from .kernels import N_COUNTERS, plane_masks
-from ..model.certified import block_certified, block_scratch, gather, pair_certified
-from ..model.ray_triangle import BLOCK
+from ..model.certified import block_pairs, pair_certified
 
 drop_stale_cache(__file__)
 
@@ -43,6 +42,8 @@ __all__ = ["certified_pass", "trace_certified", "N_CERT_COUNTERS", "CERT_COUNTER
 
 #: Extra counter columns after the unit's eight.
 CERT_COUNTERS = ("uncertain", "filtered", "pending")
+#: Pairs listed at a time by the block path (runs are listed whole, up to half of it).
+LANES = 1 << 15
 N_CERT_COUNTERS = N_COUNTERS + len(CERT_COUNTERS)
 
 
@@ -59,11 +60,12 @@ def _push(pend, npend, b, ray, tid):
 @njit(cache=True, error_model="numpy")
 def _tail(outcome, cnt, u, b, ray, di, tid, o64, d64, tri64, tmin, tmax, excl, any_hit,
           best_lo, best_hi, best_tri, counters, pend, npend):
-    """One pair's outcome into run ``u``'s counters and ray ``(b, ray)``'s state: the filter,
-    the fold and the pending list (module docstring); returns the new pending count."""
-    counters[u, 5] += cnt & 0xFF
-    counters[u, 6] += (cnt >> 8) & 0xFF
-    counters[u, 7] += (cnt >> 16) & 0xFF
+    """One pair's outcome and event counts (``cnt``: overflow, underflow, invalid) into run
+    ``u``'s counters and ray ``(b, ray)``'s state: the filter, the fold and the pending list
+    (module docstring); returns the new pending count."""
+    counters[u, 5] += cnt[0]
+    counters[u, 6] += cnt[1]
+    counters[u, 7] += cnt[2]
     if outcome == 0:
         return npend
     if outcome == 1:
@@ -99,28 +101,35 @@ def _tail(outcome, cnt, u, b, ray, di, tid, o64, d64, tri64, tmin, tmax, excl, a
 @njit(nogil=True, cache=True, error_model="numpy")
 def trace_certified(pn, pp, ro, rd, enable, keep_all, rows, cols, run_b, run_start, run_sph,
                     sc, sr, tcount, tlist, v0, e1, e2, nn, cc, o64, d64, tri64, tmin, tmax,
-                    excl, any_hit, lo, hi, best_lo, best_hi, best_tri, counters, pend,
-                    e, m, r, block):
+                    excl, any_hit, lo, hi, best_lo, best_hi, best_tri, counters, pend, lanes,
+                    e, m, r):
     """Runs ``lo .. hi-1`` of a pass in certified mode (module docstring).
 
     ``o64 (B, 3)`` and ``d64 (B*R, 3)`` are the encoded rays decoded to float64, ``tri64
     (F, 3, 3)`` the original triangles. ``best_lo, best_hi, best_tri (B, R)``: each ray's
     folded hit (interval of ``t`` and ID; -1 for none), updated in place. Pending entries
     go to ``pend (cap, 3)``; returns how many there were (more than ``cap``: run the range
-    again with a larger buffer). ``block``: the unit's pairs a block at a time
-    (:func:`~raplas_hdl.model.certified.block_certified`), then each lane's filter, fold
-    and pending entry in stream order; else one pair at a time
-    (:func:`~raplas_hdl.model.certified.pair_certified`). Both give the same results.
+    again with a larger buffer).
+
+    With ``lanes`` of shape ``(5, L)``, ``L > 0``, the kernel does not run the unit: it
+    lists the pairs of whole runs from ``lo`` on, ``(bundle, ray, direction row, triangle,
+    run)`` per column, stops after the run that reaches ``L // 2`` pairs and returns
+    ``(count, next run)`` encoded as ``count * (hi + 1) + next``, or -1 when ``L`` pairs do
+    not hold a run (:func:`_tails` then takes the pairs through the unit's results).
+    Otherwise (``L == 0``) it runs the unit one pair at a time
+    (:func:`~raplas_hdl.model.certified.pair_certified`) and folds each pair at once.
     """
     n_planes = rows + cols
     n_rays = rows * cols
     rm = np.empty(rows, np.bool_)
     cm = np.empty(cols, np.bool_)
-    g, w, gb, res = block_scratch()
-    lanes = np.empty((5, BLOCK), np.int64)          # bundle, ray, direction row, triangle, run
+    cnt3 = np.zeros(3, np.uint8)
+    cap = lanes.shape[1]
     n = 0
     npend = 0
     for u in range(lo, hi):
+        if cap and 2 * n >= cap:
+            return n * (hi + 1) + u
         b = run_b[u]
         base = b * n_planes
         issued = 0
@@ -145,45 +154,36 @@ def trace_certified(pn, pp, ro, rd, enable, keep_all, rows, cols, run_b, run_sta
                     for k in range(nt):
                         tid = tlist[s, k]
                         issued += 1
-                        if not block:
-                            outcome, _, _, cnt = pair_certified(ro, b, rd, di, v0, e1, e2,
-                                                                nn, tid, e, m, r, cc)
-                            npend = _tail(outcome, cnt, u, b, ray, di, tid, o64, d64, tri64,
-                                          tmin, tmax, excl, any_hit, best_lo, best_hi,
-                                          best_tri, counters, pend, npend)
+                        if cap:
+                            if n == cap:
+                                return -1
+                            lanes[0, n], lanes[1, n], lanes[2, n] = b, ray, di
+                            lanes[3, n], lanes[4, n] = tid, u
+                            n += 1
                             continue
-                        gather(g, n, ro, b, rd, di, v0, e1, e2, nn, tid)
-                        lanes[0, n], lanes[1, n], lanes[2, n] = b, ray, di
-                        lanes[3, n], lanes[4, n] = tid, u
-                        n += 1
-                        if n == BLOCK:
-                            npend = _flush(g, w, gb, res, n, lanes, ro, rd, v0, e1, e2, nn,
-                                           cc, o64, d64, tri64, tmin, tmax, excl, any_hit,
-                                           best_lo, best_hi, best_tri, counters, pend, npend,
-                                           e, m, r)
-                            n = 0
+                        outcome, _, _, cnt = pair_certified(ro, b, rd, di, v0, e1, e2, nn,
+                                                            tid, e, m, r, cc)
+                        cnt3[0], cnt3[1], cnt3[2] = cnt & 0xFF, (cnt >> 8) & 0xFF, cnt >> 16
+                        npend = _tail(outcome, cnt3, u, b, ray, di, tid, o64, d64, tri64,
+                                      tmin, tmax, excl, any_hit, best_lo, best_hi, best_tri,
+                                      counters, pend, npend)
         n_sph = run_start[u + 1] - run_start[u]
         counters[u, 0] = n_sph
         counters[u, 1] = n_sph * n_planes
         counters[u, 2] = issued
         counters[u, 3] = skipped
-    if n:
-        npend = _flush(g, w, gb, res, n, lanes, ro, rd, v0, e1, e2, nn, cc, o64, d64, tri64,
-                       tmin, tmax, excl, any_hit, best_lo, best_hi, best_tri, counters, pend,
-                       npend, e, m, r)
-    return npend
+    return n * (hi + 1) + hi if cap else npend
 
 
-@njit(cache=True, error_model="numpy")
-def _flush(g, w, gb, res, n, lanes, ro, rd, v0, e1, e2, nn, cc, o64, d64, tri64, tmin, tmax,
-           excl, any_hit, best_lo, best_hi, best_tri, counters, pend, npend, e, m, r):
-    """The block's pairs, then each lane's tail in order; returns the pending count."""
-    block_certified(g, w, gb, res, n, lanes[0], lanes[2], lanes[3], ro, rd, v0, e1, e2, nn,
-                    e, m, r, cc)
+@njit(nogil=True, cache=True, error_model="numpy")
+def _tails(lanes, n, outc, cnt, o64, d64, tri64, tmin, tmax, excl, any_hit, best_lo, best_hi,
+           best_tri, counters, pend, npend):
+    """The listed pairs' outcomes and counts into the counters and the rays' state, in
+    stream order (:func:`_tail`); returns the pending count."""
     for q in range(n):
-        npend = _tail(res[0, q], res[5, q], lanes[4, q], lanes[0, q], lanes[1, q],
-                      lanes[2, q], lanes[3, q], o64, d64, tri64, tmin, tmax, excl, any_hit,
-                      best_lo, best_hi, best_tri, counters, pend, npend)
+        npend = _tail(outc[q], cnt[q], lanes[4, q], lanes[0, q], lanes[1, q], lanes[2, q],
+                      lanes[3, q], o64, d64, tri64, tmin, tmax, excl, any_hit, best_lo,
+                      best_hi, best_tri, counters, pend, npend)
     return npend
 
 
@@ -215,14 +215,45 @@ def certified_pass(arith, scene, batch, run_b, run_start, run_sph, tri64, best_l
     args = (*head, *arith.extra, o64, d64, np.ascontiguousarray(tri64, np.float64), *tail,
             bool(any_hit))
 
+    ro, rd = (np.ascontiguousarray(x, np.uint32) for x in (head[2], head[3]))
+    mem = [np.ascontiguousarray(x, np.uint32) for x in head[15:19]]
+    cc = arith.extra[0]
+    none = np.zeros((5, 0), np.int64)
+
+    def units(lo, hi, pend):
+        """Runs ``lo .. hi-1`` through the block path: list, unit, tails; the pending
+        count."""
+        size = LANES
+        npend = 0
+        u = lo
+        while u < hi:
+            lanes = np.empty((5, size), np.int64)
+            code = trace_certified(*args, u, hi, best_lo, best_hi, best_tri, counters, pend,
+                                   lanes, *arith.cull_tail)
+            if code < 0:                                # one run holds more than size pairs
+                size *= 4
+                continue
+            n, u = divmod(code, hi + 1)
+            outc = np.empty(n, np.uint8)
+            outs = [np.empty(n, np.uint32) for _ in range(4)]
+            cnt = np.empty((n, 3), np.uint8)
+            block_pairs(ro, rd, *mem, cc, lanes[0], lanes[2], lanes[3], 0, n, outc, *outs,
+                        cnt, *arith.cull_tail)
+            npend = _tails(lanes, n, outc, cnt, *args[20:], best_lo, best_hi, best_tri,
+                           counters, pend, npend)
+        return npend
+
     def chunk(lo, hi):
         cap = 1024
         rows = run_b[lo:hi]
         saved = best_lo[rows], best_hi[rows], best_tri[rows]
         while True:
             pend = np.empty((cap, 3), np.int64)
-            n = trace_certified(*args, lo, hi, best_lo, best_hi, best_tri, counters, pend,
-                                *arith.cull_tail, bool(block))
+            if block:
+                n = units(lo, hi, pend)
+            else:
+                n = trace_certified(*args, lo, hi, best_lo, best_hi, best_tri, counters, pend,
+                                    none, *arith.cull_tail)
             if n <= cap:
                 return pend[:n]
             # the buffer was too small: restore the range's rays and run it again

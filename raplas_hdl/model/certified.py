@@ -63,7 +63,7 @@ from .ray_triangle import BLOCK, _add, _mul, _sub, _tally, store, vpair
 
 __all__ = ["VARIANTS", "DEFAULT_VARIANT", "N_OPS", "MAX_EXP_BITS", "certified_constants",
            "certified_domain", "check_certified_format", "pair_certified", "intersect_certified",
-           "block_certified", "block_scratch", "gather", "N_BOUND_ROWS", "N_RES_ROWS"]
+           "block_pairs", "vbounds", "N_BOUND_ROWS"]
 
 #: Bound variants: name -> (j leading fraction bits read from each |x|, k fraction bits of
 #: the bound float).
@@ -438,8 +438,6 @@ _GDET, _GTP = 15, 16
 _GQ = 17                               # Q = D x T (x, y, z)
 _GU, _GV, _GS, _GW, _ZERO = 20, 21, 22, 23, 24
 N_BOUND_ROWS = 25
-#: Rows of a block's results ``res`` (int64, (6, BLOCK)): outcome, t', u', v', det, counts.
-N_RES_ROWS = 6
 
 
 # Branch-free forms of the bound operations for those lanes (LLVM vectorises their loops):
@@ -579,51 +577,6 @@ def gather(g, q, o, oi, d, di, v0, e1, e2, nn, ti):
     g[15:18, q] = nn[ti]
 
 
-@njit(cache=True)
-def block_certified(g, w, gb, res, n, lane_o, lane_d, lane_t, o, d, v0, e1, e2, nn, e, m, r,
-                    cc):
-    """:func:`pair_full` over a block of ``n`` lanes whose operands :func:`gather` put in
-    ``g``: lane ``q`` is the pair (``o`` row ``lane_o[q]``, ``d`` row ``lane_d[q]``, triangle
-    row ``lane_t[q]``). ``w`` (13, BLOCK) int64 and ``gb`` (N_BOUND_ROWS, BLOCK) float64 are
-    scratch; ``res`` (N_RES_ROWS, BLOCK) int64 receives per lane the outcome, t', u', v',
-    det and the packed counts, the same bits as :func:`pair_full` (a block with fewer than
-    a quarter of its lanes in the common case is recomputed lane by lane, without the
-    vector bounds)."""
-    vpair(g, w, n, True, e, m, r)
-    common = 0
-    for q in range(n):
-        common += w[11, q] >= 0
-    vector = 4 * common >= n          # else every lane is recomputed alone: no bounds
-    if vector:
-        vbounds(g, w, gb, n, e, m, r, cc)
-    sc = cc[0]
-    for q in range(n):
-        if vector and w[11, q] >= 0:
-            res[0, q] = _outcome(w[3, q], w[0, q], w[1, q], w[2, q], w[5, q], gb[_GDET, q],
-                                 gb[_GTP, q], gb[_GU, q], gb[_GV, q], gb[_GW, q], sc, e, m)
-            res[1, q] = w[0, q]
-            res[2, q] = w[1, q]
-            res[3, q] = w[2, q]
-            res[4, q] = w[3, q]
-            res[5, q] = 0
-        else:
-            oc, tp, up, vp, det, cnt = pair_full(o, lane_o[q], d, lane_d[q], v0, e1, e2, nn,
-                                                 lane_t[q], e, m, r, cc)
-            res[0, q] = oc
-            res[1, q] = tp
-            res[2, q] = up
-            res[3, q] = vp
-            res[4, q] = det
-            res[5, q] = cnt
-
-
-@njit(cache=True)
-def block_scratch():
-    """Scratch arrays ``(g, w, gb, res)`` of :func:`block_certified`."""
-    return (np.empty((18, BLOCK), np.int64), np.empty((13, BLOCK), np.int64),
-            np.empty((N_BOUND_ROWS, BLOCK), np.float64), np.empty((N_RES_ROWS, BLOCK), np.int64))
-
-
 @njit(nogil=True, cache=True)
 def _loop(o, d, v0, e1, e2, nn, cc, lo, hi, outc, t_o, u_o, v_o, det_o, cnt_o, e, m, r):
     """Pairs ``lo .. hi-1`` one at a time (:func:`pair_full`)."""
@@ -634,28 +587,55 @@ def _loop(o, d, v0, e1, e2, nn, cc, lo, hi, outc, t_o, u_o, v_o, det_o, cnt_o, e
 
 
 @njit(nogil=True, cache=True)
-def _block_loop(o, d, v0, e1, e2, nn, cc, lo, hi, outc, t_o, u_o, v_o, det_o, cnt_o, e, m,
-                r):
-    """Pairs ``lo .. hi-1`` a block at a time (:func:`block_certified`)."""
-    g, w, gb, res = block_scratch()
-    lane = np.empty(BLOCK, np.int64)
+def block_pairs(o, d, v0, e1, e2, nn, cc, lane_o, lane_d, lane_t, lo, hi, outc, t_o, u_o, v_o,
+                det_o, cnt_o, e, m, r):
+    """Pairs ``lo .. hi-1`` of the lane lists (pair ``i``: ``o`` row ``lane_o[i]``, ``d``
+    row ``lane_d[i]``, triangle row ``lane_t[i]``) a block at a time; row ``i`` of the
+    outputs as :func:`intersect_certified`, the same bits as :func:`pair_full`.
+
+    Per block: the operands gathered (:func:`gather`), the values by
+    :func:`~raplas_hdl.model.ray_triangle.vpair`, the bounds by :func:`vbounds`, the
+    outcome of each common-case lane; the other lanes (and every lane of a block with fewer
+    than a quarter of its lanes in the common case, where the bounds are skipped) by
+    :func:`pair_full`. The one compiled kernel of the block path (each level of compiled
+    callers would optimise the vector loops again): :func:`intersect_certified` and the
+    renderer's certified pass both run it."""
+    g = np.empty((18, BLOCK), np.int64)
+    w = np.empty((13, BLOCK), np.int64)
+    gb = np.empty((N_BOUND_ROWS, BLOCK), np.float64)
+    sc = cc[0]
     for start in range(lo, hi, BLOCK):
         n = min(BLOCK, hi - start)
         for q in range(n):
-            lane[q] = start + q
-            gather(g, q, o, start + q, d, start + q, v0, e1, e2, nn, start + q)
-        block_certified(g, w, gb, res, n, lane, lane, lane, o, d, v0, e1, e2, nn, e, m, r, cc)
+            i = start + q
+            gather(g, q, o, lane_o[i], d, lane_d[i], v0, e1, e2, nn, lane_t[i])
+        vpair(g, w, n, True, e, m, r)
+        common = 0
         for q in range(n):
-            outc[start + q] = res[0, q]
-            store(start + q, np.uint32(res[1, q]), np.uint32(res[2, q]), np.uint32(res[3, q]),
-                  np.uint32(res[4, q]), res[5, q], t_o, u_o, v_o, det_o, cnt_o)
+            common += w[11, q] >= 0
+        vector = 4 * common >= n
+        if vector:
+            vbounds(g, w, gb, n, e, m, r, cc)
+        for q in range(n):
+            i = start + q
+            if vector and w[11, q] >= 0:
+                oc = _outcome(w[3, q], w[0, q], w[1, q], w[2, q], w[5, q], gb[_GDET, q],
+                              gb[_GTP, q], gb[_GU, q], gb[_GV, q], gb[_GW, q], sc, e, m)
+                outc[i] = oc
+                store(i, np.uint32(w[0, q]), np.uint32(w[1, q]), np.uint32(w[2, q]),
+                      np.uint32(w[3, q]), 0, t_o, u_o, v_o, det_o, cnt_o)
+            else:
+                oc, tp, up, vp, det, cnt = pair_full(o, lane_o[i], d, lane_d[i], v0, e1, e2,
+                                                     nn, lane_t[i], e, m, r, cc)
+                outc[i] = oc
+                store(i, tp, up, vp, det, cnt, t_o, u_o, v_o, det_o, cnt_o)
 
 
 def intersect_certified(arrs, fmt: FPFormat, scale: float = 1.0,
                         variant: str = DEFAULT_VARIANT, block: bool = True) -> dict:
     """The certified mode over validated pair arrays ``(o, d, v0, e1, e2, n)`` (uint32,
     shape (n, 3) each); :func:`raplas_hdl.model.ray_triangle.intersect` is the public
-    entry. ``block``: a block at a time (:func:`block_certified`), else one pair at a time
+    entry. ``block``: a block at a time (:func:`block_pairs`), else one pair at a time
     (:func:`pair_full`); the results are the same bits. Returns ``outcome`` (uint8), ``t``, ``u``, ``v``, ``det`` (uint32) and
     ``event_counts`` (uint8, (n, 3))."""
     cc = certified_constants(fmt, scale, variant)
@@ -664,8 +644,12 @@ def intersect_certified(arrs, fmt: FPFormat, scale: float = 1.0,
     outs = [np.empty(count, dtype=np.uint32) for _ in range(4)]
     counts = np.empty((count, 3), dtype=np.uint8)
     key = (np.int64(fmt.exp_bits), np.int64(fmt.man_bits), np.int64(rmode_code(fmt)))
-    loop = _block_loop if block else _loop
-    run_chunks(count, lambda lo, hi: loop(*arrs, cc, lo, hi, outc, *outs, counts, *key))
+    if block:
+        lane = np.arange(count, dtype=np.int64)
+        run_chunks(count, lambda lo, hi: block_pairs(*arrs, cc, lane, lane, lane, lo, hi, outc,
+                                                     *outs, counts, *key))
+    else:
+        run_chunks(count, lambda lo, hi: _loop(*arrs, cc, lo, hi, outc, *outs, counts, *key))
     return {"outcome": outc, "t": outs[0], "u": outs[1], "v": outs[2], "det": outs[3],
             "event_counts": counts}
 
