@@ -205,9 +205,6 @@ def check(args) -> None:
         g.reject(args, ("valid_density",), "to intersection-unit (its harness presents each "
                                            "command until taken; --stall-density sets the "
                                            "result back-pressure)")
-        if args.options.get("target") == "virtex4":
-            raise g.UsageError("--target virtex4 is not available for intersection-unit in "
-                               "cosim yet (its live harness builds the generic unit)")
     args.valid_density = 0.9 if args.valid_density is None else args.valid_density
     args.stall_density = 0.1 if args.stall_density is None else args.stall_density
     if args.write_vectors:

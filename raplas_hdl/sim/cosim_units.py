@@ -846,7 +846,7 @@ class IntersectionCosim(UnitCosim):
             from .unit_driver import run_runs
 
             got = run_runs(simulator, self.config, cases["scene"], cases["runs"], seed=seed,
-                           ready_density=1.0 - stall_density)
+                           ready_density=1.0 - stall_density, multiplier=self.target)
             cycles = sum(int(c.get("cycles", 0)) for _, c in got)
             build_s = 0.0
             run_s = time.monotonic() - t0
@@ -855,7 +855,8 @@ class IntersectionCosim(UnitCosim):
 
             with UnitSession(simulator, self.config, cases["scene"], seed=seed,
                              ready_density=1.0 - stall_density,
-                             timeout_s=timeout_s or 24 * 3600.0) as s:
+                             timeout_s=timeout_s or 24 * 3600.0,
+                             multiplier=self.target) as s:
                 build_s = time.monotonic() - t0 - s.load_s
                 t1 = time.monotonic()
                 got = s.run(cases["runs"])

@@ -131,7 +131,7 @@ def _verilator_pch_fix(simulator):
             os.environ["MAKEFLAGS"] = saved
 
 
-def _source_digest(config: UnitConfig) -> str:
+def _source_digest(config: UnitConfig, multiplier: str = "generic") -> str:
     import hashlib
 
     import amaranth
@@ -140,6 +140,8 @@ def _source_digest(config: UnitConfig) -> str:
 
     root = Path(raplas_hdl.__file__).resolve().parent
     h = hashlib.sha256(json.dumps(config.params(), sort_keys=True).encode())
+    if multiplier != "generic":
+        h.update(multiplier.encode())
     h.update(amaranth.__version__.encode())
     for path in sorted((root / "rtl").glob("*.py")) + [root / "model" / "memory_image.py",
                                                         root / "model" / "records.py",
@@ -149,8 +151,9 @@ def _source_digest(config: UnitConfig) -> str:
     return h.hexdigest()[:16]
 
 
-def unit_verilog(config: UnitConfig) -> str:
-    """The unit's Verilog for ``config`` (module ``intersection_unit``).
+def unit_verilog(config: UnitConfig, multiplier: str = "generic") -> str:
+    """The unit's Verilog for ``config`` (module ``intersection_unit``); ``multiplier``
+    ``"virtex4"`` builds the DSP48 target (Yosys's DSP48 simulation model appended).
 
     Emitting the whole unit takes a while (about 15 s of CPU at FP24), so the text is
     cached in memory and on disk under ``build/sim/verilog/``, keyed by the parameters and
@@ -158,9 +161,9 @@ def unit_verilog(config: UnitConfig) -> str:
     """
     from raplas_hdl.sim.runner import BUILD_ROOT
 
-    if config in _VERILOG_CACHE:
-        return _VERILOG_CACHE[config]
-    path = BUILD_ROOT / "verilog" / f"intersection_unit-{_source_digest(config)}.v"
+    if (config, multiplier) in _VERILOG_CACHE:
+        return _VERILOG_CACHE[config, multiplier]
+    path = BUILD_ROOT / "verilog" / f"intersection_unit-{_source_digest(config, multiplier)}.v"
     if path.exists():
         text = path.read_text()
     else:
@@ -169,14 +172,18 @@ def unit_verilog(config: UnitConfig) -> str:
         from raplas_hdl.rtl.ram import ram_verilog
 
         # behavioural RAMs without initial values: converts in seconds at any depth
-        text, _ = emit_verilog(IntersectionUnit(config, ram="verilog"), "intersection_unit",
-                               {**config.params(), "ram": "verilog"})
+        text, _ = emit_verilog(IntersectionUnit(config, ram="verilog", multiplier=multiplier),
+                               "intersection_unit", {**config.params(), "ram": "verilog"})
         text += ram_verilog()
+        if multiplier == "virtex4":
+            from raplas_hdl.rtl.dsp48 import dsp48_sim_model
+
+            text += "\n" + dsp48_sim_model()
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
         tmp.write_text(text)
         os.replace(tmp, path)
-    _VERILOG_CACHE[config] = text
+    _VERILOG_CACHE[config, multiplier] = text
     return text
 
 
@@ -255,7 +262,7 @@ def decode_results(config: UnitConfig, beats) -> np.ndarray:
 
 def run_runs(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
              seed: int = 1, ready_density: float = 1.0, overlap: bool = False,
-             build_key: str | None = None):
+             build_key: str | None = None, multiplier: str = "generic"):
     """Run ``runs`` through the unit's Verilog.
 
     Parameters
@@ -274,6 +281,8 @@ def run_runs(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
         Start each run without waiting for the previous run's last beat (counters are then
         only meaningful summed over all runs: each run's counters are ``None`` but the
         last's, which holds the totals).
+    multiplier : ``"generic"`` or ``"virtex4"``
+        The unit's multiplier target (see :func:`unit_verilog`).
 
     Returns
     -------
@@ -292,7 +301,7 @@ def run_runs(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
     if not runs:
         return []
     scene.check(config)
-    text = unit_verilog(config)
+    text = unit_verilog(config, multiplier)
     with tempfile.TemporaryDirectory(prefix="raplas-unit-") as tmp:
         stim_path = Path(tmp) / "stim.npz"
         out_path = Path(tmp) / "out.npz"
