@@ -20,7 +20,14 @@ common path:
    folded hit (:func:`raplas_hdl.host.exact.exact_t`).
 
 The kernel runs a range of runs like :func:`raplas_hdl.engine.kernels.trace_model`; each
-bundle appears in one run of a pass, so each ray's state is written by one range only.
+bundle appears in one run of a pass, so each ray's state is written by one range only. The
+unit's pairs go a block at a time, in three compiled steps per list of whole runs: the
+kernel lists the runs' pairs in stream order, :func:`raplas_hdl.model.certified.block_pairs`
+(the kernel ``intersect(mode="certified")`` runs: compiled once for both) gives each pair's
+outcome and counts, and :func:`_tails` filters, folds and lists them pending in stream order.
+``certified_pass(..., block=False)`` runs the unit one pair at a time instead
+(:func:`raplas_hdl.model.certified.pairs_one`); the results (counters, pending list and its
+order, folded hits) are the same.
 Counters per run: the unit's eight (``hits`` counts the unit's certified hits), then
 ``uncertain`` (the unit's uncertain pairs), ``filtered`` (pairs through the float64
 filter) and ``pending``.
@@ -34,7 +41,7 @@ from numba import njit
 from ..fp.numba_cache import drop_stale_cache
 from .exact_filter import HIT, MISS, filter_pair
 from .kernels import N_COUNTERS, plane_masks
-from ..model.certified import block_pairs, pair_certified
+from ..model.certified import block_pairs, pairs_one
 
 drop_stale_cache(__file__)
 
@@ -99,36 +106,21 @@ def _tail(outcome, cnt, u, b, ray, di, tid, o64, d64, tri64, tmin, tmax, excl, a
 
 
 @njit(nogil=True, cache=True, error_model="numpy")
-def trace_certified(pn, pp, ro, rd, enable, keep_all, rows, cols, run_b, run_start, run_sph,
-                    sc, sr, tcount, tlist, v0, e1, e2, nn, cc, o64, d64, tri64, tmin, tmax,
-                    excl, any_hit, lo, hi, best_lo, best_hi, best_tri, counters, pend, lanes,
-                    e, m, r):
-    """Runs ``lo .. hi-1`` of a pass in certified mode (module docstring).
-
-    ``o64 (B, 3)`` and ``d64 (B*R, 3)`` are the encoded rays decoded to float64, ``tri64
-    (F, 3, 3)`` the original triangles. ``best_lo, best_hi, best_tri (B, R)``: each ray's
-    folded hit (interval of ``t`` and ID; -1 for none), updated in place. Pending entries
-    go to ``pend (cap, 3)``; returns how many there were (more than ``cap``: run the range
-    again with a larger buffer).
-
-    With ``lanes`` of shape ``(5, L)``, ``L > 0``, the kernel does not run the unit: it
-    lists the pairs of whole runs from ``lo`` on, ``(bundle, ray, direction row, triangle,
-    run)`` per column, stops after the run that reaches ``L // 2`` pairs and returns
-    ``(count, next run)`` encoded as ``count * (hi + 1) + next``, or -1 when ``L`` pairs do
-    not hold a run (:func:`_tails` then takes the pairs through the unit's results).
-    Otherwise (``L == 0``) it runs the unit one pair at a time
-    (:func:`~raplas_hdl.model.certified.pair_certified`) and folds each pair at once.
-    """
+def trace_certified(pn, pp, enable, keep_all, rows, cols, run_b, run_start, run_sph, sc, sr,
+                    tcount, tlist, lo, hi, counters, lanes, e, m, r):
+    """The pairs of runs ``lo ..`` of a pass in the unit's stream order (module
+    docstring), into ``lanes (5, L)``: per column ``(bundle, ray, direction row, triangle,
+    run)``. Runs are listed whole; the kernel stops after the run that reaches ``L // 2``
+    pairs (or at ``hi``) and returns ``count * (hi + 1) + next run``, or -1 when ``L`` pairs
+    do not hold a run. Sets the runs' counters 0-3 and zeroes the others."""
     n_planes = rows + cols
     n_rays = rows * cols
     rm = np.empty(rows, np.bool_)
     cm = np.empty(cols, np.bool_)
-    cnt3 = np.zeros(3, np.uint8)
     cap = lanes.shape[1]
     n = 0
-    npend = 0
     for u in range(lo, hi):
-        if cap and 2 * n >= cap:
+        if 2 * n >= cap:
             return n * (hi + 1) + u
         b = run_b[u]
         base = b * n_planes
@@ -150,29 +142,19 @@ def trace_certified(pn, pp, ro, rd, enable, keep_all, rows, cols, run_b, run_sta
                     if not enable[b, ray]:
                         skipped += nt
                         continue
-                    di = b * n_rays + ray
+                    if n + nt > cap:
+                        return -1
                     for k in range(nt):
-                        tid = tlist[s, k]
-                        issued += 1
-                        if cap:
-                            if n == cap:
-                                return -1
-                            lanes[0, n], lanes[1, n], lanes[2, n] = b, ray, di
-                            lanes[3, n], lanes[4, n] = tid, u
-                            n += 1
-                            continue
-                        outcome, _, _, cnt = pair_certified(ro, b, rd, di, v0, e1, e2, nn,
-                                                            tid, e, m, r, cc)
-                        cnt3[0], cnt3[1], cnt3[2] = cnt & 0xFF, (cnt >> 8) & 0xFF, cnt >> 16
-                        npend = _tail(outcome, cnt3, u, b, ray, di, tid, o64, d64, tri64,
-                                      tmin, tmax, excl, any_hit, best_lo, best_hi, best_tri,
-                                      counters, pend, npend)
+                        lanes[0, n], lanes[1, n], lanes[2, n] = b, ray, b * n_rays + ray
+                        lanes[3, n], lanes[4, n] = tlist[s, k], u
+                        n += 1
+                    issued += nt
         n_sph = run_start[u + 1] - run_start[u]
         counters[u, 0] = n_sph
         counters[u, 1] = n_sph * n_planes
         counters[u, 2] = issued
         counters[u, 3] = skipped
-    return n * (hi + 1) + hi if cap else npend
+    return n * (hi + 1) + hi
 
 
 @njit(nogil=True, cache=True, error_model="numpy")
@@ -212,24 +194,19 @@ def certified_pass(arith, scene, batch, run_b, run_start, run_sph, tri64, best_l
     counters = np.zeros((run_b.size, N_CERT_COUNTERS), np.int64)
     o64 = np.ascontiguousarray(batch.origin, np.float64)
     d64 = np.ascontiguousarray(batch.directions, np.float64).reshape(-1, 3)
-    args = (*head, *arith.extra, o64, d64, np.ascontiguousarray(tri64, np.float64), *tail,
-            bool(any_hit))
-
-    ro, rd = (np.ascontiguousarray(x, np.uint32) for x in (head[2], head[3]))
-    mem = [np.ascontiguousarray(x, np.uint32) for x in head[15:19]]
-    cc = arith.extra[0]
-    none = np.zeros((5, 0), np.int64)
+    fold = (o64, d64, np.ascontiguousarray(tri64, np.float64), *tail, bool(any_hit))
+    listing = (*head[:2], *head[4:8], run_b, *head[9:15])
+    mem = [np.ascontiguousarray(x, np.uint32) for x in (*head[2:4], *head[15:19])]
+    unit = block_pairs if block else pairs_one
 
     def units(lo, hi, pend):
-        """Runs ``lo .. hi-1`` through the block path: list, unit, tails; the pending
-        count."""
+        """Runs ``lo .. hi-1``: list, unit, fold; returns the pending count."""
         size = LANES
         npend = 0
         u = lo
         while u < hi:
             lanes = np.empty((5, size), np.int64)
-            code = trace_certified(*args, u, hi, best_lo, best_hi, best_tri, counters, pend,
-                                   lanes, *arith.cull_tail)
+            code = trace_certified(*listing, u, hi, counters, lanes, *arith.cull_tail)
             if code < 0:                                # one run holds more than size pairs
                 size *= 4
                 continue
@@ -237,10 +214,10 @@ def certified_pass(arith, scene, batch, run_b, run_start, run_sph, tri64, best_l
             outc = np.empty(n, np.uint8)
             outs = [np.empty(n, np.uint32) for _ in range(4)]
             cnt = np.empty((n, 3), np.uint8)
-            block_pairs(ro, rd, *mem, cc, lanes[0], lanes[2], lanes[3], 0, n, outc, *outs,
-                        cnt, *arith.cull_tail)
-            npend = _tails(lanes, n, outc, cnt, *args[20:], best_lo, best_hi, best_tri,
-                           counters, pend, npend)
+            unit(*mem, *arith.extra, lanes[0], lanes[2], lanes[3], 0, n, outc, *outs, cnt,
+                 *arith.cull_tail)
+            npend = _tails(lanes, n, outc, cnt, *fold, best_lo, best_hi, best_tri, counters,
+                           pend, npend)
         return npend
 
     def chunk(lo, hi):
@@ -249,11 +226,7 @@ def certified_pass(arith, scene, batch, run_b, run_start, run_sph, tri64, best_l
         saved = best_lo[rows], best_hi[rows], best_tri[rows]
         while True:
             pend = np.empty((cap, 3), np.int64)
-            if block:
-                n = units(lo, hi, pend)
-            else:
-                n = trace_certified(*args, lo, hi, best_lo, best_hi, best_tri, counters, pend,
-                                    none, *arith.cull_tail)
+            n = units(lo, hi, pend)
             if n <= cap:
                 return pend[:n]
             # the buffer was too small: restore the range's rays and run it again

@@ -63,7 +63,7 @@ from .ray_triangle import BLOCK, _add, _mul, _sub, _tally, store, vpair
 
 __all__ = ["VARIANTS", "DEFAULT_VARIANT", "N_OPS", "MAX_EXP_BITS", "certified_constants",
            "certified_domain", "check_certified_format", "pair_certified", "intersect_certified",
-           "block_pairs", "vbounds", "N_BOUND_ROWS"]
+           "block_pairs", "pairs_one", "vbounds", "N_BOUND_ROWS"]
 
 #: Bound variants: name -> (j leading fraction bits read from each |x|, k fraction bits of
 #: the bound float).
@@ -578,10 +578,13 @@ def gather(g, q, o, oi, d, di, v0, e1, e2, nn, ti):
 
 
 @njit(nogil=True, cache=True)
-def _loop(o, d, v0, e1, e2, nn, cc, lo, hi, outc, t_o, u_o, v_o, det_o, cnt_o, e, m, r):
-    """Pairs ``lo .. hi-1`` one at a time (:func:`pair_full`)."""
+def pairs_one(o, d, v0, e1, e2, nn, cc, lane_o, lane_d, lane_t, lo, hi, outc, t_o, u_o, v_o,
+              det_o, cnt_o, e, m, r):
+    """:func:`block_pairs` one pair at a time (:func:`pair_full`): the reference of the
+    block path."""
     for i in range(lo, hi):
-        oc, tp, up, vp, det, cnt = pair_full(o, i, d, i, v0, e1, e2, nn, i, e, m, r, cc)
+        oc, tp, up, vp, det, cnt = pair_full(o, lane_o[i], d, lane_d[i], v0, e1, e2, nn,
+                                             lane_t[i], e, m, r, cc)
         outc[i] = oc
         store(i, tp, up, vp, det, cnt, t_o, u_o, v_o, det_o, cnt_o)
 
@@ -644,12 +647,10 @@ def intersect_certified(arrs, fmt: FPFormat, scale: float = 1.0,
     outs = [np.empty(count, dtype=np.uint32) for _ in range(4)]
     counts = np.empty((count, 3), dtype=np.uint8)
     key = (np.int64(fmt.exp_bits), np.int64(fmt.man_bits), np.int64(rmode_code(fmt)))
-    if block:
-        lane = np.arange(count, dtype=np.int64)
-        run_chunks(count, lambda lo, hi: block_pairs(*arrs, cc, lane, lane, lane, lo, hi, outc,
-                                                     *outs, counts, *key))
-    else:
-        run_chunks(count, lambda lo, hi: _loop(*arrs, cc, lo, hi, outc, *outs, counts, *key))
+    lane = np.arange(count, dtype=np.int64)
+    kernel = block_pairs if block else pairs_one
+    run_chunks(count, lambda lo, hi: kernel(*arrs, cc, lane, lane, lane, lo, hi, outc, *outs,
+                                            counts, *key))
     return {"outcome": outc, "t": outs[0], "u": outs[1], "v": outs[2], "det": outs[3],
             "event_counts": counts}
 
