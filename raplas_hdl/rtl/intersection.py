@@ -140,6 +140,9 @@ class IntersectionUnit(wiring.Component):
         if not isinstance(config, UnitConfig):
             raise ValueError(f"config must be a UnitConfig, not {config!r}")
         self._cfg = cfg = config
+        if cfg.mode == "certified":
+            raise ValueError("the intersection unit has no certified mode (its result stream "
+                             "carries a hit bit, no outcome); RayTriangleUnit has it")
         layouts = port_layouts(cfg)
         self.cmd_layout = layouts["cmd"]
         self.result_layout = layouts["result"]

@@ -45,7 +45,9 @@ from amaranth.lib.wiring import In, Out
 from ..fp.format import FLAG_OVERFLOW, FPFormat, check_format
 from ..model.modes import MODES, check_rtl_mode
 from ..model.conservative import MARGIN_NAMES, margin_constants
+from ..model.certified import certified_constants, check_certified_format
 from ..model.records import EVENT_COUNT_BITS, PAIR, RT_RESULT
+from .certified_bound import RTL_VARIANTS, BoundOps
 from .fp_add import FPAdd
 from .fp_mul import FPMul, check_multiplier, fp_mul_latency
 from .pipeline import delay
@@ -70,21 +72,29 @@ def input_layout(fmt: FPFormat, ray_id_bits: int = 16, tri_id_bits: int = 16):
     return struct_layout(PAIR, fmt, ray_id_bits=ray_id_bits, tri_id_bits=tri_id_bits)
 
 
-def output_layout(fmt: FPFormat, ray_id_bits: int = 16, tri_id_bits: int = 16):
+def output_layout(fmt: FPFormat, ray_id_bits: int = 16, tri_id_bits: int = 16,
+                  outcome: bool = False):
     """Payload of the unit's output stream: the record
     :data:`~raplas_hdl.model.records.RT_RESULT` (fields from the low bits up).
 
     ``flags`` is the OR of the event flags of the pair's operations; ``n_overflow``,
-    ``n_underflow``, ``n_invalid`` count the operations that raised each event."""
-    return struct_layout(RT_RESULT, fmt, ray_id_bits=ray_id_bits, tri_id_bits=tri_id_bits)
+    ``n_underflow``, ``n_invalid`` count the operations that raised each event. With
+    ``outcome`` (the certified mode) a 2-bit ``outcome`` field (0 miss, 1 hit, 2 uncertain)
+    follows above the record's bits; ``hit`` is then ``outcome == 1``."""
+    rec = struct_layout(RT_RESULT, fmt, ray_id_bits=ray_id_bits, tri_id_bits=tri_id_bits)
+    if not outcome:
+        return rec
+    return data.StructLayout({**{name: fld.shape for name, fld in rec}, "outcome": 2})
 
 
 class _Timed:
     """A value and the cycle (after acceptance) at which it is valid."""
 
-    def __init__(self, value, time):
+    def __init__(self, value, time, start=None, parts=()):
         self.value = value
         self.time = time
+        self.start = time if start is None else start    # the operation's start cycle
+        self.parts = parts                               # a dot product's p0, p1, p2, p0+p1
         self._delayed = {}
 
 
@@ -95,11 +105,17 @@ class RayTriangleUnit(wiring.Component):
     ----------
     fmt : FPFormat
         Format and rounding of every operation.
-    mode : {"paper", "conservative"}
-        The paper's exact inequalities, or the conservative mode's widened tests
-        (:mod:`raplas_hdl.model.conservative`; needs ``man_bits >= 8``).
+    mode : {"paper", "conservative", "certified"}
+        The paper's exact inequalities, the conservative mode's widened tests
+        (:mod:`raplas_hdl.model.conservative`; needs ``man_bits >= 8``), or the certified
+        hit / miss / uncertain outcome (:mod:`raplas_hdl.model.certified`: 34 operations,
+        each with its running error bound in a bound float beside the FP datapath,
+        :mod:`.certified_bound`; ``exp_bits <= 9``).
     margin_scale : float
-        ``s``, the factor on the derived conservative margin (1 = the derivation).
+        ``s``, the factor on the derived conservative margin (1 = the derivation); the
+        certified mode takes 1 only (the guarantee).
+    bound_variant : str
+        Certified mode only: the bound variant (``"exp"``, the one with gateware).
     ray_id_bits, tri_id_bits : int
         Widths of the IDs carried with each pair.
     add_stages, mul_stages : int
@@ -116,7 +132,8 @@ class RayTriangleUnit(wiring.Component):
         Results: ``ray_id``, ``tri_id``, ``hit``, ``t``, ``u``, ``v``, ``det`` (t', u', v',
         det as bit patterns), ``flags`` (OR of the event flags of the pair's operations) and
         ``n_overflow``, ``n_underflow``, ``n_invalid`` (how many of the pair's operations
-        raised each event, :data:`EVENT_COUNT_BITS` bits each).
+        raised each event, :data:`EVENT_COUNT_BITS` bits each); certified mode: also
+        ``outcome`` (0 miss, 1 hit, 2 uncertain; ``hit = outcome == 1``).
 
     Raises
     ------
@@ -126,9 +143,22 @@ class RayTriangleUnit(wiring.Component):
 
     def __init__(self, fmt, *, mode: str = "paper", margin_scale: float = 1,
                  ray_id_bits: int = 16, tri_id_bits: int = 16, add_stages: int = 4,
-                 mul_stages: int = 3, multiplier: str = "generic"):
+                 mul_stages: int = 3, multiplier: str = "generic",
+                 bound_variant: str = "exp"):
         check_format(fmt)
         check_rtl_mode(mode)
+        self._bound_k = None
+        if mode == "certified":
+            check_certified_format(fmt)
+            if bound_variant not in RTL_VARIANTS:
+                raise ValueError(f"the RTL's bound variants are {', '.join(RTL_VARIANTS)}, "
+                                 f"not {bound_variant!r}")
+            if margin_scale != 1:
+                raise ValueError(f"the certified RTL takes margin_scale 1 only, "
+                                 f"not {margin_scale!r}")
+            self._bound_k = int(certified_constants(fmt, 1.0, bound_variant)[2])
+        self._bound_variant = bound_variant if mode == "certified" else None
+        self._dec = None
         for name, bits in (("ray_id_bits", ray_id_bits), ("tri_id_bits", tri_id_bits)):
             if not isinstance(bits, int) or isinstance(bits, bool) or not 1 <= bits <= 64:
                 raise ValueError(f"{name} must be an integer from 1 to 64, not {bits!r}")
@@ -149,7 +179,8 @@ class RayTriangleUnit(wiring.Component):
         self._lm = fp_mul_latency(fmt, mul_stages, multiplier)
         super().__init__({
             "i": In(stream.Signature(input_layout(fmt, ray_id_bits, tri_id_bits))),
-            "o": Out(stream.Signature(output_layout(fmt, ray_id_bits, tri_id_bits))),
+            "o": Out(stream.Signature(output_layout(fmt, ray_id_bits, tri_id_bits,
+                                                    outcome=mode == "certified"))),
         })
 
     @property
@@ -169,9 +200,18 @@ class RayTriangleUnit(wiring.Component):
         return self._multiplier
 
     @property
+    def bound_variant(self):
+        return self._bound_variant
+
+    @property
     def decision_cycle(self) -> int:
-        """Cycle (after acceptance) of the combinational hit decision."""
+        """Cycle (after acceptance) of the combinational hit decision (certified mode: when
+        the last bound is ready, from a trial build of the schedule)."""
         d = 5 * self._la + 2 * self._lm
+        if self._mode == "certified":
+            if self._dec is None:
+                self._dec = self._schedule_end()
+            return self._dec
         return d + self._la if self._mode == "conservative" else d
 
     @property
@@ -210,13 +250,70 @@ class RayTriangleUnit(wiring.Component):
             m.d.comb += unit.sub.eq(int(sub))
         if unit.latency != (self._lm if kind == "mul" else self._la):
             raise AssertionError(f"{kind} latency {unit.latency} differs from the schedule's")
-        out = _Timed(unit.o, t + unit.latency)
+        if self._trial:
+            unit._MustUse__silence = True        # a trial build is never elaborated
+        out = _Timed(unit.o, t + unit.latency, start=t)
         self._flag_taps.append((unit.flags, out.time))
         return out
 
     def _dot(self, m, a, b):
         p = [self._op(m, "mul", x, y) for x, y in zip(a, b)]
-        return self._op(m, "add", self._op(m, "add", p[0], p[1]), p[2])
+        s01 = self._op(m, "add", p[0], p[1])
+        out = self._op(m, "add", s01, p[2])
+        out.parts = (*p, s01)
+        return out
+
+    # -- the certified mode's bounds (model.certified, operand order as there) -----------
+    def _breg(self, m, value, time):
+        """Register a bound value computed at ``time``."""
+        self._n_bound += 1
+        r = Signal(self._bo.width, name=f"bound{self._n_bound}")
+        m.d.sync += r.eq(value)
+        return _Timed(r, time + 1)
+
+    def _bv(self, m, tv, time):
+        return self._bo.view(self._at(m, tv, time))
+
+    def _bound_mul(self, m, x, bx, y, by, p):
+        """Bound of ``p = x*y``: ``U(x) B_y + (U(y) + B_y) B_x + rnd`` (``by`` None: y
+        exact, then ``U(y) B_x + rnd``)."""
+        ops = self._bo
+        t = max(p.start, bx.time, 0 if by is None else by.time)
+        if by is None:
+            acc = self._breg(m, ops.mul(m, ops.upper(m, self._at(m, y, t)),
+                                        self._bv(m, bx, t)), t)
+        else:
+            byv = self._bv(m, by, t)
+            t1 = self._breg(m, ops.mul(m, ops.upper(m, self._at(m, x, t)), byv), t)
+            u2 = self._breg(m, ops.add(m, ops.upper(m, self._at(m, y, t)), byv), t)
+            t2 = self._breg(m, ops.mul(m, self._bv(m, u2, t + 1), self._bv(m, bx, t + 1)),
+                            t + 1)
+            acc = self._breg(m, ops.add(m, self._bv(m, t1, t + 2), self._bv(m, t2, t + 2)),
+                             t + 2)
+        tf = max(acc.time, p.time)
+        return self._breg(m, ops.add(m, self._bv(m, acc, tf),
+                                     ops.rnd_mul(m, self._at(m, p, tf))), tf)
+
+    def _bound_add(self, m, a, ba, b, bb, s):
+        """Bound of ``s = a + b`` (or ``a - b``): ``B_a + B_b + rnd`` (``bb`` None: b
+        exact)."""
+        ops = self._bo
+        if bb is None:
+            acc = ba
+        else:
+            t = max(ba.time, bb.time)
+            acc = self._breg(m, ops.add(m, self._bv(m, ba, t), self._bv(m, bb, t)), t)
+        tf = max(acc.time, s.time)
+        rnd = ops.rnd_add(m, self._at(m, a, tf), self._at(m, b, tf), self._at(m, s, tf))
+        return self._breg(m, ops.add(m, self._bv(m, acc, tf), rnd), tf)
+
+    def _bound_dot(self, m, x, bx, y, by, dot):
+        """Bound of the dot product ``dot`` of ``x`` and ``y`` (``by`` None: y exact)."""
+        p0, p1, p2, s01 = dot.parts
+        q = [self._bound_mul(m, x[c], bx[c], y[c], None if by is None else by[c], pc)
+             for c, pc in enumerate((p0, p1, p2))]
+        g01 = self._bound_add(m, p0, q[0], p1, q[1], s01)
+        return self._bound_add(m, s01, g01, p2, q[2], dot)
 
     def _neg(self, m, x: _Timed):
         f = self._fmt
@@ -293,14 +390,84 @@ class RayTriangleUnit(wiring.Component):
         return out
 
     # -- elaboration ---------------------------------------------------------------------
+    def _datapath(self, m, p):
+        """The operations (and, in certified mode, their bounds) on the payload ``p``;
+        returns ``{name: _Timed}`` of det, t', u', v', s (and w), bounds as ``g_<name>``."""
+        self._n_ops = 0
+        self._n_delay = 0
+        self._n_bound = 0
+        self._flag_taps = []
+        self._keys = []
+        vec = {name: [_Timed(getattr(p, name)[k], 0) for k in ("x", "y", "z")]
+               for name in ("o", "d", "v0", "e1", "e2", "n")}
+        o, d, v0 = vec["o"], vec["d"], vec["v0"]
+        e1, e2, n = vec["e1"], vec["e2"], vec["n"]
+
+        # 1-3: T = V0 - O
+        t = [self._op(m, "add", v0[k], o[k], sub=True) for k in range(3)]
+        # 4-8: det = N.D; 9-13: t' = N.T
+        det = self._dot(m, n, d)
+        tp = self._dot(m, n, t)
+        # 14-22: Q = D x T, q_c = p_c - r_c
+        prods = [(self._op(m, "mul", d[a], t[b]), self._op(m, "mul", d[b], t[a]))
+                 for a, b in ((1, 2), (2, 0), (0, 1))]
+        q = [self._op(m, "add", pc, rc, sub=True) for pc, rc in prods]
+        # 23-27: u' = neg(Q.E2); 28-32: v' = Q.E1; 33: s = u' + v'
+        qe2 = self._dot(m, q, e2)
+        up = self._neg(m, qe2)
+        vp = self._dot(m, q, e1)
+        s = self._op(m, "add", up, vp)
+        res = {"det": det, "t": tp, "u": up, "v": vp, "s": s}
+        if self._mode != "paper":
+            res["w"] = self._op(m, "add", det, s, sub=True)      # 34: w = det - s
+        if self._mode != "certified":
+            return res
+
+        ops = self._bo = BoundOps(self._fmt, self._bound_k)
+        w = res["w"]
+
+        def inputs(vals, slack):
+            return [_Timed(ops.input_bound(m, x.value, slack).as_value(), 0) for x in vals]
+
+        bv, b1, b2, bn = inputs(v0, False), inputs(e1, True), inputs(e2, True), inputs(n, True)
+        gt_ = [self._bound_add(m, v0[c], bv[c], o[c], None, t[c]) for c in range(3)]
+        g = {"det": self._bound_dot(m, n, bn, d, None, det),
+             "t": self._bound_dot(m, n, bn, t, gt_, tp)}
+        gq = []
+        for (a, b), (pc, rc), qc in zip(((1, 2), (2, 0), (0, 1)), prods, q):
+            gp = self._bound_mul(m, t[b], gt_[b], d[a], None, pc)
+            gr = self._bound_mul(m, t[a], gt_[a], d[b], None, rc)
+            gq.append(self._bound_add(m, pc, gp, rc, gr, qc))
+        g["u"] = self._bound_dot(m, e2, b2, q, gq, qe2)
+        g["v"] = self._bound_dot(m, e1, b1, q, gq, vp)
+        gs = self._bound_add(m, up, g["u"], vp, g["v"], s)
+        g["w"] = self._bound_add(m, det, g["det"], s, gs, w)
+        res.update({f"g_{k}": v for k, v in g.items()})
+        return res
+
+    def _schedule_end(self) -> int:
+        """The certified mode's decision cycle: when the last result and bound are ready
+        (a trial build of the datapath into a module that is thrown away)."""
+        self._trial = True
+        try:
+            p = Signal(input_layout(self._fmt, self._ray_id_bits, self._tri_id_bits))
+            trial = Module()
+            trial._MustUse__silence = True
+            res = self._datapath(trial, p)
+        finally:
+            self._trial = False
+        return max(tv.time for tv in res.values())
+
+    _trial = False
+
     def elaborate(self, platform):
         m = Module()
         f = self._fmt
-        self._n_ops = 0
-        self._n_delay = 0
-        self._flag_taps = []
-        self._keys = []
         dec = self.decision_cycle
+        p = self.i.payload
+        res = self._datapath(m, p)
+        det, tp, up, vp, s = (res[k] for k in ("det", "t", "u", "v", "s"))
+        assert max(tv.time for tv in res.values()) <= dec
 
         fifo = m.submodules.fifo = SyncFIFO(width=len(self.o.payload.as_value()),
                                             depth=self.fifo_depth)
@@ -314,33 +481,6 @@ class RayTriangleUnit(wiring.Component):
             self.o.payload.eq(fifo.r_data),
         ]
         m.d.sync += credits.eq(credits + accept - (fifo.r_rdy & self.o.ready))
-
-        p = self.i.payload
-        vec = {name: [_Timed(getattr(p, name)[k], 0) for k in ("x", "y", "z")]
-               for name in ("o", "d", "v0", "e1", "e2", "n")}
-        o, d, v0 = vec["o"], vec["d"], vec["v0"]
-        e1, e2, n = vec["e1"], vec["e2"], vec["n"]
-
-        # 1-3: T = V0 - O
-        t = [self._op(m, "add", v0[k], o[k], sub=True) for k in range(3)]
-        # 4-8: det = N.D; 9-13: t' = N.T
-        det = self._dot(m, n, d)
-        tp = self._dot(m, n, t)
-        # 14-22: Q = D x T
-        q = [self._op(m, "add", self._op(m, "mul", d[1], t[2]), self._op(m, "mul", d[2], t[1]),
-                      sub=True),
-             self._op(m, "add", self._op(m, "mul", d[2], t[0]), self._op(m, "mul", d[0], t[2]),
-                      sub=True),
-             self._op(m, "add", self._op(m, "mul", d[0], t[1]), self._op(m, "mul", d[1], t[0]),
-                      sub=True)]
-        # 23-27: u' = neg(Q.E2); 28-32: v' = Q.E1; 33: s = u' + v'
-        up = self._neg(m, self._dot(m, q, e2))
-        vp = self._dot(m, q, e1)
-        s = self._op(m, "add", up, vp)
-        if self._mode == "conservative":
-            w = self._op(m, "add", det, s, sub=True)             # 34: w = det - s
-        assert max(tv.time for tv in (det, tp, up, vp, s)) <= dec
-
         # event counts: per event, the number of the pair's operations that raised it,
         # summed along the pipeline as the operations finish (each running sum only as
         # wide as the operations finished so far need); the OR flags follow from them
@@ -368,7 +508,25 @@ class RayTriangleUnit(wiring.Component):
         det_d, tp_d = self._at(m, det, dec), self._at(m, tp, dec)
         up_d, vp_d, s_d = self._at(m, up, dec), self._at(m, vp, dec), self._at(m, s, dec)
         hit = Signal()
-        if self._mode == "paper":
+        outcome = Signal(2)
+        if self._mode == "certified":
+            ops = self._bo
+            emf = f.exp_max_field
+            vals = {k: self._at(m, res[k], dec) for k in ("det", "t", "u", "v", "w")}
+            special = Cat(*(v[f.man_bits:f.width - 1] == emf for v in vals.values())).any()
+            cl = {k: ops.classify(v, self._bv(m, res[f"g_{k}"], dec)) for k, v in vals.items()}
+            ge, gt, le, lt = ({k: c[i] for k, c in cl.items()} for i in range(4))
+            names = ("u", "v", "w", "t")
+            chit = ((gt["det"] & Cat(*(ge[k] for k in names)).all())
+                    | (lt["det"] & Cat(*(le[k] for k in names)).all()))
+            cmiss = ((le["det"] | Cat(*(lt[k] for k in names)).any())
+                     & (ge["det"] | Cat(*(gt[k] for k in names)).any()))
+            m.d.comb += [
+                outcome.eq(Mux(special | (flags & FLAG_OVERFLOW).any(), 2,
+                               Mux(chit, 1, Mux(cmiss, 0, 2)))),
+                hit.eq(outcome == 1),
+            ]
+        elif self._mode == "paper":
             pos = (self._le(m, zero, up_d) & self._le(m, zero, vp_d) & self._le(m, s_d, det_d)
                    & self._le(m, zero, tp_d))
             neg = (self._le(m, up_d, zero) & self._le(m, vp_d, zero) & self._le(m, det_d, s_d)
@@ -377,7 +535,7 @@ class RayTriangleUnit(wiring.Component):
         else:
             mg = self._margin_fields(m, p)
             mg = {k: delay(m, v, dec, name=f"mg_{k}") for k, v in mg.items()}
-            w_d = self._at(m, w, dec)
+            w_d = self._at(m, res["w"], dec)
             sign = f.sign_bit
             bad = (self._nan(det_d) | self._nan(tp_d) | self._nan(up_d) | self._nan(vp_d)
                    | self._nan(w_d) | (flags & FLAG_OVERFLOW).any())
@@ -393,13 +551,16 @@ class RayTriangleUnit(wiring.Component):
         tid_d = delay(m, p.tri_id, dec, name="tri_id")
 
         # output register (cycle dec + 1), then the FIFO
-        res = Signal(output_layout(f, self._ray_id_bits, self._tri_id_bits))
-        res_valid = Signal()
+        out = Signal(output_layout(f, self._ray_id_bits, self._tri_id_bits,
+                                   outcome=self._mode == "certified"))
+        out_valid = Signal()
         m.d.sync += [
-            res.ray_id.eq(ids_d), res.tri_id.eq(tid_d), res.hit.eq(hit),
-            res.t.eq(tp_d), res.u.eq(up_d), res.v.eq(vp_d), res.det.eq(det_d),
-            res.flags.eq(flags), res.n_overflow.eq(counts[0]),
-            res.n_underflow.eq(counts[1]), res.n_invalid.eq(counts[2]), res_valid.eq(valid_d),
+            out.ray_id.eq(ids_d), out.tri_id.eq(tid_d), out.hit.eq(hit),
+            out.t.eq(tp_d), out.u.eq(up_d), out.v.eq(vp_d), out.det.eq(det_d),
+            out.flags.eq(flags), out.n_overflow.eq(counts[0]),
+            out.n_underflow.eq(counts[1]), out.n_invalid.eq(counts[2]), out_valid.eq(valid_d),
         ]
-        m.d.comb += [fifo.w_data.eq(res.as_value()), fifo.w_en.eq(res_valid)]
+        if self._mode == "certified":
+            m.d.sync += out.outcome.eq(outcome)
+        m.d.comb += [fifo.w_data.eq(out.as_value()), fifo.w_en.eq(out_valid)]
         return m

@@ -280,7 +280,9 @@ def _key(*parts) -> str:
 
 
 class RayTriangleCosim(UnitCosim):
-    """``ray-triangle``: one untagged line per pair, inputs then the expected result."""
+    """``ray-triangle``: one untagged line per pair, inputs then the expected result (the
+    certified mode: the record's fields and ``outcome``, the 2 bits above them, compared
+    with the model's ``bound_variant="exp"``, the variant the RTL has)."""
 
     name = "ray-triangle"
 
@@ -296,6 +298,9 @@ class RayTriangleCosim(UnitCosim):
         ins = [(n, w) for n, (_, w) in self.pair.offsets().items()]
         outs = [(n, w) for n, (_, w) in self.res.offsets().items()
                 if n not in ("ray_id", "tri_id")]
+        self.certified = self.mode == "certified"
+        if self.certified:
+            outs.append(("outcome", 2))
         self.outputs = tuple(n for n, _ in outs)
         self.compared = ("ray_id", "tri_id") + self.outputs
         self.kinds = (LineKind(None, tuple(ins + outs)),)
@@ -327,9 +332,10 @@ class RayTriangleCosim(UnitCosim):
 
         f = self._split(cases, self.pair)
         ref = intersect(*(f[k].astype(np.uint32) for k in ("o", "d", "v0", "e1", "e2", "n")),
-                        self.fmt, mode=self.mode)
+                        self.fmt, mode=self.mode,
+                        bound_variant="exp" if self.certified else None)
         out = {"ray_id": _u64(cases["ray_id"]), "tri_id": _u64(cases["tri_id"])}
-        for k in ("hit", "t", "u", "v", "det", "flags"):
+        for k in ("hit", "t", "u", "v", "det", "flags") + ("outcome",) * self.certified:
             out[k] = _u64(ref[k])
         for j, ev in enumerate(("overflow", "underflow", "invalid")):
             out[f"n_{ev}"] = _u64(ref["event_counts"][:, j])
@@ -356,18 +362,26 @@ class RayTriangleCosim(UnitCosim):
         from .harness import HarnessSpec
 
         text, latency = unit_verilog(self.name, self.fmt, self.options, "ray_triangle")
+        out_bits = self.res.size + 2 * self.certified
         spec = HarnessSpec(dut="ray_triangle", inputs=[("i__payload", self.pair.size)],
-                           outputs=[("o__payload", self.res.size)], i_valid="i__valid",
+                           outputs=[("o__payload", out_bits)], i_valid="i__valid",
                            o_valid="o__valid", i_ready="i__ready", o_ready="o__ready")
         words = self.pair.pack_words(self._split(cases, self.pair))
         out, info = _batch(simulator, spec, text,
                            _key("ray_triangle", self.fmt.name, self.mode, self.target),
                            {"i__payload": _words32(words, self.pair.size)}, valid_density,
                            stall_density, seed, timeout_s)
-        rec = self.res.unpack_words(_words64(out["o__payload"], self.res.size))
+        words = _words64(out["o__payload"], out_bits)
+        rec = self.res.unpack_words(words)
         got = {}
         for s in self.res.fields:
             got[s.name] = rec[s.name]
+        if self.certified:              # the 2 bits above the record (maybe across a word)
+            lo, sh = divmod(self.res.size, 64)
+            both = words[:, lo] >> np.uint64(sh)
+            if sh == 63:
+                both |= (words[:, lo + 1] & np.uint64(1)) << np.uint64(1)
+            got["outcome"] = both & np.uint64(3)
         info["latency"] = latency
         return got, info
 
