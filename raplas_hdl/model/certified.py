@@ -43,6 +43,10 @@ products are exponent adds), ``lead3`` and ``lead6`` (3 or 6 leading fraction bi
 operand: small LUT multipliers). :data:`DEFAULT_VARIANT` is the one the mode uses. Per
 pair the bound datapath is 65 round-up bound adders, 27 bound products and 5 comparators, no
 DSP48 (estimates per variant in ``docs/certified-mode.md``).
+
+The model runs the pairs 128 at a time (:func:`block_pairs`: paper mode's vector loops for
+the values, vector loops for the bounds of the lanes in the common case, :func:`pair_full`
+for the other lanes), the same bits as one pair at a time (:func:`pairs_one`).
 """
 
 from __future__ import annotations
@@ -639,8 +643,8 @@ def intersect_certified(arrs, fmt: FPFormat, scale: float = 1.0,
     """The certified mode over validated pair arrays ``(o, d, v0, e1, e2, n)`` (uint32,
     shape (n, 3) each); :func:`raplas_hdl.model.ray_triangle.intersect` is the public
     entry. ``block``: a block at a time (:func:`block_pairs`), else one pair at a time
-    (:func:`pair_full`); the results are the same bits. Returns ``outcome`` (uint8), ``t``, ``u``, ``v``, ``det`` (uint32) and
-    ``event_counts`` (uint8, (n, 3))."""
+    (:func:`pairs_one`); the results are the same bits. Returns ``outcome`` (uint8), ``t``,
+    ``u``, ``v``, ``det`` (uint32) and ``event_counts`` (uint8, (n, 3))."""
     cc = certified_constants(fmt, scale, variant)
     count = arrs[0].shape[0]
     outc = np.empty(count, dtype=np.uint8)
