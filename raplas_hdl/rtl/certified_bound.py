@@ -110,7 +110,7 @@ class BoundOps:
             tab = Mux(ea > eb, ea, eb)
             m.d.comb += top.eq(Mux(~sz & (es > tab), es, tab))
             ulp = self.pow2(m, "ct", top - f.man_bits)
-            zero_case = self.add(m, ulp, self.eta(m))
+            zero_case = self.add_pow2(m, top - f.man_bits, 1 - f.bias)
             r = Signal(self.layout, name=f"brc{self._n}")
             m.d.comb += r.eq(Mux(sz, zero_case, ulp))
             return self._new(m, "ra", opz | r.z, r.e, r.f)
@@ -143,6 +143,19 @@ class BoundOps:
         r = Signal(self.layout, name=f"bsum{self._n}")
         m.d.comb += r.eq(Mux(a.z, b, Mux(b.z, a, both)))
         return r
+
+    def add_pow2(self, m, ea, eb):
+        """``2**ea + 2**eb`` rounded up (what :meth:`add` gives, without its adders):
+        ``2**(hi+1)`` if equal, else ``2**hi (1 + 2**-d)`` with ``d = |ea - eb|``, the
+        fraction rounded up to ``2**-k`` beyond ``k``."""
+        k = self.k
+        hi = Signal(signed(self.ew), name=f"bph{self._n}")
+        d = Signal(self.ew + 1, name=f"bpd{self._n}")
+        m.d.comb += [hi.eq(Mux(ea > eb, ea, eb)), d.eq(Mux(ea > eb, ea - eb, eb - ea))]
+        frac = Const(1, k)
+        for i in range(k, 0, -1):                 # d = i: fraction 2**(k-i)
+            frac = Mux(d == i, 1 << (k - i), frac)
+        return self._new(m, "p2", 0, hi + (d == 0), Mux(d == 0, 0, frac))
 
     def mul(self, m, a, b):
         """``a * b`` rounded up to ``k + 1`` significant bits (the significand product as
