@@ -113,8 +113,7 @@ def test_rtl_mode_check():
     from raplas_hdl.model.modes import RTL_MODES, check_rtl_mode
 
     assert check_rtl_mode("conservative") == "conservative"
-    assert "certified" not in RTL_MODES
-    with pytest.raises(ValueError, match="RTL has no certified mode"):
-        check_rtl_mode("certified")
+    assert check_rtl_mode("certified") == "certified"
+    assert set(RTL_MODES) == {"paper", "conservative", "certified"}
     with pytest.raises(ValueError, match="mode must be one of"):
         check_rtl_mode("bogus")

@@ -540,8 +540,9 @@ class RtlBackend(ModelBackend):
     def __init__(self, fmt: FPFormat = FP24, mode: str = "conservative", testers=None,
                  margin_scale: int = 1, sim: str = "icarus"):
         if mode == "certified":
-            raise ValueError("the rtl backend has no certified mode yet (the unit's outcome "
-                             "is in the model only): use --backend model, or --mode paper or "
+            raise ValueError("the rtl backend has no certified mode yet (the ray-triangle "
+                             "unit has it, the intersection unit's result stream does not "
+                             "carry the outcome): use --backend model, or --mode paper or "
                              "conservative")
         super().__init__(fmt, mode, testers, margin_scale)
         try:
