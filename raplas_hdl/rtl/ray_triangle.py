@@ -305,6 +305,9 @@ class RayTriangleUnit(wiring.Component):
             acc = self._breg(m, ops.add(m, self._bv(m, ba, t), self._bv(m, bb, t)), t)
         tf = max(acc.time, s.time)
         rnd = ops.rnd_add(m, self._at(m, a, tf), self._at(m, b, tf), self._at(m, s, tf))
+        if self._fmt.rounding == "chop":        # chop's max of three exponents: own stage
+            rnd = self._bv(m, self._breg(m, rnd, tf), tf + 1)
+            tf += 1
         return self._breg(m, ops.add(m, self._bv(m, acc, tf), rnd), tf)
 
     def _bound_dot(self, m, x, bx, y, by, dot):
