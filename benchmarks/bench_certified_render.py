@@ -93,7 +93,8 @@ def main(argv=None):
                     rows.append({"scene": name, "format": f, "mode": mode,
                                  "not_rendered": str(exc)})
                     continue
-                row["unit_cost_device_fraction"] = cost.get("cost")
+                row["unit_cost_device_fraction"] = cost.get("device_fraction")
+                row["units_fit"] = cost.get("units_fit")
                 rows.append(row)
                 unc = (f"uncertain {100 * row['uncertain_fraction']:.3f} %, filtered "
                        f"{row['filtered']:,}, exact {row['exact']:,} in {row['exact_s']}s"
