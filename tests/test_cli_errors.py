@@ -490,7 +490,7 @@ def test_help_is_plain_complete_and_true(cmd, capsys):
     assert "(default None)" not in text and "rows+cols) (default" not in text
     if cmd == "verilog":
         assert "fp-add 1 to 7 (default 4), fp-mul 1 to 5 (default 3)" in " ".join(text.split())
-        assert "--mode {paper,conservative}" in text and "--target {generic,virtex4}" in text
+        assert "--mode {paper,conservative,certified}" in text and "--target {generic,virtex4}" in text
     if cmd == "cosim":
         flat = " ".join(text.split())
         for opt in ("--exp-bits E the format", "--seed S seed", "--man-bits M fraction"):

@@ -59,7 +59,7 @@ UNITS = {u.name: u for u in [
           **TARGET_OPTION}),
     Unit("ray-triangle", "ray_triangle", "division-free Moller-Trumbore unit",
          "raplas_hdl.rtl.ray_triangle:RayTriangleUnit",
-         {"mode": (str, "paper", "paper | conservative"), **TARGET_OPTION}),
+         {"mode": (str, "paper", "paper | conservative | certified"), **TARGET_OPTION}),
     Unit("intersection-unit", "intersection_unit", "the whole intersection unit",
          "raplas_hdl.rtl.intersection:build_intersection_unit",
          {"rows": (int, 4, "bundle rows"), "cols": (int, 4, "bundle columns"),
