@@ -891,6 +891,8 @@ def run_sweep(spec: BenchSpec, progress=print, cost_thread: bool = True) -> dict
                    hw_slices=c.get("slices_est"), hw_cost=c.get("device_fraction"))
         row.update(device_figures(row, c.get("device"), clock))
     spec_d = asdict(spec)
+    if spec_d["mesh_dir"] is not None:     # results name the project's folder, not a machine's
+        spec_d["mesh_dir"] = dev._rel(spec_d["mesh_dir"])
     return {"spec": spec_d, "points": rows, "stress": stress, "costs": costs,
             "device": {"name": "XC4VSX35", "rows": dev.DEVICE_ROWS, "cols": dev.DEVICE_COLS,
                        "testers": dev.DEVICE_TESTERS, "tester_latency": dev.TESTER_LATENCY,

@@ -87,7 +87,7 @@ def warm(formats=("FP24/rtz",), modes=MODES, float64: bool = True,
             Path(lock).parent.mkdir(parents=True, exist_ok=True)
             with open(lock, "a+"):
                 held = file_lock(lock)
-        except OSError:
+        except OSError:         # a read-only install: compile without the lock
             pass
     with held:
         if generic:

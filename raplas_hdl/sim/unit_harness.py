@@ -59,6 +59,7 @@ import numpy as np
 
 from raplas_hdl.model.memory_image import SceneMemory, UnitConfig, as_run, scene_writes
 from raplas_hdl.model.records import CMD, COUNTERS, RESULT
+from raplas_hdl.sim.harness import _HEX, _UNHEX  # the hex digit tables, defined once
 
 __all__ = [
     "BACKDOOR",
@@ -76,12 +77,6 @@ __all__ = [
 
 TOPLEVEL = "unit_harness"
 OP_WRITE, OP_CMD, OP_WAIT, OP_COUNTERS, OP_END, OP_QUIT = range(6)
-_HEX = np.frombuffer(b"0123456789abcdef", dtype=np.uint8)
-_UNHEX = np.full(256, 255, dtype=np.uint8)
-for _i, _c in enumerate(b"0123456789abcdef"):
-    _UNHEX[_c] = _i
-for _i, _c in enumerate(b"ABCDEF"):
-    _UNHEX[_c] = 10 + _i
 
 
 class HarnessError(AssertionError):
