@@ -203,6 +203,9 @@ class Scene:
         The materials table (default: ``(material,)``).
     material_ids : ndarray (F,) int64
         Index into ``materials`` of every triangle (default: all 0).
+    render_defaults : dict
+        Render settings the scene asks for (a scene file's ``[render]`` table:
+        ``depth``, ``glossy``, ``ao``, ``ao_angle``, ``ao_distance``); options override them.
     """
 
     name: str
@@ -217,6 +220,7 @@ class Scene:
     scale: float = 1.0
     materials: tuple = ()
     material_ids: np.ndarray | None = None
+    render_defaults: dict = field(default_factory=dict)
 
     def __post_init__(self):
         v = np.asarray(self.vertices, dtype=np.float64)
