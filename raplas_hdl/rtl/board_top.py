@@ -52,8 +52,8 @@ class BoardTop(wiring.Component):
     ----------
     config : UnitConfig, optional
         Build parameters of the unit; alternatively pass them as keywords.
-    multiplier : {"generic", "virtex4"}
-        Significand multipliers of the unit (see :class:`IntersectionUnit`).
+    multiplier, adder : {"generic", "virtex4"}
+        Significand multipliers and FP adders of the unit (see :class:`IntersectionUnit`).
 
     Members
     -------
@@ -75,7 +75,7 @@ class BoardTop(wiring.Component):
     """
 
     def __init__(self, config: UnitConfig | None = None, *, multiplier: str = "generic",
-                 **params):
+                 adder: str = "generic", **params):
         if config is None:
             config = UnitConfig(**params)
         elif params:
@@ -87,6 +87,7 @@ class BoardTop(wiring.Component):
                              f"{config.fmt.width} bits wide")
         self._cfg = config
         self._multiplier = multiplier
+        self._adder = adder
         super().__init__({
             CLOCK_PORT: In(1), RESET_PORT: In(1),
             "wb_adr": In(ADDR_BITS), "wb_dat_w": In(32), "wb_dat_r": Out(32),
@@ -110,7 +111,8 @@ class BoardTop(wiring.Component):
         m.d.comb += cd.clk.eq(getattr(self, CLOCK_PORT))
         m.submodules.reset_sync = ResetSynchronizer(getattr(self, RESET_PORT), domain="sync")
         # (the keyword only when it is not the default: the unit took it later)
-        extra = {} if self._multiplier == "generic" else {"multiplier": self._multiplier}
+        extra = {k: v for k, v in (("multiplier", self._multiplier), ("adder", self._adder))
+                 if v != "generic"}
         m.submodules.unit = unit = IntersectionUnit(cfg, **extra)
 
         # -- registers ----------------------------------------------------------------------
@@ -220,9 +222,10 @@ class BoardTop(wiring.Component):
         return m
 
 
-def build_board_top(fmt=None, multiplier: str = "generic", **params) -> BoardTop:
+def build_board_top(fmt=None, multiplier: str = "generic", adder: str = "generic",
+                    **params) -> BoardTop:
     """Builder for ``raplas-hdl verilog board-top`` (keywords of :class:`UnitConfig`, and
-    ``multiplier``)."""
+    ``multiplier``, ``adder``)."""
     if fmt is not None:
         params["fmt"] = fmt
-    return BoardTop(UnitConfig(**params), multiplier=multiplier)
+    return BoardTop(UnitConfig(**params), multiplier=multiplier, adder=adder)

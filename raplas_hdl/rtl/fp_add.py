@@ -65,7 +65,7 @@ from .fp_common import (check_format, leading_zeros, pack, round_significand,
                         shift_right_sticky, unpack)
 from .pipeline import Step, build_pipeline, group_steps, place_registers, wire
 
-__all__ = ["FPAdd", "TARGETS", "fp_add_latency"]
+__all__ = ["FPAdd", "TARGETS", "check_adder", "fp_add_latency"]
 
 #: Adder targets: all in the fabric, or shifts and add in Virtex-4 DSP48 (:mod:`.fp_add_dsp48`).
 TARGETS = ("generic", "virtex4")
@@ -86,6 +86,14 @@ def _check_target(target, multiplier):
     if target not in TARGETS:
         raise ValueError(f"target must be one of {', '.join(TARGETS)}, not {target!r}")
     return target
+
+
+def check_adder(adder) -> str:
+    """Return ``adder`` if it is a known adder target (:data:`TARGETS`), else raise
+    ``ValueError`` (the ``adder=`` keyword of the units that hold FP adders)."""
+    if adder not in TARGETS:
+        raise ValueError(f"adder must be one of {', '.join(TARGETS)}, not {adder!r}")
+    return adder
 
 
 def adder_ports(width: int) -> dict:

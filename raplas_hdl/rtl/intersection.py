@@ -86,6 +86,9 @@ class IntersectionUnit(wiring.Component):
         plane-sphere array and the ray-triangle unit (``virtex4``: Virtex-4 ``DSP48``
         primitives, one cycle more per multiplier). An implementation choice only: the
         results, and so the golden model, do not depend on it.
+    adder : {"generic", "virtex4"}
+        The same for every :class:`~raplas_hdl.rtl.fp_add.FPAdd` (``virtex4``: shifts and
+        significand add in two DSP48, latency 7; :mod:`raplas_hdl.rtl.fp_add_dsp48`).
     ram : {"memory", "verilog"}
         The memories as Amaranth ``Memory`` (default; Amaranth's simulator runs it) or as
         instances of a behavioural Verilog RAM without initial values
@@ -125,11 +128,13 @@ class IntersectionUnit(wiring.Component):
     """
 
     def __init__(self, config: UnitConfig | None = None, *, multiplier: str = "generic",
-                 ram: str = "memory", **params):
+                 adder: str = "generic", ram: str = "memory", **params):
+        from .fp_add import check_adder
         from .fp_mul import check_multiplier
         from .ram import RAM_IMPLS
 
         self._multiplier = check_multiplier(multiplier)
+        self._adder = check_adder(adder)
         if ram not in RAM_IMPLS:
             raise ValueError(f"ram must be one of {', '.join(RAM_IMPLS)}, not {ram!r}")
         self._ram = ram
@@ -167,6 +172,10 @@ class IntersectionUnit(wiring.Component):
         return self._multiplier
 
     @property
+    def adder(self) -> str:
+        return self._adder
+
+    @property
     def latency(self):
         """None: the unit's delay depends on the scene (see the stage list)."""
         return None
@@ -179,10 +188,10 @@ class IntersectionUnit(wiring.Component):
         cfg = self._cfg
         psa = PlaneSphereArray(cfg.fmt, rows=cfg.rows, cols=cfg.cols, testers=cfg.n_testers,
                                sphere_id_bits=cfg.sphere_id_bits + 3,
-                               multiplier=self._multiplier)
+                               multiplier=self._multiplier, adder=self._adder)
         rtu = RayTriangleUnit(cfg.fmt, mode=cfg.mode, margin_scale=cfg.margin_scale,
                               ray_id_bits=cfg.ray_id_bits + 1, tri_id_bits=cfg.tri_id_bits,
-                              multiplier=self._multiplier)
+                              multiplier=self._multiplier, adder=self._adder)
         return psa, rtu
 
     def elaborate(self, platform):
@@ -251,10 +260,10 @@ class IntersectionUnit(wiring.Component):
         return m
 
 
-def build_intersection_unit(fmt=None, multiplier: str = "generic", **params
-                            ) -> IntersectionUnit:
+def build_intersection_unit(fmt=None, multiplier: str = "generic", adder: str = "generic",
+                            **params) -> IntersectionUnit:
     """Builder for ``raplas-hdl verilog intersection-unit`` (keywords of :class:`UnitConfig`,
-    and ``multiplier``)."""
+    and ``multiplier``, ``adder``)."""
     if fmt is not None:
         params["fmt"] = fmt
-    return IntersectionUnit(UnitConfig(**params), multiplier=multiplier)
+    return IntersectionUnit(UnitConfig(**params), multiplier=multiplier, adder=adder)

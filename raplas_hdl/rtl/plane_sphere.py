@@ -52,7 +52,7 @@ from amaranth.lib.wiring import In, Out
 
 from ..fp import FP24
 from ..model.records import PLANE, PS_RESULT, SPHERE
-from .fp_add import FPAdd
+from .fp_add import FPAdd, check_adder, fp_add_latency
 from .fp_common import check_format
 from .fp_mul import FPMul, check_multiplier, fp_mul_latency
 from .pipeline import delay
@@ -128,6 +128,9 @@ class PlaneSphereTester(wiring.Component):
     multiplier : {"generic", "virtex4"}
         Significand multiplier of the three :class:`~.fp_mul.FPMul` (``virtex4``: DSP48
         primitives, one cycle more at FP24).
+    adder : {"generic", "virtex4"}
+        Target of the three :class:`~.fp_add.FPAdd` (``virtex4``: two DSP48 each, latency
+        7 whatever ``add_stages``).
 
     Attributes
     ----------
@@ -149,17 +152,18 @@ class PlaneSphereTester(wiring.Component):
         ``NOT(|d| > r')``: 1 keeps the sphere.
     o_valid : Out(1)
     latency : int
-        ``Lm + 2*add_stages + 1`` with ``Lm`` the multiplier's latency (12 by default, 13
-        with ``multiplier="virtex4"`` at FP24).
+        ``Lm + 2*La + 1`` with ``Lm``, ``La`` the multiplier's and the adder's latencies
+        (12 by default, 13 with ``multiplier="virtex4"`` at FP24, 19 with both targets
+        ``virtex4``).
 
     Raises
     ------
     ValueError
-        For a bad format, a slot count below 1 or an unknown multiplier.
+        For a bad format, a slot count below 1 or an unknown multiplier or adder.
     """
 
     def __init__(self, fmt=FP24, planes: int = 1, mul_stages: int = 3, add_stages: int = 4,
-                 multiplier: str = "generic"):
+                 multiplier: str = "generic", adder: str = "generic"):
         self._fmt = check_format(fmt)
         _check_int("planes", planes, 1)
         self._planes = planes
@@ -169,6 +173,8 @@ class PlaneSphereTester(wiring.Component):
         self._add_stages = add_stages
         self._multiplier = check_multiplier(multiplier)
         self._mul_latency = fp_mul_latency(fmt, mul_stages, multiplier)
+        self._adder = check_adder(adder)
+        self._add_latency = fp_add_latency(fmt, add_stages, adder)
         w = fmt.width
         super().__init__({
             "pw_en": In(1), "pw_addr": In(range(planes)), "pw_data": In(plane_layout(fmt)),
@@ -190,16 +196,20 @@ class PlaneSphereTester(wiring.Component):
         return self._multiplier
 
     @property
+    def adder(self) -> str:
+        return self._adder
+
+    @property
     def latency(self) -> int:
         """Enabled clock edges from a sphere to its flag."""
-        return self._mul_latency + 2 * self._add_stages + 1
+        return self._mul_latency + 2 * self._add_latency + 1
 
     def elaborate(self, platform):
         m = Module()
         fmt = self._fmt
         mul_x, mul_y, mul_z = muls = [FPMul(fmt, self._mul_stages, self._multiplier)
                                       for _ in range(3)]
-        add_s1, add_s2, add_d = [FPAdd(fmt, self._add_stages) for _ in range(3)]
+        add_s1, add_s2, add_d = [FPAdd(fmt, self._add_stages, self._adder) for _ in range(3)]
         for i, u in enumerate(muls):
             m.submodules[f"mul_{'xyz'[i]}"] = u
         m.submodules.add_s1 = add_s1
@@ -267,6 +277,8 @@ class PlaneSphereArray(wiring.Component):
         Depths of the FP units in each tester.
     multiplier : {"generic", "virtex4"}
         Significand multiplier of the testers' :class:`~.fp_mul.FPMul`.
+    adder : {"generic", "virtex4"}
+        Target of the testers' :class:`~.fp_add.FPAdd`.
 
     Attributes
     ----------
@@ -298,7 +310,7 @@ class PlaneSphereArray(wiring.Component):
 
     def __init__(self, fmt=FP24, *, rows: int, cols: int, testers: int | None = None,
                  sphere_id_bits: int = 16, mul_stages: int = 3, add_stages: int = 4,
-                 multiplier: str = "generic"):
+                 multiplier: str = "generic", adder: str = "generic"):
         self._fmt = check_format(fmt)
         _check_int("rows", rows, 1)
         _check_int("cols", cols, 1)
@@ -313,11 +325,13 @@ class PlaneSphereArray(wiring.Component):
         self._id_bits = sphere_id_bits
         # The testers' parameters: the array builds its testers in elaborate, so that an
         # array that is never elaborated leaves no unused elaboratables behind.
-        self._tester_args = (fmt, self._passes, mul_stages, add_stages, multiplier)
+        self._tester_args = (fmt, self._passes, mul_stages, add_stages, multiplier, adder)
         _check_int("mul_stages", mul_stages, 1)
         _check_int("add_stages", add_stages, 1)
         self._multiplier = check_multiplier(multiplier)
-        self._tester_latency = fp_mul_latency(fmt, mul_stages, multiplier) + 2 * add_stages + 1
+        self._adder = check_adder(adder)
+        self._tester_latency = (fp_mul_latency(fmt, mul_stages, multiplier)
+                                + 2 * fp_add_latency(fmt, add_stages, adder) + 1)
         self._fifo_depth = self.latency + 2
         super().__init__({
             "pw_en": In(1), "pw_addr": In(range(self._n_planes)),
@@ -355,6 +369,10 @@ class PlaneSphereArray(wiring.Component):
     @property
     def multiplier(self) -> str:
         return self._multiplier
+
+    @property
+    def adder(self) -> str:
+        return self._adder
 
     @property
     def latency(self) -> int:

@@ -23,7 +23,8 @@ mode, which adds ``w = det - s``. With adder latency ``La`` and multiplier laten
 
 ``latency`` (``D + 2``: 28 for the defaults in paper mode, 32 in conservative mode; the
 paper's unit has 29 stages; with ``multiplier="virtex4"`` ``Lm`` is 4 at FP24, so 30 and
-34) is the number of clock edges from the one that accepts a pair
+34; with ``adder="virtex4"`` ``La`` is 7, so 43 and 50 with generic multipliers, 45 and 52
+with both targets ``virtex4``) is the number of clock edges from the one that accepts a pair
 on ``i`` to the one that can take its result from ``o``, with an empty FIFO.
 
 Back-pressure: the pipeline never stalls (its clock enable is tied high). Every accepted
@@ -48,7 +49,7 @@ from ..model.conservative import MARGIN_NAMES, margin_constants
 from ..model.certified import certified_constants, check_certified_format
 from ..model.records import EVENT_COUNT_BITS, PAIR, RT_RESULT
 from .certified_bound import RTL_VARIANTS, BoundOps
-from .fp_add import FPAdd
+from .fp_add import FPAdd, check_adder, fp_add_latency
 from .fp_mul import FPMul, check_multiplier, fp_mul_latency
 from .pipeline import delay
 from .records import struct_layout
@@ -123,6 +124,9 @@ class RayTriangleUnit(wiring.Component):
     multiplier : {"generic", "virtex4"}
         Significand multiplier of the 18 :class:`~.fp_mul.FPMul` (``virtex4``: one DSP48
         each at FP24 and one cycle more, so ``latency`` grows by 2).
+    adder : {"generic", "virtex4"}
+        Target of the 15 (16) :class:`~.fp_add.FPAdd` (``virtex4``: two DSP48 each,
+        latency 7 whatever ``add_stages``; the schedule follows, see the module docstring).
 
     Attributes
     ----------
@@ -138,13 +142,13 @@ class RayTriangleUnit(wiring.Component):
     Raises
     ------
     ValueError
-        For a bad format, mode, scale, ID width or multiplier.
+        For a bad format, mode, scale, ID width, multiplier or adder.
     """
 
     def __init__(self, fmt, *, mode: str = "paper", margin_scale: float = 1,
                  ray_id_bits: int = 16, tri_id_bits: int = 16, add_stages: int = 4,
                  mul_stages: int = 3, multiplier: str = "generic",
-                 bound_variant: str = "exp"):
+                 adder: str = "generic", bound_variant: str = "exp"):
         check_format(fmt)
         check_rtl_mode(mode)
         self._bound_k = None
@@ -174,8 +178,9 @@ class RayTriangleUnit(wiring.Component):
         self._add_stages = add_stages
         self._mul_stages = mul_stages
         self._multiplier = check_multiplier(multiplier)
+        self._adder = check_adder(adder)
         # the FP units' latencies (checked against the built units in elaborate)
-        self._la = add_stages
+        self._la = fp_add_latency(fmt, add_stages, adder)
         self._lm = fp_mul_latency(fmt, mul_stages, multiplier)
         super().__init__({
             "i": In(stream.Signature(input_layout(fmt, ray_id_bits, tri_id_bits))),
@@ -198,6 +203,10 @@ class RayTriangleUnit(wiring.Component):
     @property
     def multiplier(self) -> str:
         return self._multiplier
+
+    @property
+    def adder(self) -> str:
+        return self._adder
 
     @property
     def bound_variant(self):
@@ -241,7 +250,7 @@ class RayTriangleUnit(wiring.Component):
         if kind == "mul":
             unit = FPMul(self._fmt, self._mul_stages, self._multiplier)
         else:
-            unit = FPAdd(self._fmt, self._add_stages)
+            unit = FPAdd(self._fmt, self._add_stages, self._adder)
         self._n_ops += 1
         m.submodules[f"{kind}{self._n_ops}"] = unit
         m.d.comb += [unit.a.eq(self._at(m, a, t)), unit.b.eq(self._at(m, b, t)),
