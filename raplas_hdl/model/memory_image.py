@@ -111,6 +111,11 @@ class UnitConfig:
         Scale of the conservative margin (the ray-triangle unit's parameter).
     fifo_depth : int
         Depth of the pair FIFO in front of the ray-triangle unit (2 to 1024).
+    lanes : int
+        Ray-triangle units fed by the one plane-sphere array (1 to 8): pairs are dealt to
+        them round-robin and their results merged back in the same order, so the result
+        stream does not depend on it (``docs/intersection-unit.md``). In :meth:`params`
+        only when not 1.
 
     Raises
     ------
@@ -128,6 +133,7 @@ class UnitConfig:
     mode: str = "paper"
     margin_scale: int = 1
     fifo_depth: int = 16
+    lanes: int = 1
 
     def __post_init__(self):
         check_format(self.fmt)
@@ -141,6 +147,7 @@ class UnitConfig:
         check_mode(self.mode)
         _check_int("margin_scale", self.margin_scale, 1)
         _check_int("fifo_depth", self.fifo_depth, 2, 1024)
+        _check_int("lanes", self.lanes, 1, 8)
         if self.max_spheres * self.tris_per_sphere > _MAX_INDEX + 1:
             raise ValueError("max_spheres * tris_per_sphere exceeds the address map "
                              f"({_MAX_INDEX + 1} list entries)")
@@ -194,7 +201,8 @@ class UnitConfig:
                 "testers": self.n_testers, "tris_per_sphere": self.tris_per_sphere,
                 "max_triangles": self.max_triangles, "max_spheres": self.max_spheres,
                 "mode": self.mode, "margin_scale": self.margin_scale,
-                "fifo_depth": self.fifo_depth}
+                "fifo_depth": self.fifo_depth,
+                **({"lanes": self.lanes} if self.lanes != 1 else {})}
 
 
 def _u32(name, a, shape_tail, fmt=None):
