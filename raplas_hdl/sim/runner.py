@@ -1,7 +1,8 @@
 """Build-once, run-many glue between pytest (or the CLI) and cocotb's Python runner.
 
 :func:`run_cocotb` builds a simulator model once per (Verilog text, simulator, build flags)
-under ``<repo>/build/sim/<build_key>-<hash8>/<simulator>/`` and reuses it, across pytest-xdist
+under ``build/sim/<build_key>-<hash8>/<simulator>/`` (of the checkout, or of the
+working directory for an installed wheel) and reuses it, across pytest-xdist
 workers too (a file lock serialises the build), then runs a cocotb test module in a fresh
 run directory, parses the results XML and raises :class:`AssertionError` naming the
 failed tests.
@@ -39,7 +40,17 @@ _file_lock = file_lock
 
 SIMULATORS = ("icarus", "verilator")
 REPO_ROOT = Path(__file__).resolve().parents[2]
-BUILD_ROOT = REPO_ROOT / "build" / "sim"
+
+
+def _build_root() -> Path:
+    """``build/sim`` of the checkout when the package runs from one (an editable install),
+    else of the working directory (an installed wheel: never inside site-packages)."""
+    if (REPO_ROOT / "pyproject.toml").is_file() and (REPO_ROOT / "raplas_hdl").is_dir():
+        return REPO_ROOT / "build" / "sim"
+    return Path.cwd().resolve() / "build" / "sim"
+
+
+BUILD_ROOT = _build_root()
 
 #: Verilator options shared by the cocotb build and the plain C++ harness of the benchmark.
 VERILATOR_OPT = ("--timing", "-O3", "--x-assign", "fast", "--x-initial", "fast", "--noassert",
