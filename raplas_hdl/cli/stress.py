@@ -2,15 +2,16 @@
 unit (golden model) against the exact reference R, as a table per format and mode.
 
 ``raplas-hdl stress campaign``: the same families and the plane-culling proof at scale,
-sharded over the machine's cores, resumable (:mod:`raplas_hdl.verify.campaign`). Its
-reports go under build/stress-campaign/ unless --out (or --results/--report) says
-otherwise."""
+sharded over the machine's cores (or a Dask cluster: --scheduler, --dask-workers), resumable
+(:mod:`raplas_hdl.verify.campaign`). Its reports go under build/stress-campaign/ unless
+--out (or --results/--report) says otherwise."""
 
 from __future__ import annotations
 
 import json
 import os
 
+from .. import cluster
 from ..model.modes import MODES
 from . import grammar as g
 
@@ -77,8 +78,9 @@ def add_parser(subparsers):
     c = sub.add_parser(
         "campaign", help="the stress families and the culling proof at scale (resumable)",
         description="The stress families and the plane-culling proof over formats, roundings "
-                    "and both modes (48.5 M cases by default), sharded over the cores, "
-                    "seeded, resumable: run the same command again after an interruption. "
+                    "and both modes (48.5 M cases by default), sharded over the cores (or "
+                    "a Dask cluster: --scheduler, --dask-workers), seeded, resumable: run "
+                    "the same command again after an interruption. "
                     f"Shards go to --shard-dir (default {CAMPAIGN_SHARDS}), the merged JSON "
                     f"and markdown report to --out (default {CAMPAIGN_OUT}). To regenerate "
                     "the committed report, give --results docs/results/stress_campaign.json "
@@ -116,10 +118,12 @@ def add_parser(subparsers):
     c.add_argument("--report", default=None, metavar="FILE.md",
                    help="markdown summary (default <out>/stress-campaign.md)")
     c.add_argument("--jobs", type=g.int_range(1, MAX_JOBS), default=None, metavar="N",
-                   help=f"worker processes, 1 to {MAX_JOBS} (default: the number of cores)")
+                   help=f"worker processes of the local pool, 1 to {MAX_JOBS} (default: the "
+                        "number of cores)")
     c.add_argument("--max-shards", type=g.int_range(1), default=None, metavar="K",
                    help="run at most K new shards, then stop (no merge)")
     c.add_argument("--no-progress", action="store_true", help="no progress bar")
+    cluster.add_options(c, "shards")
     c.set_defaults(_check_target=check_campaign, _run_target=run_campaign)
     return p
 
@@ -230,6 +234,7 @@ def check_campaign(args) -> None:
                            ("--report", args.report, ".md")):
         g.check_output_file(path, (ext,), opt, must_exist_dir=False)
     g.check_distinct(**{"--results": args.results, "--report": args.report})
+    cluster.check_options(args, conflicts=("jobs",))
 
 
 def _campaign_command(args) -> str:
@@ -246,7 +251,7 @@ def _campaign_command(args) -> str:
         parts += ["--certified-scale", repr(args.certified_scale)]
     if args.jobs:
         parts += ["--jobs", str(args.jobs)]
-    return " ".join(parts)
+    return " ".join(parts + cluster.command_options(args))
 
 
 def run_campaign(args) -> int:
@@ -259,20 +264,21 @@ def run_campaign(args) -> int:
     params = args.params
     t0 = time.perf_counter()
     try:
-        info = campaign.run_campaign(params, args.shard_dir, args.jobs, args.max_shards,
-                                     progress=not args.no_progress)
+        with cluster.executor_from_args(args, args.jobs) as executor:
+            info = campaign.run_campaign(params, args.shard_dir, max_shards=args.max_shards,
+                                         progress=not args.no_progress, executor=executor)
     except KeyboardInterrupt:
         print("\ninterrupted: finished shards are kept; run the same command to resume",
               file=sys.stderr)
         return 130
-    print(f"{info['run']} shards run, {info['reused']} reused, {info['pending']} of "
-          f"{info['shards']} missing ({info['wall_s']:.1f} s)")
+    print(f"{info['run']} shards run ({info['executor']}), {info['reused']} reused, "
+          f"{info['pending']} of {info['shards']} missing ({info['wall_s']:.1f} s)")
     if info["pending"]:
         print("campaign incomplete: run the same command again to resume; not merged")
         return 0
     doc = campaign.merge(params, args.shard_dir, _campaign_command(args),
                          {"wall_s": time.perf_counter() - t0, "shards_run": info["run"],
-                          "shards_reused": info["reused"]})
+                          "shards_reused": info["reused"], "executor": info["executor"]})
     campaign.write_outputs(doc, args.results, args.report)
     tot, gu = doc["totals"], doc["guarantees"]
     print(f"{tot['cases']:,} cases ({tot['raytri_pairs']:,} ray-triangle pairs x "

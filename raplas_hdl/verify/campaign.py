@@ -31,8 +31,10 @@ index. A shard's result is written atomically (temporary file, then ``os.replace
 ``<out_dir>/<task>_<format>_<family>_<index>_<digest>.json``, where the digest covers the
 whole key: :data:`VERSION`, the sizes, the seed. A shard file whose key matches is reused;
 a change of version or parameters gives other names, so stale files are ignored.
-:func:`run_campaign` runs the missing shards over a process pool, and :func:`merge` sums
-the shard files (in key order: the result does not depend on the order shards finished).
+:func:`run_campaign` runs the missing shards on an executor of :mod:`raplas_hdl.cluster`
+(a local process pool by default, or a Dask cluster) and writes each shard's file in the
+calling process as its result comes back; :func:`merge` sums the shard files (in key order:
+the result does not depend on the order shards finished, nor on where they ran).
 
 Merged JSON (``docs/results/stress_campaign.json``)
 --------------------------------------------------
@@ -89,11 +91,9 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import multiprocessing
 import os
 import platform
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
 from datetime import datetime, timezone
 from fractions import Fraction
@@ -105,7 +105,7 @@ from ..fp.format import ROUNDINGS, FPFormat, parse_format
 from ..model.modes import MODES
 
 __all__ = ["VERSION", "RUN_KEYS", "MODES", "KINDS", "CampaignParams", "Shard", "plan",
-           "shard_path", "run_shard", "run_campaign", "merge", "markdown", "culling_shard",
+           "shard_path", "compute_shard", "write_shard", "run_shard", "run_campaign", "merge", "markdown", "culling_shard",
            "raytri_shard", "random_bundle", "random_spheres", "adversarial_spheres",
            "exact_line_hit", "quantile_from_hist", "results_of", "write_outputs"]
 
@@ -491,8 +491,9 @@ def culling_shard(shard: Shard) -> dict:
 
 
 # -- running -----------------------------------------------------------------------------------
-def run_shard(shard: Shard, out_dir) -> dict:
-    """Compute one shard and write its file atomically. Returns the file's content."""
+def compute_shard(shard: Shard) -> dict:
+    """Compute one shard: the content of its file (``key``, ``result``, ``wall_s``,
+    ``cpu_s``). Runs wherever the executor puts it; writes nothing."""
     t0, c0 = time.perf_counter(), time.process_time()
     if shard.task == "raytri":
         result = raytri_shard(shard)
@@ -500,12 +501,23 @@ def run_shard(shard: Shard, out_dir) -> dict:
         result = culling_shard(shard)
     else:
         raise ValueError(f"unknown campaign task {shard.task!r}")
-    doc = {"key": shard.key(), "result": result,
-           "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0}
+    return {"key": shard.key(), "result": result,
+            "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0}
+
+
+def write_shard(out_dir, shard: Shard, doc: dict) -> Path:
+    """Write a shard's file atomically (a temporary file, then ``os.replace``)."""
     path = shard_path(out_dir, shard)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     tmp.write_text(json.dumps(doc, sort_keys=True))
     os.replace(tmp, path)
+    return path
+
+
+def run_shard(shard: Shard, out_dir) -> dict:
+    """Compute one shard and write its file atomically. Returns the file's content."""
+    doc = compute_shard(shard)
+    write_shard(out_dir, shard, doc)
     return doc
 
 
@@ -518,36 +530,40 @@ def _load(out_dir, shard: Shard):
     return doc if doc.get("key") == shard.key() else None
 
 
-def _worker_init():
-    try:
-        import numba
-        numba.set_num_threads(1)
-    except Exception:       # noqa: BLE001 - a missing numba only costs threads
-        pass
-
-
 def run_campaign(params: CampaignParams, out_dir="build/campaign", jobs=None,
-                 max_shards=None, progress=True) -> dict:
+                 max_shards=None, progress=True, executor=None) -> dict:
     """Run the shards of ``params`` that ``out_dir`` lacks.
+
+    The shards run on ``executor`` (:mod:`raplas_hdl.cluster`: this process, the local
+    process pool or a Dask cluster) and come back to this process, which writes each one's
+    file as it arrives: an interrupted run keeps every shard that came back, and the workers
+    of a cluster need no file system in common with this one.
 
     Parameters
     ----------
     jobs : int, optional
-        Worker processes (default ``os.cpu_count()``); 1 runs in this process.
+        Worker processes of the default executor (default ``os.cpu_count()``); 1 runs in
+        this process. Not with ``executor``.
     max_shards : int, optional
         Stop after this many new shards (an interrupted campaign, on purpose).
     progress : bool
         Show a tqdm progress bar.
+    executor : raplas_hdl.cluster.Executor, optional
+        Where the shards run (the caller closes it); default a process pool of ``jobs``.
 
     Returns
     -------
     dict
         ``shards`` (total), ``reused``, ``run`` (computed now), ``pending`` (still
-        missing), ``wall_s``.
+        missing), ``wall_s``, ``executor`` (where they ran).
     """
-    jobs = (os.cpu_count() or 1) if jobs is None else int(jobs)
-    if jobs < 1:
-        raise ValueError(f"jobs must be at least 1, not {jobs}")
+    from ..cluster import SerialExecutor, make_executor
+
+    if executor is not None and jobs is not None:
+        raise ValueError("give jobs or an executor, not both")
+    own = executor is None
+    if own:
+        executor = make_executor(jobs)
     t0 = time.perf_counter()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -558,47 +574,33 @@ def run_campaign(params: CampaignParams, out_dir="build/campaign", jobs=None,
     reused = len(shards) - len(todo)
     if max_shards is not None:
         todo = todo[:max(0, int(max_shards))]
+    if own and len(todo) <= 1:
+        executor = SerialExecutor()
     bar = None
     if progress and todo:
         from tqdm import tqdm
         bar = tqdm(total=len(todo), unit="shard", desc="stress campaign", smoothing=0.05)
     done = 0
     try:
-        if jobs == 1 or len(todo) <= 1:
-            for s in todo:
-                run_shard(s, out)
-                done += 1
-                if bar:
-                    bar.update(1)
-        else:
+        if todo and executor.kind != "serial" and executor.local:
             # compile the kernels the shards use once, here, so that the workers only load
             # numba's disk cache (each would otherwise compile them again)
             from ..engine.warm import default_lock, warm
 
             warm(engine=False, lock=default_lock())
-            # spawn, not fork: a fork after numba has started its thread pool (any earlier
-            # parallel kernel in this process) gives children that crash (BrokenProcessPool)
-            ctx = multiprocessing.get_context("spawn")
-            with ProcessPoolExecutor(max_workers=jobs, initializer=_worker_init,
-                                     mp_context=ctx) as pool:
-                futures = {pool.submit(run_shard, s, out): s for s in todo}
-                try:
-                    for fut in as_completed(futures):
-                        fut.result()
-                        done += 1
-                        if bar:
-                            bar.update(1)
-                except BaseException:
-                    for f in futures:
-                        f.cancel()
-                    pool.shutdown(wait=False, cancel_futures=True)
-                    raise
+        for shard, doc in executor.run(compute_shard, todo):
+            write_shard(out, shard, doc)
+            done += 1
+            if bar:
+                bar.update(1)
     finally:
         if bar:
             bar.close()
+        if own:
+            executor.close()
     pending = sum(1 for s in shards if _load(out, s) is None)
     return {"shards": len(shards), "reused": reused, "run": done, "pending": pending,
-            "wall_s": time.perf_counter() - t0}
+            "wall_s": time.perf_counter() - t0, "executor": executor.describe()}
 
 
 # -- merging -----------------------------------------------------------------------------------
@@ -740,7 +742,9 @@ def markdown(doc: dict) -> str:
         f"- machine: {m['node']}, {m['cpus']} CPUs, Python {m['python']}, {m['platform']}",
         f"- date (merge): {doc['date']}",
         f"- wall time of the run that merged: {run.get('wall_s', 0):.0f} s "
-        f"({run.get('shards_run', 0)} shards run, {run.get('shards_reused', 0)} reused); "
+        f"({run.get('shards_run', 0)} shards run"
+        + (f" on a {run['executor']}" if run.get("executor", "").startswith(("process", "Dask"))
+           else "") + f", {run.get('shards_reused', 0)} reused); "
         f"CPU time summed over the shards: {doc['cpu_s']:.0f} s",
         f"- {tot['shards']} shards; seed {p['seed']}; {p['rays_per_family']} rays per family "
         f"and format ({p['shard_rays']} per shard); {p['bundles']} bundles per sphere kind "
