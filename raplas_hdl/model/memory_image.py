@@ -30,9 +30,15 @@ region      name    bank   index                      field
 3           PLANE   0/1    plane ID (rows, then cols)  0-2 n xyz, 3 p
 4           RAY     0/1    ray ID (i*cols + j)         0-2 O xyz, 3-5 D xyz, 6 enable (bit 0)
 5           RLIST   0/1    position in the run list    0: sphere ID
+6           WINDOW  0/1    0                           0: tmin, 1: excluded triangle
+                                                      ID + 1 (0: none), 2: any-hit
+                                                      (bit 0)
 ==========  ======  =====  =========================  ==============================
 
 Writes to an index outside the memory's depth, or to an unused field, are ignored.
+With the on-chip reduction (``UnitConfig.reduce``), RAY field 7 is the ray's ``tmax`` and
+the WINDOW region holds the bank's acceptance window and mode
+(:mod:`raplas_hdl.model.reduction`); without it both are ignored.
 
 Runs
 ----
@@ -64,7 +70,8 @@ __all__ = ["UnitConfig", "SceneMemory", "BundleMemory", "REGIONS", "write_addres
 
 
 #: Regions of the write-port address map.
-REGIONS = {"tri": 0, "sphere": 1, "tlist": 2, "plane": 3, "ray": 4, "rlist": 5}
+REGIONS = {"tri": 0, "sphere": 1, "tlist": 2, "plane": 3, "ray": 4, "rlist": 5,
+           "window": 6}
 _REGION_SHIFT = 28
 _BANK_SHIFT = 27
 _INDEX_SHIFT = 4
@@ -116,6 +123,10 @@ class UnitConfig:
         them round-robin and their results merged back in the same order, so the result
         stream does not depend on it (``docs/intersection-unit.md``). In :meth:`params`
         only when not 1.
+    reduce : bool
+        On-chip reduction (:mod:`raplas_hdl.model.reduction`): the result stream carries
+        one answer per ray (the nearest accepted hit, or the first blocking hit of an
+        any-hit bundle) instead of one beat per pair. In :meth:`params` only when set.
 
     Raises
     ------
@@ -134,6 +145,7 @@ class UnitConfig:
     margin_scale: int = 1
     fifo_depth: int = 16
     lanes: int = 1
+    reduce: bool = False
 
     def __post_init__(self):
         check_format(self.fmt)
@@ -148,6 +160,8 @@ class UnitConfig:
         _check_int("margin_scale", self.margin_scale, 1)
         _check_int("fifo_depth", self.fifo_depth, 2, 1024)
         _check_int("lanes", self.lanes, 1, 8)
+        if not isinstance(self.reduce, (bool, np.bool_)):
+            raise ValueError(f"reduce must be True or False, not {self.reduce!r}")
         if self.max_spheres * self.tris_per_sphere > _MAX_INDEX + 1:
             raise ValueError("max_spheres * tris_per_sphere exceeds the address map "
                              f"({_MAX_INDEX + 1} list entries)")
@@ -202,7 +216,8 @@ class UnitConfig:
                 "max_triangles": self.max_triangles, "max_spheres": self.max_spheres,
                 "mode": self.mode, "margin_scale": self.margin_scale,
                 "fifo_depth": self.fifo_depth,
-                **({"lanes": self.lanes} if self.lanes != 1 else {})}
+                **({"lanes": self.lanes} if self.lanes != 1 else {}),
+                **({"reduce": True} if self.reduce else {})}
 
 
 def _u32(name, a, shape_tail, fmt=None):
@@ -309,6 +324,16 @@ class BundleMemory:
     keep_all : bool
         The host's mark for a bundle over the culling budget: every run of it is sent with
         the command's ``keep_all`` bit (nothing culled). Not a memory of the unit.
+    tmin : int
+        Bit pattern of the acceptance window's lower end, finite (default 0: +0.0); used by
+        the on-chip reduction only, as ``tmax``, ``exclude`` and ``any_hit``
+        (:mod:`raplas_hdl.model.reduction`).
+    tmax : (rows*cols,) uint32, optional
+        Per ray, the window's upper end: a finite pattern or +infinity (default: +infinity).
+    exclude : int
+        A triangle ID no answer may be (-1: none), e.g. a shadow bundle's own triangle.
+    any_hit : bool
+        The bundle's rays want any accepted hit (shadow rays), not the nearest.
     """
 
     plane_n: np.ndarray
@@ -317,6 +342,10 @@ class BundleMemory:
     ray_d: np.ndarray
     enable: np.ndarray | None = None
     keep_all: bool = False
+    tmin: int = 0
+    tmax: np.ndarray | None = None
+    exclude: int = -1
+    any_hit: bool = False
 
     def __post_init__(self):
         self.plane_n = _u32("plane_n", self.plane_n, (3,))
@@ -336,6 +365,16 @@ class BundleMemory:
                                  f"not {en.shape}")
             self.enable = en.astype(bool)
         self.keep_all = bool(self.keep_all)
+        _check_int("tmin", self.tmin, 0, 0xFFFFFFFF)
+        self.tmin = int(self.tmin)
+        if self.tmax is not None:
+            self.tmax = _u32("tmax", np.asarray(self.tmax).reshape(-1), ())
+            if self.tmax.shape[0] != self.ray_o.shape[0]:
+                raise ValueError(f"tmax must have one pattern per ray "
+                                 f"({self.ray_o.shape[0]}), not {self.tmax.shape[0]}")
+        _check_int("exclude", self.exclude, -1)
+        self.exclude = int(self.exclude)
+        self.any_hit = bool(self.any_hit)
 
     def check(self, config: UnitConfig):
         """Raise ``ValueError`` if the bundle does not fit the unit ``config``."""
@@ -349,6 +388,17 @@ class BundleMemory:
             a = getattr(self, name)
             if a.size and a.max() > config.fmt.mask:
                 raise ValueError(f"{name} holds patterns wider than {config.fmt}")
+        if config.reduce:
+            from .reduction import check_window
+
+            check_window(config, self)
+
+    def window_tmax(self, config: UnitConfig) -> np.ndarray:
+        """Per ray, the ``tmax`` pattern the unit holds (+infinity where none was given)."""
+        if self.tmax is not None:
+            return self.tmax
+        inf = ((1 << config.fmt.exp_bits) - 1) << config.fmt.man_bits
+        return np.full(self.ray_o.shape[0], inf, np.uint32)
 
 
 class Run(NamedTuple):
@@ -428,7 +478,9 @@ def scene_writes(config: UnitConfig, scene: SceneMemory):
 
 def bundle_writes(config: UnitConfig, bundle: BundleMemory, bank: int = 0,
                   enable_only: bool = False):
-    """Writes that load ``bundle`` into ``bank`` (only the enable bits if ``enable_only``)."""
+    """Writes that load ``bundle`` into ``bank`` (only the enable bits if ``enable_only``).
+    With ``config.reduce`` they also write the rays' ``tmax`` (RAY field 7) and the bank's
+    window (WINDOW region)."""
     bundle.check(config)
     en = bundle.enable.astype(np.uint32)
     if enable_only:
@@ -436,8 +488,14 @@ def bundle_writes(config: UnitConfig, bundle: BundleMemory, bank: int = 0,
     pf = [bundle.plane_n[:, k] for k in range(3)] + [bundle.plane_p]
     a1, d1 = _record_writes("plane", pf, bank)
     rf = [bundle.ray_o[:, k] for k in range(3)] + [bundle.ray_d[:, k] for k in range(3)] + [en]
+    if config.reduce:
+        rf.append(bundle.window_tmax(config))
     a2, d2 = _record_writes("ray", rf, bank)
-    return np.concatenate([a1, a2]), np.concatenate([d1, d2]).astype(np.uint32)
+    if not config.reduce:
+        return np.concatenate([a1, a2]), np.concatenate([d1, d2]).astype(np.uint32)
+    a3 = write_address("window", np.zeros(3, np.int64), np.arange(3), bank)
+    d3 = np.array([bundle.tmin, bundle.exclude + 1, int(bundle.any_hit)], np.uint32)
+    return np.concatenate([a1, a2, a3]), np.concatenate([d1, d2, d3]).astype(np.uint32)
 
 
 def run_list_writes(config: UnitConfig, sphere_ids, bank: int = 0):
