@@ -4,7 +4,7 @@ Units: fp-add, fp-mul, plane-sphere-tester, plane-sphere, ray-triangle, intersec
 Each runs at full clock rate in a generated Verilog harness (no Python per clock) with
 random gaps in valid (held until taken) and random stalls; every output bit is compared
 with the golden model. The unit options (--stages, --rows, --cols, --testers,
---tris-per-sphere, --mode, --target) are those of raplas-hdl verilog.
+--tris-per-sphere, --mode, --target, --adder) are those of raplas-hdl verilog.
 
 Cases: --random N draws N seeded cases and takes the expected results from the model (an
 intersection-unit case is one run: a bundle against a list of spheres of a random scene);
@@ -81,7 +81,7 @@ def add_parser(subparsers):
                           f"{MAX_CASES:,} (intersection-unit: runs, at most {MAX_RUNS:,}); "
                           "default " + ", ".join(f"{u} {n:,}" for u, n in DEFAULT_CASES.items()))
     add_unit_options(p, UNITS, only=("stages", "rows", "cols", "testers", "tris_per_sphere",
-                                     "target"))
+                                     "target", "adder"))
     p.add_argument("--mode", type=_mode_or_driver, default=None,
                    metavar="{" + ",".join(MODES) + "}",
                    help="ray-triangle mode (default paper); ray-triangle, intersection-unit. "
@@ -249,7 +249,7 @@ def _check_build(args) -> None:
         from ..model.memory_image import UnitConfig
 
         kw = {k: v for k, v in args.options.items()
-              if v is not None and k not in ("target",)}
+              if v is not None and k not in ("target", "adder")}
         UnitConfig(fmt=args.fmt, **kw)        # ValueError names the parameter
         return
     from ..rtl.units import build_unit

@@ -31,8 +31,11 @@ CHOICE_OPTIONS = {
     "mode": (RTL_MODES, "paper",
              ("ray-triangle", "intersection-unit", "board-top")),
     "target": (("generic", "virtex4"), "generic",
-               ("fp-mul", "plane-sphere-tester", "plane-sphere", "ray-triangle",
+               ("fp-add", "fp-mul", "plane-sphere-tester", "plane-sphere", "ray-triangle",
                 "intersection-unit", "board-top")),
+    "adder": (("generic", "virtex4"), "generic",
+              ("plane-sphere-tester", "plane-sphere", "ray-triangle", "intersection-unit",
+               "board-top")),
 }
 _HELP = {
     "stages": "pipeline stages",
@@ -45,7 +48,9 @@ _HELP = {
     "fifo_depth": "pair FIFO depth",
     "mode": "ray-triangle mode",
     "target": "multiplier target: inferred multiplies (generic) or Virtex-4 DSP48 "
-              "primitives (virtex4)",
+              "primitives (virtex4); fp-add: its shifts and add in two DSP48",
+    "adder": "FP adder target of the unit's adders: fabric (generic) or two Virtex-4 DSP48 "
+             "each (virtex4, latency 7)",
 }
 
 
@@ -190,8 +195,9 @@ def run(args) -> int:
     unit, comp, opts = build_unit(args.unit, fmt, **args.options)
     params = {"exp_bits": fmt.exp_bits, "man_bits": fmt.man_bits, "rounding": fmt.rounding,
               **opts}
-    if "target" in unit.options:   # the manifest always says which multiplier was built
-        params.setdefault("target", UNITS[args.unit].options["target"][1])
+    for opt in ("target", "adder"):   # the manifest always says which targets were built
+        if opt in unit.options:
+            params.setdefault(opt, UNITS[args.unit].options[opt][1])
     vpath, mpath = write_unit(comp, unit.module, params, args.output)
     print(f"wrote {vpath} ({unit.module}, latency {getattr(comp, 'latency', 'n/a')}) "
           f"and {mpath}", file=sys.stderr)

@@ -4,9 +4,14 @@ Each entry builds a component from keyword parameters; the format arrives as an
 :class:`~raplas_hdl.fp.FPFormat`. Builders import their unit lazily, so emitting one unit
 never needs the others' modules.
 
-The option ``target`` (``generic`` or ``virtex4``, every unit with an FP multiplier) reaches
-the builder as its ``multiplier`` keyword: ``virtex4`` builds the significand multiplies
-from Virtex-4 ``DSP48`` primitives (:mod:`raplas_hdl.rtl.dsp48`).
+The option ``target`` (``generic`` or ``virtex4``, every unit with an FP multiplier, and
+``fp-add``) reaches the builder as its ``multiplier`` keyword: ``virtex4`` builds the
+significand multiplies from Virtex-4 ``DSP48`` primitives (:mod:`raplas_hdl.rtl.dsp48`); for
+``fp-add`` it is the adder's own target (:class:`~.fp_add.FPAdd` takes ``multiplier=`` as
+another name for ``target``): two ``DSP48`` per adder (:mod:`raplas_hdl.rtl.fp_add_dsp48`).
+The option ``adder`` (``generic`` or ``virtex4``, every unit built from FP adders and
+multipliers) chooses the same for all of the unit's :class:`~.fp_add.FPAdd`, independently
+of ``target``: ``--target virtex4 --adder virtex4`` puts both kinds of operation in DSP48.
 """
 
 from __future__ import annotations
@@ -17,11 +22,15 @@ from pathlib import Path
 
 from ..fp import FP24, FPFormat
 
-__all__ = ["Unit", "UNITS", "build_unit", "emit_all", "TARGET_OPTION"]
+__all__ = ["Unit", "UNITS", "build_unit", "emit_all", "TARGET_OPTION", "ADDER_OPTION"]
 
 #: The ``target`` option of the units with FP multipliers (``--target`` on the CLI).
 TARGET_OPTION = {"target": (str, "generic", "multiplier target: generic | virtex4 "
                                             "(DSP48 primitives)")}
+
+#: The ``adder`` option of the units built from FP adders and multipliers (``--adder``).
+ADDER_OPTION = {"adder": (str, "generic", "FP adder target: generic | virtex4 "
+                                          "(two DSP48 per adder)")}
 
 #: Values of the ``target`` option (the ``multiplier`` of :class:`~.fp_mul.FPMul`).
 TARGETS = ("generic", "virtex4")
@@ -46,26 +55,30 @@ class Unit:
 
 UNITS = {u.name: u for u in [
     Unit("fp-add", "fp_add", "pipelined FP adder/subtractor",
-         "raplas_hdl.rtl.fp_add:FPAdd", {"stages": (int, 4, "pipeline stages")}),
+         "raplas_hdl.rtl.fp_add:FPAdd", {"stages": (int, 4, "pipeline stages"),
+                                         "target": (str, "generic", "adder target: generic "
+                                                    "| virtex4 (two DSP48)")}),
     Unit("fp-mul", "fp_mul", "pipelined FP multiplier (one (M+1)x(M+1) multiply)",
          "raplas_hdl.rtl.fp_mul:FPMul", {"stages": (int, 3, "pipeline stages"),
                                          **TARGET_OPTION}),
     Unit("plane-sphere-tester", "plane_sphere_tester", "one plane-sphere tester",
-         "raplas_hdl.rtl.plane_sphere:PlaneSphereTester", {**TARGET_OPTION}),
+         "raplas_hdl.rtl.plane_sphere:PlaneSphereTester", {**TARGET_OPTION, **ADDER_OPTION}),
     Unit("plane-sphere", "plane_sphere", "plane-sphere tester array with decoder",
          "raplas_hdl.rtl.plane_sphere:build_plane_sphere",
          {"rows": (int, 4, "bundle rows"), "cols": (int, 4, "bundle columns"),
           "testers": (int, None, "testers in the array (default rows+cols)"),
-          **TARGET_OPTION}),
+          **TARGET_OPTION, **ADDER_OPTION}),
     Unit("ray-triangle", "ray_triangle", "division-free Moller-Trumbore unit",
          "raplas_hdl.rtl.ray_triangle:RayTriangleUnit",
-         {"mode": (str, "paper", "paper | conservative | certified"), **TARGET_OPTION}),
+         {"mode": (str, "paper", "paper | conservative | certified"), **TARGET_OPTION,
+          **ADDER_OPTION}),
     Unit("intersection-unit", "intersection_unit", "the whole intersection unit",
          "raplas_hdl.rtl.intersection:build_intersection_unit",
          {"rows": (int, 4, "bundle rows"), "cols": (int, 4, "bundle columns"),
           "testers": (int, None, "plane-sphere testers (default rows+cols)"),
           "tris_per_sphere": (int, 8, "triangles per bounding sphere"),
-          "mode": (str, "paper", "paper | conservative"), **TARGET_OPTION}),
+          "mode": (str, "paper", "paper | conservative"), **TARGET_OPTION,
+          **ADDER_OPTION}),
     Unit("board-top", "board_top", "the intersection unit behind a 32-bit Wishbone slave",
          "raplas_hdl.rtl.board_top:build_board_top",
          {"rows": (int, 4, "bundle rows"), "cols": (int, 4, "bundle columns"),
@@ -74,7 +87,8 @@ UNITS = {u.name: u for u in [
           "max_triangles": (int, 1024, "Triangle Memory depth"),
           "max_spheres": (int, 256, "Sphere Memory depth"),
           "fifo_depth": (int, 16, "pair FIFO depth"),
-          "mode": (str, "paper", "paper | conservative"), **TARGET_OPTION}),
+          "mode": (str, "paper", "paper | conservative"), **TARGET_OPTION,
+          **ADDER_OPTION}),
 ]}
 
 
@@ -92,8 +106,9 @@ def build_unit(name: str, fmt: FPFormat = FP24, **options):
     if unknown:
         raise ValueError(f"unit {name} takes no option(s) {', '.join(sorted(unknown))}")
     opts = {k: v for k, v in options.items() if v is not None}
-    if "target" in opts and opts["target"] not in TARGETS:
-        raise ValueError(f"target must be one of {', '.join(TARGETS)}, not {opts['target']!r}")
+    for opt in ("target", "adder"):
+        if opt in opts and opts[opt] not in TARGETS:
+            raise ValueError(f"{opt} must be one of {', '.join(TARGETS)}, not {opts[opt]!r}")
     return unit, unit.build(fmt, **opts), opts
 
 

@@ -106,7 +106,7 @@ def unit_verilog(unit: str, fmt, options: dict, module: str) -> tuple[str, int]:
             tmp = p.with_suffix(p.suffix + f".{os.getpid()}.tmp")
             tmp.write_text(content)
             os.replace(tmp, p)
-    if opts.get("target") == "virtex4":
+    if "virtex4" in (opts.get("target"), opts.get("adder")):
         from raplas_hdl.rtl.dsp48 import dsp48_sim_model
 
         text += "\n" + dsp48_sim_model()
@@ -217,6 +217,9 @@ class UnitCosim:
         self.fmt = fmt
         self.options = {k: v for k, v in options.items() if v is not None}
         self.target = self.options.get("target", "generic")
+        self.adder = self.options.get("adder", "generic")
+        # build-cache tag of the DSP48 choices (the adder only when not generic)
+        self.targets = self.target + ("" if self.adder == "generic" else f"-add-{self.adder}")
         self.header_params = {}
 
     # the interface
@@ -368,7 +371,7 @@ class RayTriangleCosim(UnitCosim):
                            o_valid="o__valid", i_ready="i__ready", o_ready="o__ready")
         words = self.pair.pack_words(self._split(cases, self.pair))
         out, info = _batch(simulator, spec, text,
-                           _key("ray_triangle", self.fmt.name, self.mode, self.target),
+                           _key("ray_triangle", self.fmt.name, self.mode, self.targets),
                            {"i__payload": _words32(words, self.pair.size)}, valid_density,
                            stall_density, seed, timeout_s)
         words = _words64(out["o__payload"], out_bits)
@@ -538,7 +541,7 @@ class TesterCosim(_PlaneCosim):
         words = {"planes": _pack_fields([pl[:, 0], pl[:, 1], pl[:, 2], pl[:, 3]], w),
                  "sphere": _pack_fields([cases[k] for k in ("cx", "cy", "cz", "r")], w)}
         out, info = _batch(simulator, spec, text,
-                           _key("plane_sphere_tester", self.fmt.name, self.target), words,
+                           _key("plane_sphere_tester", self.fmt.name, self.targets), words,
                            valid_density, stall_density, seed, timeout_s)
         info["latency"] = latency
         return {"flag": out["result"]}, info
@@ -648,7 +651,7 @@ class ArrayCosim(_PlaneCosim):
                 "sphere": _words32(words, sph.size)}
         out, info = _batch(simulator, spec, text,
                            _key("plane_sphere", self.fmt.name, f"{self.rows}x{self.cols}",
-                                f"t{self.options.get('testers', p)}", self.target),
+                                f"t{self.options.get('testers', p)}", self.targets),
                            cols, valid_density, stall_density, seed, timeout_s)
         rec = res.unpack_words(_words64(out["result"], res.size))
         info["latency"] = latency
@@ -860,7 +863,8 @@ class IntersectionCosim(UnitCosim):
             from .unit_driver import run_runs
 
             got = run_runs(simulator, self.config, cases["scene"], cases["runs"], seed=seed,
-                           ready_density=1.0 - stall_density, multiplier=self.target)
+                           ready_density=1.0 - stall_density, multiplier=self.target,
+                           adder=self.adder)
             cycles = sum(int(c.get("cycles", 0)) for _, c in got)
             build_s = 0.0
             run_s = time.monotonic() - t0
@@ -870,7 +874,7 @@ class IntersectionCosim(UnitCosim):
             with UnitSession(simulator, self.config, cases["scene"], seed=seed,
                              ready_density=1.0 - stall_density,
                              timeout_s=timeout_s or 24 * 3600.0,
-                             multiplier=self.target) as s:
+                             multiplier=self.target, adder=self.adder) as s:
                 build_s = time.monotonic() - t0 - s.load_s
                 t1 = time.monotonic()
                 got = s.run(cases["runs"])

@@ -188,7 +188,8 @@ def fp_verilog(op: str, fmt, stages: int | None = None, multiplier: str = "gener
                ) -> tuple[str, int]:
     """``(verilog text, latency)`` of the FP unit, module named ``fp_add``/``fp_mul``.
 
-    ``multiplier`` (``fp-mul`` only; ignored by the adder) picks the significand multiplier;
+    ``multiplier`` picks the significand multiplier of ``fp-mul`` and the target of
+    ``fp-add`` (its ``multiplier=`` alias of ``target``: the two-DSP48 adder);
     with ``"virtex4"`` the text instantiates ``DSP48`` and a simulation needs
     :func:`raplas_hdl.rtl.dsp48.dsp48_sim_model` appended (once per design).
     """
@@ -201,7 +202,7 @@ def fp_verilog(op: str, fmt, stages: int | None = None, multiplier: str = "gener
     else:
         raise ValueError(f"op must be one of {', '.join(FP_OPS)}, not {op!r}")
     kw = {} if stages is None else {"stages": stages}
-    if op == "fp-mul" and multiplier != "generic":
+    if multiplier != "generic":
         kw["multiplier"] = multiplier
     comp = cls(fmt, **kw)
     params = {"exp_bits": fmt.exp_bits, "man_bits": fmt.man_bits, "rounding": fmt.rounding,
@@ -281,7 +282,7 @@ def fp_cosim(op: str, fmt, a, b, sub=None, *, simulator: str, stages: int | None
                        else np.asarray(sub).astype(np.uint32))
     verilog, latency = fp_verilog(op, fmt, stages, multiplier)
     key = f"{spec.dut}-{fmt.name}-s{stages if stages is not None else 'd'}"
-    if op == "fp-mul" and multiplier != "generic":
+    if multiplier != "generic":
         from raplas_hdl.rtl.dsp48 import dsp48_sim_model
 
         verilog += "\n" + dsp48_sim_model()

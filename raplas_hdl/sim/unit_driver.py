@@ -131,7 +131,8 @@ def _verilator_pch_fix(simulator):
             os.environ["MAKEFLAGS"] = saved
 
 
-def _source_digest(config: UnitConfig, multiplier: str = "generic") -> str:
+def _source_digest(config: UnitConfig, multiplier: str = "generic",
+                   adder: str = "generic") -> str:
     import hashlib
 
     import amaranth
@@ -142,6 +143,8 @@ def _source_digest(config: UnitConfig, multiplier: str = "generic") -> str:
     h = hashlib.sha256(json.dumps(config.params(), sort_keys=True).encode())
     if multiplier != "generic":
         h.update(multiplier.encode())
+    if adder != "generic":
+        h.update(b"adder-" + adder.encode())
     h.update(amaranth.__version__.encode())
     for path in sorted((root / "rtl").glob("*.py")) + [root / "model" / "memory_image.py",
                                                         root / "model" / "records.py",
@@ -151,9 +154,11 @@ def _source_digest(config: UnitConfig, multiplier: str = "generic") -> str:
     return h.hexdigest()[:16]
 
 
-def unit_verilog(config: UnitConfig, multiplier: str = "generic") -> str:
+def unit_verilog(config: UnitConfig, multiplier: str = "generic",
+                 adder: str = "generic") -> str:
     """The unit's Verilog for ``config`` (module ``intersection_unit``); ``multiplier``
-    ``"virtex4"`` builds the DSP48 target (Yosys's DSP48 simulation model appended).
+    ``"virtex4"`` builds the DSP48 target (Yosys's DSP48 simulation model appended), and
+    ``adder="virtex4"`` the two-DSP48 FP adders.
 
     Emitting the whole unit takes a while (about 15 s of CPU at FP24), so the text is
     cached in memory and on disk under ``build/sim/verilog/``, keyed by the parameters and
@@ -161,9 +166,10 @@ def unit_verilog(config: UnitConfig, multiplier: str = "generic") -> str:
     """
     from raplas_hdl.sim.runner import BUILD_ROOT
 
-    if (config, multiplier) in _VERILOG_CACHE:
-        return _VERILOG_CACHE[config, multiplier]
-    path = BUILD_ROOT / "verilog" / f"intersection_unit-{_source_digest(config, multiplier)}.v"
+    if (config, multiplier, adder) in _VERILOG_CACHE:
+        return _VERILOG_CACHE[config, multiplier, adder]
+    digest = _source_digest(config, multiplier, adder)
+    path = BUILD_ROOT / "verilog" / f"intersection_unit-{digest}.v"
     if path.exists():
         text = path.read_text()
     else:
@@ -172,10 +178,10 @@ def unit_verilog(config: UnitConfig, multiplier: str = "generic") -> str:
         from raplas_hdl.rtl.ram import ram_verilog
 
         # behavioural RAMs without initial values: converts in seconds at any depth
-        text, _ = emit_verilog(IntersectionUnit(config, ram="verilog", multiplier=multiplier),
-                               "intersection_unit", {**config.params(), "ram": "verilog"})
+        unit = IntersectionUnit(config, ram="verilog", multiplier=multiplier, adder=adder)
+        text, _ = emit_verilog(unit, "intersection_unit", {**config.params(), "ram": "verilog"})
         text += ram_verilog()
-        if multiplier == "virtex4":
+        if "virtex4" in (multiplier, adder):
             from raplas_hdl.rtl.dsp48 import dsp48_sim_model
 
             text += "\n" + dsp48_sim_model()
@@ -183,7 +189,7 @@ def unit_verilog(config: UnitConfig, multiplier: str = "generic") -> str:
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
         tmp.write_text(text)
         os.replace(tmp, path)
-    _VERILOG_CACHE[config, multiplier] = text
+    _VERILOG_CACHE[config, multiplier, adder] = text
     return text
 
 
@@ -262,7 +268,8 @@ def decode_results(config: UnitConfig, beats) -> np.ndarray:
 
 def run_runs(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
              seed: int = 1, ready_density: float = 1.0, overlap: bool = False,
-             build_key: str | None = None, multiplier: str = "generic"):
+             build_key: str | None = None, multiplier: str = "generic",
+             adder: str = "generic"):
     """Run ``runs`` through the unit's Verilog.
 
     Parameters
@@ -283,6 +290,8 @@ def run_runs(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
         last's, which holds the totals).
     multiplier : ``"generic"`` or ``"virtex4"``
         The unit's multiplier target (see :func:`unit_verilog`).
+    adder : ``"generic"`` or ``"virtex4"``
+        The unit's FP adder target (see :func:`unit_verilog`).
 
     Returns
     -------
@@ -301,7 +310,7 @@ def run_runs(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
     if not runs:
         return []
     scene.check(config)
-    text = unit_verilog(config, multiplier)
+    text = unit_verilog(config, multiplier, adder)
     with tempfile.TemporaryDirectory(prefix="raplas-unit-") as tmp:
         stim_path = Path(tmp) / "stim.npz"
         out_path = Path(tmp) / "out.npz"

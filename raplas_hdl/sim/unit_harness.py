@@ -226,9 +226,10 @@ def _tail(path: Path, n: int = 30) -> str:
 
 
 def build_harness(simulator: str, config: UnitConfig, build_key: str | None = None,
-                  multiplier: str = "generic") -> list:
+                  multiplier: str = "generic", adder: str = "generic") -> list:
     """Build (or reuse) the harness and the unit for ``simulator``; the command that runs it
-    (``multiplier="virtex4"``: the DSP48 multipliers, with Yosys's DSP48 model).
+    (``multiplier="virtex4"``: the DSP48 multipliers, ``adder="virtex4"``: the DSP48 adders,
+    with Yosys's DSP48 model).
 
     Verilator: :func:`~raplas_hdl.sim.runner.build_plain_verilator` (the cocotb build's flags,
     no tracing, the plain C++ main). Icarus: ``iverilog -g2005``, run with ``vvp -n``. Both
@@ -237,7 +238,7 @@ def build_harness(simulator: str, config: UnitConfig, build_key: str | None = No
     from raplas_hdl.sim.runner import BUILD_ROOT, _file_lock, build_plain_verilator, simulator_env
     from raplas_hdl.sim.unit_driver import unit_verilog
 
-    text = harness_verilog(config) + unit_verilog(config, multiplier)
+    text = harness_verilog(config) + unit_verilog(config, multiplier, adder)
     key = build_key or f"unit-harness-{config.fmt.name}-{config.rows}x{config.cols}"
     if simulator == "verilator":
         return [str(build_plain_verilator(text, TOPLEVEL, key))]
@@ -423,6 +424,8 @@ class UnitSession:
     multiplier : ``"generic"`` or ``"virtex4"``
         The unit's multiplier target (``virtex4``: DSP48 primitives, simulated with Yosys's
         model).
+    adder : ``"generic"`` or ``"virtex4"``
+        The unit's FP adder target (``virtex4``: two DSP48 per adder).
     timeout_s : float
         Longest wait for one round's status line.
 
@@ -439,7 +442,7 @@ class UnitSession:
                  seed: int = 1, ready_density: float = 1.0, record=None,
                  timeout_s: float = 24 * 3600.0, build_key: str | None = None,
                  max_stall: int = 100_000_000, backdoor: bool = True,
-                 multiplier: str = "generic"):
+                 multiplier: str = "generic", adder: str = "generic"):
         if not 0.0 < ready_density <= 1.0:
             raise ValueError(f"ready_density must be in (0, 1], not {ready_density}")
         scene.check(config)
@@ -452,7 +455,7 @@ class UnitSession:
         self._result = RESULT.bind(config)
         self._counters = COUNTERS.bind(config)
         self._last_bit = self._result["last"].offset
-        cmd = build_harness(simulator, config, build_key, multiplier)
+        cmd = build_harness(simulator, config, build_key, multiplier, adder)
         from raplas_hdl.sim.runner import simulator_env
 
         t0 = time.monotonic()
