@@ -43,11 +43,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..engine.passes import round_runs, select_runs
-from .backends import COUNTERS, Backend
+from .backends import Backend
 from .scenes import Scene
-from .shading import face_normals, phong, shadow_bundles
+from .secondary import Tracer, whitted
+from .shading import face_normals, light_hits, phong, shadow_bundles
 from .spheres import build_sphere_tree, unit_margin
+from .tracing import RAY_TYPES, Tally, nearest_pass
 
 __all__ = [
     "RenderResult",
@@ -60,6 +61,12 @@ __all__ = [
     "save_png",
     "to_uint8",
 ]
+
+
+#: Largest ``RenderSettings.depth`` (generations of reflection and refraction rays).
+MAX_DEPTH = 16
+#: Largest side of a glossy or ambient-occlusion bundle.
+MAX_SECONDARY_LATTICE = 64
 
 
 @dataclass
@@ -94,6 +101,18 @@ class RenderSettings:
         results do not depend on it.
     record_rays : bool
         Keep every issued ray in :attr:`RenderResult.rays` (for the exact reference).
+    depth : int
+        Generations of reflection and refraction rays (0: none; docs/secondary-rays.md).
+    glossy_rows, glossy_cols : int
+        Glossy bundle of a point whose material has ``gloss_angle > 0`` (0: such materials
+        use the single mirror ray).
+    ao_rows, ao_cols : int
+        Ambient-occlusion bundle of every primary point (0: no ambient occlusion).
+    ao_angle : float
+        Half-angle in degrees of the ambient-occlusion cone, above 0 and below 90.
+    ao_distance : float
+        Reach of an ambient-occlusion ray as a fraction of the normalised scene's extent
+        (``tmax = ao_distance * 2 * bound``), above 0 and at most 1.
     """
 
     width: int = 128
@@ -112,6 +131,13 @@ class RenderSettings:
     progress: bool = True
     threads: int | None = None
     record_rays: bool = False
+    depth: int = 0
+    glossy_rows: int = 0
+    glossy_cols: int = 0
+    ao_rows: int = 0
+    ao_cols: int = 0
+    ao_angle: float = 60.0
+    ao_distance: float = 0.25
 
     def __post_init__(self):
         for name in ("width", "height", "rows", "cols", "tris_per_sphere", "batch_spheres",
@@ -122,6 +148,23 @@ class RenderSettings:
                 self.shadow_rows, self.shadow_cols) < 0:
             raise ValueError("shadow_rows and shadow_cols must both be positive (or both 0 "
                              "for no shadows)")
+        for name in ("depth", "glossy_rows", "glossy_cols", "ao_rows", "ao_cols"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < 0:
+                raise ValueError(f"{name} must be a non-negative integer, not {v!r}")
+        if self.depth > MAX_DEPTH:
+            raise ValueError(f"depth must be at most {MAX_DEPTH}, not {self.depth}")
+        for kind in ("glossy", "ao"):
+            r, c = getattr(self, f"{kind}_rows"), getattr(self, f"{kind}_cols")
+            if (r == 0) != (c == 0) or max(r, c) > MAX_SECONDARY_LATTICE:
+                raise ValueError(f"{kind}_rows and {kind}_cols must both be 1 to "
+                                 f"{MAX_SECONDARY_LATTICE} (or both 0 for none), not {r}x{c}")
+        if not 0.0 < float(self.ao_angle) < 90.0:
+            raise ValueError(f"ao_angle must be above 0 and below 90 degrees, not "
+                             f"{self.ao_angle}")
+        if not 0.0 < float(self.ao_distance) <= 1.0:
+            raise ValueError(f"ao_distance must be above 0 and at most 1 (a fraction of the "
+                             f"scene's extent), not {self.ao_distance}")
 
     @property
     def shadows(self) -> bool:
@@ -151,7 +194,14 @@ class RenderResult:
         ``primary_d`` (N, 3) and ``primary_yx`` (N, 2); ``shadow_o`` (S, 3), ``shadow_d``
         (S, r, 3), ``shadow_tmax`` (S, r), ``shadow_own`` (S,), ``shadow_point`` (S,) (the
         index of the shaded point, in ``np.nonzero(tri_id >= 0)`` order), ``shadow_tmin``;
-        ``loaded``: the IDs of the triangles the backend loaded.
+        ``loaded``: the IDs of the triangles the backend loaded. Only the shadow rays of
+        primary points are recorded (not those of secondary hits).
+    layers : dict
+        Per-pixel (H, W) arrays of the first secondary bounce (empty when no secondary ray
+        ran): ``reflection_tri``, ``refraction_tri`` (nearest triangle of the pixel's
+        depth-1 mirror or refracted ray; -1 miss; -2 no such ray), ``glossy_hit`` (fraction
+        of the pixel's glossy rays that hit, NaN for none), ``ao`` (unoccluded fraction,
+        NaN for none).
     """
 
     image: np.ndarray
@@ -161,6 +211,7 @@ class RenderResult:
     stats: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
     rays: dict | None = None
+    layers: dict = field(default_factory=dict)
 
 
 class _Timer:
@@ -176,29 +227,10 @@ class _Timer:
             self.times[name] = self.times.get(name, 0.0) + time.perf_counter() - t0
 
 
-def _add_counters(total: dict, counters: dict):
-    for k, v in counters.items():
-        total[k] = total.get(k, 0) + int(v)
-
-
 def _shadow_eps(backend: Backend, bound: float) -> float:
     """Lift of shadow origins and their ``tmin``: ``bound * max(2**-11, 2**(4-M))``."""
     m = backend.fmt.man_bits if backend.fmt is not None else 52
     return bound * max(2.0 ** -11, 2.0 ** (4 - m))
-
-
-def _light_hits(origin, dirs, light, t_hit):
-    """Rays that see the area light before their hit (host-only, float64)."""
-    n = light.normal
-    c = np.asarray(light.corner, float)
-    u, v = np.asarray(light.edge_u, float), np.asarray(light.edge_v, float)
-    dn = dirs @ n
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = ((c - origin) @ n) / dn
-    p = origin + t[:, None] * dirs - c
-    a = (p @ u) / (u @ u)
-    b = (p @ v) / (v @ v)
-    return (dn < 0) & (t > 0) & (t < t_hit) & (a >= 0) & (a <= 1) & (b >= 0) & (b <= 1)
 
 
 @contextmanager
@@ -263,25 +295,7 @@ def _render(scene: Scene, backend: Backend, settings: RenderSettings):
     with timer("load"):
         stats.update(backend.load(tris, tree, s.bound) or {})
     normals_all = face_normals(tris)
-
-    unit = np.zeros(len(COUNTERS), np.int64)
-    L = tree.levels
-    hier = {"tested": np.zeros(L, np.int64), "dropped": np.zeros(L, np.int64),
-            "tris_dropped": np.zeros(L, np.int64), "leaves": 0}
-    counts = {"primary_bundles": 0, "primary_rays": 0, "shadow_bundles": 0,
-              "shadow_rays": 0, "host_plane_tests": 0, "brute_force_pairs": 0,
-              "shadow_spheres_skipped": 0, "early_out_pairs_skipped": 0,
-              "unguaranteed_bundles": 0}
-    F = scene.n_triangles
-
-    def cull(batch):
-        cr = backend.cull(batch, s.hierarchy)
-        for k in ("tested", "dropped", "tris_dropped"):
-            hier[k] += getattr(cr, k)
-        hier["leaves"] += int(cr.leaves.size)
-        counts["host_plane_tests"] += cr.plane_tests
-        counts["unguaranteed_bundles"] += int(np.count_nonzero(batch.keep_all))
-        return cr
+    tally = Tally(scene.n_triangles, tree.levels, s.hierarchy)
 
     tiles = scene.camera.tiles(W, H, s.rows, s.cols)
     t_org = np.array([t.origin for t in tiles])
@@ -296,13 +310,15 @@ def _render(scene: Scene, backend: Backend, settings: RenderSettings):
     tri_img = np.full((H, W), -1, np.int64)
     t_img = np.full((H, W), np.inf)
     dir_img = np.zeros((H, W, 3))
-    org = np.zeros(3)
+    org = [np.zeros(3)]
 
     rec = {k: [] for k in ("primary_o", "primary_d", "primary_yx", "shadow_o", "shadow_d",
                            "shadow_tmax", "shadow_own", "shadow_point")}
-    n_shadow_est = W * H if s.shadows else 0
-    bar = tqdm(total=len(tiles) + n_shadow_est, unit="bundle", disable=not s.progress,
+    layers: dict = {}
+    bar = tqdm(total=len(tiles), unit="bundle", disable=not s.progress,
                desc=f"render {scene.name} [{backend.name}]", leave=False)
+    eps = _shadow_eps(backend, s.bound)
+    tracer = Tracer(backend, scene, s, tally, normals_all, eps, timer, bar)
     try:
         # compile (or load from numba's cache) the kernels: its own phase, not a rate
         with timer("compile"):
@@ -310,133 +326,105 @@ def _render(scene: Scene, backend: Backend, settings: RenderSettings):
                                     "kernels (once per machine)")
             backend.warm_pass(t_org[:1], t_cen[:1], t_col[:1], t_row[:1], s.rows, s.cols)
             bar.set_description_str(f"render {scene.name} [{backend.name}]")
-            bar.reset(total=len(tiles) + n_shadow_est)
+            bar.reset(total=len(tiles))
 
         # 3. primary: all tiles, a pass of ``chunk`` bundles at a time -------------------
-        for lo in range(0, len(tiles), s.chunk):
-            hi = min(lo + s.chunk, len(tiles))
-            with timer("primary cull"):
-                batch = backend.batch(t_org[lo:hi], t_cen[lo:hi], t_col[lo:hi], t_row[lo:hi],
-                                      s.rows, s.cols, t_valid[lo:hi])
-                n_en = int(batch.enable.sum())
-                counts["primary_bundles"] += hi - lo
-                counts["primary_rays"] += n_en
-                counts["brute_force_pairs"] += n_en * F
-                cr = cull(batch)
-            with timer("primary unit"):
-                best_t = np.full((hi - lo, R), np.inf)
-                best_tri = np.full((hi - lo, R), -1, np.int64)
-                unit += backend.trace(batch, *round_runs(cr.start, cr.leaves, None, 0),
-                                      best_t, best_tri, 0.0).sum(axis=0)
-            with timer("primary cull"):
-                v = t_valid[lo:hi]
-                y = (t_y0[lo:hi, None] + ii[None, :])[v]
-                x = (t_x0[lo:hi, None] + jj[None, :])[v]
-                tri_img[y, x] = best_tri[v]
-                t_img[y, x] = best_t[v]
-                dir_img[y, x] = batch.directions[v]
-                org = batch.origin[-1]
-                if s.record_rays:
-                    rec["primary_o"].append(np.repeat(batch.origin, v.sum(axis=1), axis=0))
-                    rec["primary_d"].append(batch.directions[v])
-                    rec["primary_yx"].append(np.stack([y, x], 1))
-            bar.update(hi - lo)
+        def primary_chunk(lo, hi, batch, best_t, best_tri):
+            v = t_valid[lo:hi]
+            y = (t_y0[lo:hi, None] + ii[None, :])[v]
+            x = (t_x0[lo:hi, None] + jj[None, :])[v]
+            tri_img[y, x] = best_tri[v]
+            t_img[y, x] = best_t[v]
+            dir_img[y, x] = batch.directions[v]
+            org[0] = batch.origin[-1]
+            if s.record_rays:
+                rec["primary_o"].append(np.repeat(batch.origin, v.sum(axis=1), axis=0))
+                rec["primary_d"].append(batch.directions[v])
+                rec["primary_yx"].append(np.stack([y, x], 1))
+
+        nearest_pass(backend, t_org, t_cen, t_col, t_row, s.rows, s.cols, tally=tally,
+                     kind="primary", chunk=s.chunk, enable=t_valid, timer=timer,
+                     progress=bar.update, on_chunk=primary_chunk)
 
         # 4. shading ---------------------------------------------------------------------
         with timer("shading"):
             hit_px = tri_img >= 0
             ys, xs = np.nonzero(hit_px)
             tri_h = tri_img[ys, xs]
-            pts = org + t_img[ys, xs, None] * dir_img[ys, xs]
+            pts = org[0] + t_img[ys, xs, None] * dir_img[ys, xs]
             nrm = normals_all[tri_h]
             flip = np.einsum("ij,ij->i", nrm, dir_img[ys, xs]) > 0
             nrm[flip] *= -1.0
-            vis = np.ones(len(ys))
-            eps = _shadow_eps(backend, s.bound)
-            if s.shadows:
-                plan = shadow_bundles(pts, nrm, scene.light, s.shadow_rows, s.shadow_cols, eps)
-                no_bundle = np.ones(len(ys), bool)
-                no_bundle[plan.point] = False
-                vis[no_bundle] = 0.0      # behind the light or facing away: unlit
-                stats["points_behind_light"] = plan.behind_light
-                stats["points_facing_away"] = plan.facing_away
-                bar.total = len(tiles) + len(plan)
-                bar.refresh()
 
         # 5. shadows: passes of ``chunk`` bundles, early-out rounds within each ------------
-        if s.shadows:
-            nr = s.shadow_rows * s.shadow_cols
-            step = s.batch_spheres if s.early_out else None
-            for lo in range(0, len(plan), s.chunk):
-                hi = min(lo + s.chunk, len(plan))
-                k = hi - lo
-                with timer("shadow cull"):
-                    batch = backend.batch(plan.origins[lo:hi], np.broadcast_to(plan.centre, (k, 3)),
-                                          np.broadcast_to(plan.col_axis, (k, 3)),
-                                          np.broadcast_to(plan.row_axis, (k, 3)),
-                                          s.shadow_rows, s.shadow_cols)
-                    counts["shadow_bundles"] += k
-                    counts["shadow_rays"] += k * nr
-                    counts["brute_force_pairs"] += k * nr * F
-                    cr = cull(batch)
-                    own = tri_h[plan.point[lo:hi]]
-                    best_t = np.full((k, nr), np.inf)
-                    best_tri = np.full((k, nr), -1, np.int64)
-                rnd = 0
-                while True:
-                    with timer("shadow cull"):
-                        run_b, run_start, run_sph = round_runs(cr.start, cr.leaves, step, rnd)
-                        if not run_b.size:
-                            break
-                        live = batch.enable[run_b].any(axis=1)
-                        counts["shadow_spheres_skipped"] += int(
-                            np.diff(run_start)[~live].sum())
-                        run_b, run_start, run_sph = select_runs(run_b, run_start, run_sph,
-                                                                live)
-                    with timer("shadow unit"):
-                        ctr = backend.trace(batch, run_b, run_start, run_sph, best_t, best_tri,
-                                            eps, plan.tmax[lo:hi], own, any_hit=True)
-                        unit += ctr.sum(axis=0)
-                        counts["early_out_pairs_skipped"] += int(ctr[:, 3].sum())
-                    if s.early_out:
-                        batch.enable &= ~(best_tri >= 0)
-                    rnd += 1
-                vis[plan.point[lo:hi]] = 1.0 - (best_tri >= 0).mean(axis=1)
-                if s.record_rays:
-                    rec["shadow_o"].append(batch.origin)
-                    rec["shadow_d"].append(batch.directions)
-                    rec["shadow_tmax"].append(plan.tmax[lo:hi])
-                    rec["shadow_own"].append(own)
-                    rec["shadow_point"].append(plan.point[lo:hi])
-                bar.update(k)
+        def shadow_chunk(lo, hi, batch, blocked):
+            rec["shadow_o"].append(batch.origin)
+            rec["shadow_d"].append(batch.directions)
+            rec["shadow_tmax"].append(plan.tmax[lo:hi])
+            rec["shadow_own"].append(tri_h[plan.point[lo:hi]])
+            rec["shadow_point"].append(plan.point[lo:hi])
 
-        # 6. image -----------------------------------------------------------------------
+        if s.shadows:
+            with timer("shading"):
+                plan = shadow_bundles(pts, nrm, scene.light, s.shadow_rows, s.shadow_cols, eps)
+            stats["points_behind_light"] = plan.behind_light
+            stats["points_facing_away"] = plan.facing_away
+        vis, plan = tracer.shadows(pts, nrm, tri_h, shadow_chunk if s.record_rays else None,
+                                   plan if s.shadows else None)
+
+        # 6. ambient occlusion of the primary points ------------------------------------
+        ao = tracer.occlusion(pts, nrm, tri_h) if s.ao_rows else None
+
+        # 7. image -----------------------------------------------------------------------
         with timer("image"):
             img = np.empty((H, W, 3))
             img[:] = np.asarray(scene.background, float)
             col = phong(pts, nrm, scene.colours[tri_h], np.asarray(scene.camera.position, float),
-                        scene.light, scene.material_at(tri_h), vis)
+                        scene.light, scene.material_at(tri_h), vis, ao)
             img[ys, xs] = col
             d = dir_img.reshape(-1, 3)
-            sees = _light_hits(np.asarray(scene.camera.position, float), d, scene.light,
-                               t_img.reshape(-1)).reshape(H, W)
+            sees = light_hits(np.asarray(scene.camera.position, float), d, scene.light,
+                              t_img.reshape(-1)).reshape(H, W)
             img[sees] = np.asarray(scene.light.colour, float)
             vis_img = np.full((H, W), np.nan)
             vis_img[ys, xs] = vis
+            if ao is not None:
+                layers["ao"] = np.full((H, W), np.nan)
+                layers["ao"][ys, xs] = ao
+
+        # 8. secondary rays: reflection, refraction, glossy, a generation at a time -----
+        if s.depth > 0:
+            pix = ys * W + xs
+            add, sec = whitted(tracer, pix, pts, nrm, tri_h, dir_img[ys, xs],
+                               (~sees[ys, xs]).astype(float), H * W)
+            img += add.reshape(H, W, 3)
+            layers.update({k: v.reshape(H, W) for k, v in sec.items()})
     finally:
         bar.close()
 
-    unit = {name: int(v) for name, v in zip(COUNTERS, unit)}
-    stats.update(counts)
-    stats["rays"] = counts["primary_rays"] + counts["shadow_rays"]
-    stats["bundles"] = counts["primary_bundles"] + counts["shadow_bundles"]
+    unit = tally.unit_total()
+    types = tally.ray_types()
+    kinds = tally.kinds
+    for kind in ("primary", "shadow"):
+        stats[f"{kind}_bundles"] = kinds.get(kind, {}).get("bundles", 0)
+        stats[f"{kind}_rays"] = kinds.get(kind, {}).get("rays", 0)
+    stats["host_plane_tests"] = sum(k["host_plane_tests"] for k in kinds.values())
+    stats["brute_force_pairs"] = sum(k["brute_force_pairs"] for k in kinds.values())
+    stats["shadow_spheres_skipped"] = kinds.get("shadow", {}).get("spheres_skipped", 0)
+    stats["early_out_pairs_skipped"] = sum(k["early_out_pairs_skipped"]
+                                           for k in kinds.values())
+    stats["unguaranteed_bundles"] = tally.unguaranteed_bundles
+    stats["rays"] = sum(k["rays"] for k in kinds.values())
+    stats["bundles"] = sum(k["bundles"] for k in kinds.values())
     stats["unit"] = unit
     stats["pairs_issued"] = unit.get("pairs_issued", 0)
-    stats["plane_tests"] = counts["host_plane_tests"] + unit.get("plane_tests", 0)
-    bf = counts["brute_force_pairs"]
+    stats["plane_tests"] = stats["host_plane_tests"] + unit.get("plane_tests", 0)
+    bf = stats["brute_force_pairs"]
     stats["pair_fraction"] = stats["pairs_issued"] / bf if bf else 0.0
     stats["hits"] = unit.get("hits", 0)
+    stats["ray_types"] = types
     stats["events"] = {k: unit.get(k, 0) for k in ("overflow", "underflow", "invalid")}
+    hier = tally.hier
     stats["hierarchy"] = {"tested": hier["tested"].tolist(), "dropped": hier["dropped"].tolist(),
                           "triangles_dropped": hier["tris_dropped"].tolist(),
                           "leaves_to_unit": hier["leaves"]}
@@ -451,7 +439,7 @@ def _render(scene: Scene, backend: Backend, settings: RenderSettings):
         rays = {k: np.concatenate(v) if v else np.zeros((0,)) for k, v in rec.items()}
         rays["shadow_tmin"] = eps
         rays["loaded"] = usable
-    return RenderResult(img, tri_img, t_img, vis_img, stats, dict(timer.times), rays)
+    return RenderResult(img, tri_img, t_img, vis_img, stats, dict(timer.times), rays, layers)
 
 
 # -- output ------------------------------------------------------------------------------
@@ -526,6 +514,11 @@ def format_summary(result: RenderResult, comparison: dict | None = None) -> str:
         f"{st['early_out_pairs_skipped']:,} pairs and {st['shadow_spheres_skipped']:,} "
         f"sphere runs"),
         f"  hits      {st['hits']:>12,}  pixels hit {st['pixels_hit']:,}",
+        *(f"  {kind:<10} {t['rays']:>11,} rays in {t['bundles']:,} bundles, pairs "
+          f"{t['pairs_issued']:,} of {t['brute_force_pairs']:,} brute force "
+          f"({100.0 * t['pair_fraction']:.3f} %), hits {t['hits']:,}, plane tests "
+          f"{t['plane_tests']:,}, early-out skipped {t['early_out_pairs_skipped']:,} pairs"
+          for kind, t in st.get("ray_types", {}).items()),
         (f"  events    overflow {st['events']['overflow']:,}, underflow "
         f"{st['events']['underflow']:,}, invalid {st['events']['invalid']:,} (operations)"),
     ]

@@ -41,6 +41,7 @@ __all__ = [
     "ShadowPlan",
     "blocked_rays",
     "face_normals",
+    "light_hits",
     "nearest_hits",
     "phong",
     "shadow_bundles",
@@ -107,20 +108,24 @@ def nearest_hits(n_rays: int, ray_id, tri_id, hit, t, tmin=0.0, tmax=np.inf,
     return best_tri, best_t, best_i
 
 
-def phong(points, normals, albedo, eye, light: AreaLight, material: Material, visibility):
+def phong(points, normals, albedo, eye, light: AreaLight, material: Material, visibility,
+          ambient=None):
     """Phong colour of shading points.
 
     Parameters
     ----------
     points, normals, albedo : ndarray (n, 3)
         ``normals`` unit, facing the viewer.
-    eye : ndarray (3,)
+    eye : ndarray (3,) or (n, 3)
+        The eye, or per point the origin of the ray that found it.
     light : AreaLight
     material : Material
         Constants shared by every point, or one value per point in each field
         (:meth:`Scene.material_at <raplas_hdl.host.scenes.Scene.material_at>`).
     visibility : ndarray (n,)
         Fraction of the light seen (1: unshadowed).
+    ambient : ndarray (n,), optional
+        Scale of the ambient term (ambient occlusion's unoccluded fraction; default 1).
 
     Returns
     -------
@@ -140,7 +145,26 @@ def phong(points, normals, albedo, eye, light: AreaLight, material: Material, vi
     diffuse = kd * albedo * np.clip(ndl, 0.0, None)[:, None]
     spec = ks * np.where(ndl > 0, rdv ** n, 0.0)[:, None]
     direct = (diffuse + spec) * np.asarray(visibility, float)[:, None]
-    return (ka * albedo + direct) * lc
+    amb = ka * albedo if ambient is None else ka * albedo * np.asarray(ambient, float)[:, None]
+    return (amb + direct) * lc
+
+
+def light_hits(origins, dirs, light: AreaLight, t_hit) -> np.ndarray:
+    """Rays that see the area light before their hit (host-only, float64): the light's
+    parallelogram, crossed from its lit side at ``0 < t < t_hit``.
+
+    ``origins`` (3,) or (n, 3), ``dirs`` (n, 3), ``t_hit`` (n,) (``inf``: no hit).
+    """
+    n = light.normal
+    c = np.asarray(light.corner, float)
+    u, v = np.asarray(light.edge_u, float), np.asarray(light.edge_v, float)
+    dn = dirs @ n
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((c - origins) @ n) / dn
+    p = origins + t[:, None] * dirs - c
+    a = (p @ u) / (u @ u)
+    b = (p @ v) / (v @ v)
+    return (dn < 0) & (t > 0) & (t < t_hit) & (a >= 0) & (a <= 1) & (b >= 0) & (b <= 1)
 
 
 @dataclass
