@@ -14,6 +14,7 @@ __all__ = [
     "_size",
     "add_parser",
     "add_render_options",
+    "add_secondary_options",
     "add_view_options",
     "check",
     "check_scene",
@@ -133,7 +134,50 @@ def add_render_options(p):
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
-def settings_from_args(args, size):
+def add_secondary_options(p):
+    """``--depth``, ``--glossy``, ``--ao``, ``--ao-angle``, ``--ao-distance``: secondary
+    rays (default: the scene file's ``[render]`` table, else none)."""
+    from ..host.scene_file import MAX_DEPTH, MAX_SECONDARY_LATTICE
+
+    r = p.add_argument_group(
+        "secondary rays", "Default: the scene file's [render] table (the shipped showcase "
+        "has one), else none. See docs/secondary-rays.md.")
+    r.add_argument("--depth", type=g.int_range(0, MAX_DEPTH), default=None, metavar="N",
+                   help=f"generations of reflection and refraction rays, 0 to {MAX_DEPTH} "
+                        "(default 0)")
+    r.add_argument("--glossy", type=g.lattice_type("--glossy"), default=None, metavar="RxC",
+                   help=f"glossy bundle per point of a material with gloss_angle > 0, sides 1 "
+                        f"to {MAX_SECONDARY_LATTICE}, or 0 for the single mirror ray "
+                        "(default 0)")
+    r.add_argument("--ao", type=g.lattice_type("--ao"), default=None, metavar="RxC",
+                   help=f"ambient-occlusion bundle per primary point, sides 1 to "
+                        f"{MAX_SECONDARY_LATTICE}, or 0 for none (default 0)")
+    r.add_argument("--ao-angle", type=g.float_range(0.0, 90.0, lo_open=True, hi_open=True),
+                   default=None, metavar="DEG",
+                   help="half-angle of the ambient-occlusion cone, between 0 and 90 degrees "
+                        "(default 60)")
+    r.add_argument("--ao-distance", type=g.float_range(0.0, 1.0, lo_open=True), default=None,
+                   metavar="F", help="reach of an ambient-occlusion ray as a fraction of the "
+                                     "scene's extent, above 0 and at most 1 (default 0.25)")
+
+
+def _secondary(args) -> dict:
+    """The secondary-ray options given on the command line, as settings."""
+    out = {}
+    if getattr(args, "depth", None) is not None:
+        out["depth"] = args.depth
+    for kind in ("glossy", "ao"):
+        if getattr(args, kind, None) is not None:
+            out[f"{kind}_rows"], out[f"{kind}_cols"] = getattr(args, kind)
+    for key in ("ao_angle", "ao_distance"):
+        if getattr(args, key, None) is not None:
+            out[key] = getattr(args, key)
+    return out
+
+
+def settings_from_args(args, size, defaults: dict | None = None):
+    """The render settings of the options; ``defaults`` (a scene's
+    :attr:`~raplas_hdl.host.scenes.Scene.render_defaults`) under the secondary-ray options."""
     from ..host.render import RenderSettings
 
     rows, cols = args.tile
@@ -142,7 +186,8 @@ def settings_from_args(args, size):
                           shadow_rows=sr, shadow_cols=sc,
                           tris_per_sphere=args.tris_per_sphere, fanout=args.fanout,
                           hierarchy=not args.no_hierarchy, early_out=not args.no_early_out,
-                          batch_spheres=args.batch, progress=not args.no_progress)
+                          batch_spheres=args.batch, progress=not args.no_progress,
+                          **{**(defaults or {}), **_secondary(args)})
 
 
 def check_scene(spec: str, overrides: dict | None = None) -> None:
@@ -205,8 +250,10 @@ def add_parser(subparsers):
         description="Render a procedural scene (cornell, spheres, terrain, soup), a mesh "
                     "file (OBJ, PLY, STL, glTF) or a scene file (TOML: camera, light, "
                     "materials, meshes with transforms; docs/scenes.md) with primary "
-                    "bundles, Phong shading and soft shadows, and print rays, bundles, "
-                    "spheres, plane tests, pairs against brute force, hits, time per stage "
+                    "bundles, Phong shading, soft shadows and, when asked, reflection, "
+                    "refraction, glossy and ambient-occlusion bundles "
+                    "(docs/secondary-rays.md), and print rays, bundles, spheres, plane "
+                    "tests, pairs against brute force (per ray type), hits, time per stage "
                     "and arithmetic events.")
     p.add_argument("--scene", default="cornell", metavar="NAME|FILE",
                    help="cornell | spheres | terrain | soup | a shipped mesh (stanford-bunny, "
@@ -222,6 +269,7 @@ def add_parser(subparsers):
                    default=None, metavar="{icarus,verilator}",
                    help="simulator of the rtl backend (default icarus; --backend rtl only)")
     add_render_options(p)
+    add_secondary_options(p)
     add_view_options(p)
     o = p.add_argument_group("outputs")
     o.add_argument("-o", "--output", required=True, metavar="FILE.png", help="PNG to write")
@@ -267,7 +315,7 @@ def run(args) -> int:
     from ..host.render import compare, difference_image, format_summary, render, save_ids, save_png
 
     size = args.size
-    settings = settings_from_args(args, size)
+    settings = settings_from_args(args, size, scene.render_defaults)
     fmt = args.fmt
     scene = scene.normalised(settings.bound)
     backend = make_backend(args.backend, fmt, mode=args.mode, sim=args.sim)

@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .backends import Backend
+from .scene_file import MAX_DEPTH, MAX_SECONDARY_LATTICE
 from .scenes import Scene
 from .secondary import Tracer, whitted
 from .shading import face_normals, light_hits, phong, shadow_bundles
@@ -61,12 +62,6 @@ __all__ = [
     "save_png",
     "to_uint8",
 ]
-
-
-#: Largest ``RenderSettings.depth`` (generations of reflection and refraction rays).
-MAX_DEPTH = 16
-#: Largest side of a glossy or ambient-occlusion bundle.
-MAX_SECONDARY_LATTICE = 64
 
 
 @dataclass
@@ -169,6 +164,12 @@ class RenderSettings:
     @property
     def shadows(self) -> bool:
         return self.shadow_rows > 0
+
+    @classmethod
+    def for_scene(cls, scene: Scene, **settings) -> RenderSettings:
+        """Settings with the scene's defaults (a scene file's ``[render]`` table,
+        :attr:`Scene.render_defaults`) under ``settings``."""
+        return cls(**{**getattr(scene, "render_defaults", {}), **settings})
 
 
 @dataclass

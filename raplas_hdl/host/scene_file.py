@@ -25,6 +25,13 @@ The format is documented with a full example in ``docs/scenes.md``; in short::
     rotate = [0, 180, 0]
     translate = [0, 1, 0]
 
+    [render]                         # optional: the scene's default render settings
+    depth = 3                        # (the render command's options override them):
+    glossy = "3x3"                   # depth, glossy ("RxC" or "0"), ao ("RxC" or "0"),
+    ao = "3x3"                       # ao_angle (degrees), ao_distance (fraction of the
+    ao_angle = 60                    # normalised scene's extent)
+    ao_distance = 0.25
+
 Everything is checked before any mesh is read (:func:`check_scene_file`): unknown or
 missing keys, wrong types, values out of range, mesh files that do not exist, unknown
 materials, a camera that cannot look (``up`` parallel to the view, ``look_at`` on the
@@ -66,7 +73,7 @@ from .scenes import (
     load_mesh,
 )
 
-__all__ = ["PRIMITIVES", "SceneFileError", "check_scene_file", "load_scene_file",
+__all__ = ["MAX_DEPTH", "MAX_SECONDARY_LATTICE", "PRIMITIVES", "SceneFileError", "check_scene_file", "load_scene_file",
            "mesh_transform", "override_scene", "parse_axis"]
 
 #: Procedural meshes of ``[[mesh]] primitive = ...``: their own keys and defaults.
@@ -77,7 +84,12 @@ PRIMITIVES = {
 }
 _SUBDIV_MAX = {"box": 4, "sphere": 5, "quad": 64}
 
-_TOP_KEYS = ("name", "background", "camera", "light", "materials", "mesh")
+_TOP_KEYS = ("name", "background", "camera", "light", "materials", "mesh", "render")
+_RENDER_KEYS = ("depth", "glossy", "ao", "ao_angle", "ao_distance")
+#: Largest depth of reflection and refraction rays (``RenderSettings.depth``).
+MAX_DEPTH = 16
+#: Largest side of a glossy or ambient-occlusion bundle.
+MAX_SECONDARY_LATTICE = 64
 _CAMERA_KEYS = ("position", "look_at", "up", "fov")
 _LIGHT_KEYS = {"area": ("type", "corner", "edge_u", "edge_v", "colour", "intensity"),
                "point": ("type", "position", "size", "direction", "colour", "intensity")}
@@ -298,6 +310,7 @@ class _SceneSpec:
     materials: tuple
     colours: tuple
     meshes: list
+    render: dict
 
 
 def _read(path) -> tuple[str, dict]:
@@ -410,6 +423,43 @@ def _materials(w: _Where, doc: dict) -> tuple[dict, list, list]:
     return names, table, colours
 
 
+def _lattice(t: _Table, key: str) -> tuple:
+    v = t.d.get(key, "0")
+    if v == 0:
+        return 0, 0
+    if not isinstance(v, str):
+        raise t.error(key, f'must be a string "RxC" (for example "3x3") or "0", not {_kind(v)}')
+    text = v.strip().lower()
+    if text in ("0", "off", "none", "0x0"):
+        return 0, 0
+    m = re.fullmatch(r"(\d+)x(\d+)", text)
+    if not m or not all(1 <= int(x) <= MAX_SECONDARY_LATTICE for x in m.groups()):
+        raise t.error(key, f'must be "RxC" with rows and cols 1 to {MAX_SECONDARY_LATTICE}, '
+                           f'or "0", not {v!r}')
+    return int(m.group(1)), int(m.group(2))
+
+
+def _render(w: _Where, doc: dict) -> dict:
+    """The optional ``[render]`` table as ``RenderSettings`` field values."""
+    if "render" not in doc:
+        return {}
+    if isinstance(doc["render"], list):
+        raise w.error(("render",), "must be one table: write [render], not [[render]]")
+    t = _Table(w, ("render",), doc["render"], _RENDER_KEYS)
+    out = {}
+    if "depth" in t.d:
+        out["depth"] = t.number("depth", lo=0, hi=MAX_DEPTH, integer=True)
+    for kind in ("glossy", "ao"):
+        if kind in t.d:
+            out[f"{kind}_rows"], out[f"{kind}_cols"] = _lattice(t, kind)
+    if "ao_angle" in t.d:
+        out["ao_angle"] = float(t.number("ao_angle", lo=0.0, hi=90.0, lo_open=True,
+                                         hi_open=True))
+    if "ao_distance" in t.d:
+        out["ao_distance"] = float(t.number("ao_distance", lo=0.0, hi=1.0, lo_open=True))
+    return out
+
+
 def _mesh(w: _Where, path: tuple, value, base: str, materials: dict) -> _MeshSpec:
     if not isinstance(value, dict):
         raise w.error(path, f"must be a table, not {_kind(value)}")
@@ -504,7 +554,8 @@ def check_scene_file(path, camera=None, look_at=None, up=None, fov=None,
         raise w.error(("mesh",), "is empty: give at least one [[mesh]]")
     base = os.path.dirname(os.path.abspath(label))
     specs = [_mesh(w, ("mesh", i), m, base, names) for i, m in enumerate(meshes)]
-    return _SceneSpec(w, name, background, cam, lt, tuple(table), tuple(colours), specs)
+    return _SceneSpec(w, name, background, cam, lt, tuple(table), tuple(colours), specs,
+                      _render(w, doc))
 
 
 # -- building -------------------------------------------------------------------------
@@ -592,7 +643,8 @@ def _build(spec: _SceneSpec) -> Scene:
     if "moved_to" in lt:
         light = light.moved(lt["moved_to"])
     return Scene(spec.name, v, f, c, spec.camera, light, spec.materials[0],
-                 spec.background, materials=spec.materials, material_ids=np.concatenate(ids))
+                 spec.background, materials=spec.materials, material_ids=np.concatenate(ids),
+                 render_defaults=dict(spec.render))
 
 
 def load_scene_file(path, camera=None, look_at=None, up=None, fov=None, light=None) -> Scene:
