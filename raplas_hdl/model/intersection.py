@@ -159,6 +159,10 @@ def run_runs(config: UnitConfig, scene: SceneMemory, runs) -> list:
     list of (results, counters)
         Per run, as :func:`run_bundle` describes them. The pairs of all runs go through one
         call of the ray-triangle model (a pair's arithmetic does not depend on the others).
+        With ``config.reduce`` the results are the run's answers (``ANSWER_DTYPE`` of
+        :mod:`raplas_hdl.model.reduction`: one beat per ray with an answer) and the counters
+        are those of the unreduced run (no early-out: the unit's ``pairs_issued``, ``hits``
+        and event counters of an any-hit run are at most these).
 
     Raises
     ------
@@ -220,6 +224,10 @@ def run_runs(config: UnitConfig, scene: SceneMemory, runs) -> list:
         c.update(event_counters(res["event_counts"][sl]))
         out.append((beats, c))
         pos += n
+    if config.reduce:
+        from .reduction import reduce_run
+
+        out = [(reduce_run(config, beats, p[0]), c) for (beats, c), p in zip(out, parts)]
     return out
 
 

@@ -26,6 +26,8 @@ for a unit build):
   ``run_count_bits``);
 - :data:`RESULT`: one beat of the intersection unit's ``o`` stream (``ray_id_bits``,
   ``tri_id_bits``, ``W``);
+- :data:`ANSWER`: one beat of the result stream of a unit built with the on-chip reduction
+  (``UnitConfig.reduce``): one answer per ray (``ray_id_bits``, ``tri_id_bits``, ``W``);
 - :data:`COUNTERS`: the intersection unit's ``counters`` port (32 bits each);
 - :data:`PAIR`: the ray-triangle unit's input, a :data:`RAY` and a :data:`TRIANGLE` with
   their IDs (``ray_id_bits``, ``tri_id_bits``, ``W``); :data:`RT_RESULT`: its output;
@@ -48,7 +50,7 @@ from .memory_image import COUNTER_NAMES
 
 __all__ = ["Field", "Record", "Layout", "Slot", "unit_params", "words_to_ints",
            "ints_to_words", "PARAMETERS", "EVENT_COUNT_BITS", "RAY", "TRIANGLE", "PAIR",
-           "RT_RESULT", "RESULT", "CMD", "COUNTERS", "PLANE", "SPHERE", "PS_RESULT", "RECORDS"]
+           "RT_RESULT", "RESULT", "ANSWER", "CMD", "COUNTERS", "PLANE", "SPHERE", "PS_RESULT", "RECORDS"]
 
 #: Width parameters a field may name, and what they are.
 PARAMETERS = {
@@ -520,6 +522,22 @@ RESULT = Record("result", (
     Field("empty", 1, "the run issued no pair: the only beat, every other field 0"),
 ), "intersection unit result stream (o)")
 
+#: One beat of the reduced result stream (``UnitConfig.reduce``): the answer of one ray of
+#: a run (:mod:`raplas_hdl.model.reduction`), the run's rays with an answer in ascending
+#: order; a run without any answer gives one ``empty`` beat.
+ANSWER = Record("answer", (
+    Field("ray_id", "ray_id_bits", "ray ID i*cols + j (0 on an empty beat)"),
+    Field("tri_id", "tri_id_bits", "the answer's triangle: the nearest accepted hit, or in an "
+                                   "any-hit bundle the first accepted hit of the stream"),
+    Field("t", "W", "its t' (bit pattern)"),
+    Field("u", "W", "its u'"),
+    Field("v", "W", "its v'"),
+    Field("det", "W", "its det"),
+    Field("flags", 3, "its pair's events (as RESULT's flags)"),
+    Field("last", 1, "the run's last beat"),
+    Field("empty", 1, "no ray of the run has an answer: the only beat, every other field 0"),
+), "intersection unit result stream (o) with the on-chip reduction")
+
 #: The intersection unit's run command.
 CMD = Record("cmd", [
     Field("first", "sphere_id_bits", "first sphere ID, or run-list position when indirect"),
@@ -574,5 +592,5 @@ PS_RESULT = Record("ps_result", [
 ], "plane-sphere array output stream (o)")
 
 #: Every record, by name.
-RECORDS = {r.name: r for r in (CMD, RESULT, COUNTERS, PAIR, RT_RESULT, RAY, TRIANGLE, PLANE,
+RECORDS = {r.name: r for r in (CMD, RESULT, ANSWER, COUNTERS, PAIR, RT_RESULT, RAY, TRIANGLE, PLANE,
                                SPHERE, PS_RESULT)}

@@ -1,0 +1,103 @@
+"""Real render passes as unit runs with their windows, for the reduction's tests and bench.
+
+:func:`recorded_runs` renders a scene through the model backend and keeps every pass the
+renderer hands the unit (primary and shadow, each early-out round), with the host's
+acceptance window in the unit's format (``tmin`` rounded up, ``tmax`` rounded down: the
+unit never accepts what the float64 window rejects). :func:`host_choice` is the host's
+choice on a run's unreduced stream (:func:`raplas_hdl.host.shading.nearest_hits`, the
+window decoded from the patterns the unit holds): what the reduced answers must equal.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+__all__ = ["RecordedPass", "recorded_runs", "pass_runs", "host_choice"]
+
+
+@dataclass
+class RecordedPass:
+    """One call of ``Backend.trace``: the batch (enable bits as they were), its runs and the
+    window in float64."""
+
+    batch: object
+    enable: np.ndarray
+    runs: list
+    tmin: float
+    tmax: np.ndarray | None
+    exclude: np.ndarray | None
+    any_hit: bool
+
+
+def recorded_runs(scene_name: str, settings, fmt=None, mode: str = "paper", **scene_options):
+    """Render ``scene_name`` through the model backend; return ``(backend, passes)``."""
+    from ..fp import FP24
+    from .backends import ModelBackend, _runs_of
+    from .render import render
+    from .scenes import get_scene
+
+    passes = []
+
+    class Recording(ModelBackend):
+        def trace(self, batch, run_b, run_start, run_sph, best_t, best_tri, tmin=0.0,
+                  tmax=None, exclude=None, any_hit=False):
+            passes.append(RecordedPass(
+                batch, batch.enable.copy(), _runs_of(run_b, run_start, run_sph), float(tmin),
+                None if tmax is None else np.array(tmax, np.float64),
+                None if exclude is None else np.array(exclude, np.int64), bool(any_hit)))
+            return super().trace(batch, run_b, run_start, run_sph, best_t, best_tri, tmin,
+                                 tmax, exclude, any_hit)
+
+    backend = Recording(fmt or FP24, mode)
+    render(get_scene(scene_name, **scene_options), backend, settings)
+    return backend, passes
+
+
+def pass_runs(backend, rec: RecordedPass, config):
+    """The runs of a recorded pass as ``Run`` objects whose bundles carry the window as
+    patterns of ``config.fmt``."""
+    from ..fp import model as fpm
+    from ..model.memory_image import Run
+
+    fmt = config.fmt
+    saved = rec.batch.enable
+    rec.batch.enable = rec.enable
+    try:
+        out = []
+        tmin = int(fpm.encode(np.array([rec.tmin]), fmt, direction="up")[0])
+        for b, ids in rec.runs:
+            mem = backend.memory(rec.batch, b)
+            tmax = None
+            if rec.tmax is not None:
+                tmax = fpm.encode(np.asarray(rec.tmax[b], np.float64), fmt, direction="down")
+            ex = -1 if rec.exclude is None else int(rec.exclude[b])
+            mem = replace(mem, tmin=tmin, tmax=tmax, exclude=ex, any_hit=rec.any_hit)
+            out.append(Run(mem, np.asarray(ids, np.int64)))
+        return out
+    finally:
+        rec.batch.enable = saved
+
+
+def host_choice(config, beats, bundle):
+    """The host's nearest hit per ray on a run's unreduced ``beats``: ``(tri, index)`` of
+    :func:`~raplas_hdl.host.shading.nearest_hits` with ``t = t' * (1/det)`` in float64 as
+    the model backend computes it, the window decoded from the bundle's patterns."""
+    from ..fp import model as fpm
+    from .shading import nearest_hits
+
+    R = config.n_rays
+    if beats["empty"].any():
+        return np.full(R, -1, np.int64), np.full(R, -1, np.int64)
+    fmt = config.fmt
+    hit = beats["hit"].astype(bool)
+    t_, det = fpm.decode(beats["t"], fmt), fpm.decode(beats["det"], fmt)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = np.where(hit, 1.0 / np.where(hit, det, 1.0), np.nan)
+        t = t_ * inv
+    lo = float(fpm.decode(np.array([bundle.tmin], np.uint32), fmt)[0])
+    hi = fpm.decode(bundle.window_tmax(config), fmt)
+    tri, _, idx = nearest_hits(R, beats["ray_id"], beats["tri_id"], hit, t, lo, hi,
+                               None if bundle.exclude < 0 else bundle.exclude)
+    return tri, idx
