@@ -39,7 +39,7 @@ of the result stream).
 
 from __future__ import annotations
 
-from amaranth.hdl import Module, Mux, Signal
+from amaranth.hdl import Cat, Module, Mux, Signal
 from amaranth.lib import stream, wiring
 from amaranth.lib.fifo import SyncFIFOBuffered
 from amaranth.lib.wiring import In, Out
@@ -51,6 +51,7 @@ from .records import struct_layout
 from .unit.feeder import SphereFeeder
 from .unit.fetch import RecordFetch
 from .unit.framing import EventCounters, ResultFraming
+from .unit.lanes import JobDistributor, ResultMerger
 from .unit.memories import MEMORIES, WriteDecoder, bind_read, bind_write, memory_geometry
 from .unit.selector import PairSelector
 from .unit.streams import job_layout, pair_layout
@@ -182,83 +183,129 @@ class IntersectionUnit(wiring.Component):
 
     # ------------------------------------------------------------------------------------
     def _subunits(self):
+        """The plane-sphere array and the (first lane's) ray-triangle unit."""
         from .plane_sphere import PlaneSphereArray
-        from .ray_triangle import RayTriangleUnit
 
         cfg = self._cfg
         psa = PlaneSphereArray(cfg.fmt, rows=cfg.rows, cols=cfg.cols, testers=cfg.n_testers,
                                sphere_id_bits=cfg.sphere_id_bits + 3,
                                multiplier=self._multiplier, adder=self._adder)
-        rtu = RayTriangleUnit(cfg.fmt, mode=cfg.mode, margin_scale=cfg.margin_scale,
-                              ray_id_bits=cfg.ray_id_bits + 1, tri_id_bits=cfg.tri_id_bits,
-                              multiplier=self._multiplier, adder=self._adder)
-        return psa, rtu
+        return psa, self._ray_triangle_unit(1 if cfg.lanes == 1 else 2)
+
+    def _ray_triangle_unit(self, tag_bits: int):
+        """A ray-triangle unit whose ``ray_id`` carries ``tag_bits`` above the ray: the
+        marker (and, in a lane, the job-last bit)."""
+        from .ray_triangle import RayTriangleUnit
+
+        cfg = self._cfg
+        return RayTriangleUnit(cfg.fmt, mode=cfg.mode, margin_scale=cfg.margin_scale,
+                               ray_id_bits=cfg.ray_id_bits + tag_bits,
+                               tri_id_bits=cfg.tri_id_bits,
+                               multiplier=self._multiplier, adder=self._adder)
 
     def elaborate(self, platform):
         cfg = self._cfg
         m = Module()
-        m.submodules.psa, m.submodules.rtu = psa, rtu = self._subunits()
+        psa, rtu = self._subunits()
+        m.submodules.psa = psa
+        if cfg.lanes == 1:
+            m.submodules.rtu = rtu
+        else:
+            rtu._MustUse__silence = True              # each lane builds its own
         m.submodules.writes = writes = WriteDecoder(cfg)
         m.submodules.feeder = feeder = SphereFeeder(cfg, capacity=2 * psa.latency + 8)
         m.submodules.selector = selector = PairSelector(cfg)
-        m.submodules.job_fifo = job_fifo = SyncFIFOBuffered(width=job_layout(cfg).size,
-                                                            depth=JOB_FIFO_DEPTH)
-        m.submodules.fetch = fetch = RecordFetch(cfg)
-        m.submodules.pair_fifo = pair_fifo = SyncFIFOBuffered(width=pair_layout(cfg).size,
-                                                             depth=cfg.fifo_depth)
+
+        # the streams, in data-flow order; the back end (job FIFO, record fetch, pair FIFO,
+        # ray-triangle unit) once, or in lanes between a distributor and a merger
+        wiring.connect(m, wiring.flipped(self.cmd), feeder.cmd)
+        wiring.connect(m, feeder.o, psa.i)
+        wiring.connect(m, psa.o, selector.i)
+        if cfg.lanes == 1:
+            fetches, rtus, pair_fifos = self._lane(m, "", rtu, selector.o)
+            results = rtu.o
+        else:
+            m.submodules.distributor = dist = JobDistributor(cfg)
+            m.submodules.merger = merger = ResultMerger(cfg)
+            wiring.connect(m, selector.o, dist.i)
+            fetches, rtus, pair_fifos = [], [], []
+            for k in range(cfg.lanes):
+                lane = self._lane(m, f"_{k}", self._ray_triangle_unit(2), dist.o[k],
+                                  job_last=True)
+                wiring.connect(m, lane[1][0].o, merger.i[k])
+                for acc, part in zip((fetches, rtus, pair_fifos), lane):
+                    acc.extend(part)
+            results = merger.o
         m.submodules.framing = framing = ResultFraming(cfg)
         m.submodules.out_fifo = out_fifo = SyncFIFOBuffered(width=self.result_layout.size,
                                                             depth=OUT_FIFO_DEPTH)
         m.submodules.events = events = EventCounters(cfg)
-
-        # the streams, in data-flow order
-        wiring.connect(m, wiring.flipped(self.cmd), feeder.cmd)
-        wiring.connect(m, feeder.o, psa.i)
-        wiring.connect(m, psa.o, selector.i)
-        wiring.connect(m, selector.o, job_fifo.w_stream)
-        wiring.connect(m, job_fifo.r_stream, fetch.i)
-        wiring.connect(m, fetch.o, pair_fifo.w_stream)
-        wiring.connect(m, pair_fifo.r_stream, rtu.i)
-        wiring.connect(m, rtu.o, framing.i)
+        wiring.connect(m, results, framing.i)
         wiring.connect(m, framing.o, out_fifo.w_stream)
         wiring.connect(m, out_fifo.r_stream, wiring.flipped(self.o))
+        level = pair_fifos[0].level
+        for fifo in pair_fifos[1:]:
+            level = Mux(fifo.level > level, fifo.level, level)
         m.d.comb += [writes.wr_en.eq(self.wr_en), writes.wr_addr.eq(self.wr_addr),
                      writes.wr_data.eq(self.wr_data),
                      feeder.plane_written.eq(writes.plane_written),
                      feeder.retired.eq(psa.o.valid & psa.o.ready),
                      psa.pw_en.eq(feeder.pw_en), psa.pw_addr.eq(feeder.pw_addr),
                      psa.pw_data.eq(feeder.pw_data),
-                     self.fifo_level.eq(pair_fifo.level),
-                     self.fifo_overflow.eq(fetch.overflow)]
+                     self.fifo_level.eq(level),
+                     self.fifo_overflow.eq(fetches[0].overflow if len(fetches) == 1 else
+                                           Cat(*[f.overflow for f in fetches]).any())]
 
         # the memories (named as the scene backdoor of the job-stream harness expects) and
-        # the stages' ports on them
-        reader = {"tri": fetch, "sphere": feeder, "count": selector, "tlist": fetch,
-                  "plane": feeder, "ray": fetch, "enable": selector, "rlist": feeder}
+        # the stages' ports on them: one read port per lane on the fetch's memories
+        readers = {"tri": fetches, "sphere": [feeder], "count": [selector],
+                   "tlist": fetches, "plane": [feeder], "ray": fetches,
+                   "enable": [selector], "rlist": [feeder]}
         for key, (width, depth, lane) in memory_geometry(cfg).items():
             mem = SyncRAM(width, depth, impl=self._ram, name=MEMORIES[key])
             bind_write(m, mem.write_port(granularity=lane), getattr(writes, key))
-            bind_read(m, mem.read_port(), getattr(reader[key], key))
+            for reader in readers[key]:
+                bind_read(m, mem.read_port(), getattr(reader, key))
             mem.add_to(m)
 
         # counters and run book-keeping: runs in flight, at most one marker per pipeline
         # slot between cmd and o
-        outstanding = Signal(range(cfg.fifo_depth + psa.fifo_depth + psa.latency + rtu.latency
-                                   + rtu.fifo_depth + JOB_FIFO_DEPTH + OUT_FIFO_DEPTH + 16))
+        lane_slots = cfg.fifo_depth + rtu.latency + rtu.fifo_depth + JOB_FIFO_DEPTH
+        outstanding = Signal(range(psa.fifo_depth + psa.latency + cfg.lanes * lane_slots
+                                   + OUT_FIFO_DEPTH + 16))
         started = self.cmd.valid & self.cmd.ready
         finished = self.o.valid & self.o.ready & self.o.payload.last
         m.d.sync += outstanding.eq(outstanding + started - finished)
-        issued = rtu.i.valid & rtu.i.ready & ~rtu.i.payload.ray_id[cfg.ray_id_bits]
+        issued = [u.i.valid & u.i.ready & ~u.i.payload.ray_id[cfg.ray_id_bits] for u in rtus]
         inc = events.inc
         m.d.comb += [self.busy.eq(outstanding != 0), inc.cycles.eq(self.busy),
                      inc.spheres.eq(feeder.spheres),
                      inc.plane_tests.eq(Mux(feeder.spheres, cfg.n_planes, 0)),
-                     inc.pairs_issued.eq(issued), inc.pairs_skipped.eq(selector.skipped),
+                     inc.pairs_issued.eq(sum(issued[1:], issued[0])),
+                     inc.pairs_skipped.eq(selector.skipped),
                      events.clear.eq(self.clear), self.counters.eq(events.counters)]
         m.d.comb += [inc[name].eq(framing.events[name])
                      for name in ("hits", "overflow", "underflow", "invalid")]
         return m
 
+    def _lane(self, m, suffix, rtu, jobs, job_last=False):
+        """Job FIFO -> record fetch -> pair FIFO -> ``rtu`` from the stream ``jobs``;
+        submodules named ``job_fifo``, ``fetch``, ``pair_fifo`` (and ``rtu``) + ``suffix``.
+        Returns ([fetch], [rtu], [pair FIFO])."""
+        cfg = self._cfg
+        job_fifo = SyncFIFOBuffered(width=job_layout(cfg).size, depth=JOB_FIFO_DEPTH)
+        fetch = RecordFetch(cfg, job_last=job_last)
+        pair_fifo = SyncFIFOBuffered(width=fetch.o.payload.shape().size, depth=cfg.fifo_depth)
+        m.submodules["job_fifo" + suffix] = job_fifo
+        m.submodules["fetch" + suffix] = fetch
+        m.submodules["pair_fifo" + suffix] = pair_fifo
+        if suffix:
+            m.submodules["rtu" + suffix] = rtu
+        wiring.connect(m, jobs, job_fifo.w_stream)
+        wiring.connect(m, job_fifo.r_stream, fetch.i)
+        wiring.connect(m, fetch.o, pair_fifo.w_stream)
+        wiring.connect(m, pair_fifo.r_stream, rtu.i)
+        return [fetch], [rtu], [pair_fifo]
 
 def build_intersection_unit(fmt=None, multiplier: str = "generic", adder: str = "generic",
                             **params) -> IntersectionUnit:

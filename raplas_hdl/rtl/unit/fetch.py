@@ -28,6 +28,10 @@ class RecordFetch(wiring.Component):
     Parameters
     ----------
     config : UnitConfig
+    job_last : bool
+        Put one more bit on top of ``ray_id``, above the marker bit: the pair is its job's
+        last (the marker pair too). The lanes' result merger advances on it
+        (:mod:`.lanes`); ``o`` is then ``pair_layout(config, 2)``.
 
     Members
     -------
@@ -41,12 +45,13 @@ class RecordFetch(wiring.Component):
         construction).
     """
 
-    def __init__(self, config: UnitConfig):
+    def __init__(self, config: UnitConfig, job_last: bool = False):
         self._cfg = config
+        self._job_last = bool(job_last)
         super().__init__({
             **read_ports(config, "tlist", "tri", "ray"),
             "i": In(stream.Signature(job_layout(config))),
-            "o": Out(stream.Signature(pair_layout(config))),
+            "o": Out(stream.Signature(pair_layout(config, 2 if job_last else 1))),
             "overflow": Out(1),
         })
 
@@ -58,9 +63,11 @@ class RecordFetch(wiring.Component):
         k = Signal(range(cfg.tris_per_sphere + 1))      # the job's next triangle
         job = Signal(job_layout(cfg))
         adv = Signal()
-        g1 = Signal(data.StructLayout({"v": 1, "ray": ray_bits, "bank": 1, "marker": 1}))
+        tail = {"last": 1} if self._job_last else {}
+        g1 = Signal(data.StructLayout({"v": 1, "ray": ray_bits, "bank": 1, "marker": 1,
+                                       **tail}))
         g2 = Signal(data.StructLayout({"v": 1, "ray": ray_bits, "marker": 1,
-                                       "tri": cfg.tri_id_bits}))
+                                       "tri": cfg.tri_id_bits, **tail}))
         last = Signal()
         pop = Signal()
         m.d.comb += [last.eq(job.marker | (k == job.ntris - 1)),
@@ -76,6 +83,8 @@ class RecordFetch(wiring.Component):
                          g1.marker.eq(job.marker),
                          g2.v.eq(g1.v), g2.ray.eq(g1.ray), g2.marker.eq(g1.marker),
                          g2.tri.eq(self.tlist.data)]
+            if tail:
+                m.d.sync += [g1.last.eq(last), g2.last.eq(g1.last)]
         m.d.comb += [self.tri.addr.eq(self.tlist.data), self.tri.en.eq(adv),
                      self.ray.addr.eq(Mux(g1.bank, g1.ray + cfg.n_rays, g1.ray)),
                      self.ray.en.eq(adv)]
@@ -84,7 +93,8 @@ class RecordFetch(wiring.Component):
         tri = data.View(struct_layout(TRIANGLE, cfg), self.tri.data)
         p = self.o.payload
         m.d.comb += [adv.eq(~g2.v | self.o.ready), self.o.valid.eq(g2.v),
-                     p.ray_id.eq(Cat(g2.ray, g2.marker)), p.tri_id.eq(g2.tri)]
+                     p.ray_id.eq(Cat(g2.ray, g2.marker, *([g2.last] if tail else []))),
+                     p.tri_id.eq(g2.tri)]
         m.d.comb += [p[f.name].eq(ray[f.name]) for f in RAY]
         m.d.comb += [p[f.name].eq(tri[f.name]) for f in TRIANGLE]
         # a pair offered to a full FIFO while the pipeline moves on would be lost

@@ -54,13 +54,14 @@ def job_layout(cfg: UnitConfig) -> data.StructLayout:
                               "ntris": cfg.count_bits, "marker": 1})
 
 
-def pair_layout(cfg: UnitConfig) -> data.StructLayout:
-    """The ray-triangle unit's input; ``ray_id`` has one bit more, the marker, on top."""
-    return struct_layout(PAIR, cfg, ray_id_bits=cfg.ray_id_bits + 1)
+def pair_layout(cfg: UnitConfig, tag_bits: int = 1) -> data.StructLayout:
+    """The ray-triangle unit's input; ``ray_id`` has ``tag_bits`` more on top: the marker
+    (and, in a lane of :mod:`.lanes`, above it the job's last pair)."""
+    return struct_layout(PAIR, cfg, ray_id_bits=cfg.ray_id_bits + tag_bits)
 
 
-def rt_result_layout(cfg: UnitConfig) -> data.StructLayout:
-    return struct_layout(RT_RESULT, cfg, ray_id_bits=cfg.ray_id_bits + 1)
+def rt_result_layout(cfg: UnitConfig, tag_bits: int = 1) -> data.StructLayout:
+    return struct_layout(RT_RESULT, cfg, ray_id_bits=cfg.ray_id_bits + tag_bits)
 
 
 def result_layout(cfg: UnitConfig) -> data.StructLayout:
