@@ -58,6 +58,17 @@ def _fileset(name: str, files, file_type: str) -> list[str]:
             f"    file_type: {file_type}"]
 
 
+def _target(name, description, filesets, top, tool=None, options=None) -> list[str]:
+    lines = [f"  {name}:", f"    description: {_q(description)}"]
+    if tool:
+        lines.append(f"    default_tool: {tool}")
+    lines += [f"    filesets: [{', '.join(filesets)}]", f"    toplevel: {_q(top)}"]
+    if options:
+        lines += ["    tools:", f"      {tool}:",
+                  *(f"        {k}: {json.dumps(v)}" for k, v in options.items())]
+    return lines
+
+
 def core_text(manifest: dict, verilog: list[str], *, unit: str | None = None,
               ucf: str | None = None, xdc: str | None = None, name: str | None = None) -> str:
     """The CAPI2 ``.core`` of an emitted unit.
@@ -86,19 +97,16 @@ def core_text(manifest: dict, verilog: list[str], *, unit: str | None = None,
     if xdc:
         lines += _fileset("constraints_xdc", [xdc], "xdc")
     lines += ["", "targets:",
-              "  default:", "    filesets: [rtl]", f"    toplevel: {_q(top)}",
-              "  lint:", "    default_tool: verilator", "    filesets: [rtl]",
-              f"    toplevel: {_q(top)}", "    tools:", "      verilator:",
-              "        mode: lint-only", "        verilator_options: [\"-Wno-fatal\"]"]
+              *_target("default", "the Verilog and its top, to use from another core",
+                       ["rtl"], top),
+              *_target("lint", "Verilator lint of the emitted Verilog", ["rtl"], top,
+                       "verilator", {"mode": "lint-only", "verilator_options": ["-Wno-fatal"]})]
     if ucf:
-        lines += ["  synth_ise:", "    default_tool: ise",
-                  "    filesets: [rtl, constraints_ucf]", f"    toplevel: {_q(top)}",
-                  "    tools:", "      ise:",
-                  *(f"        {k}: {_q(v)}" for k, v in ISE_DEVICE.items())]
+        lines += _target("synth_ise", "ISE, the paper's XC4VSX35-10FF668, with the UCF",
+                         ["rtl", "constraints_ucf"], top, "ise", ISE_DEVICE)
     if xdc:
-        lines += ["  synth_vivado:", "    description: \"7-series retarget: set the part "
-                  "(--part) for your board\"", "    default_tool: vivado",
-                  "    filesets: [rtl, constraints_xdc]", f"    toplevel: {_q(top)}"]
+        lines += _target("synth_vivado", "Vivado, a 7-series retarget with the XDC: give "
+                         "the part (--part)", ["rtl", "constraints_xdc"], top, "vivado")
     return "\n".join(lines) + "\n"
 
 
