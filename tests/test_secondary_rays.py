@@ -14,7 +14,7 @@ from raplas_hdl.cli import main
 from raplas_hdl.host.backends import make_backend
 from raplas_hdl.host.camera import Camera
 from raplas_hdl.host.exact import float64_intersect
-from raplas_hdl.host.render import RenderSettings, format_summary, render
+from raplas_hdl.host.render import RenderSettings, compare, format_summary, render
 from raplas_hdl.host.scene_file import SceneFileError, check_scene_file, load_scene_file
 from raplas_hdl.host.scenes import SCENE_FILES, AreaLight, Material, Scene, _box, _Builder, _quad_grid
 from raplas_hdl.host.secondary import perpendicular_axes, reflect, refract
@@ -298,7 +298,7 @@ def test_model_agrees_with_float64_on_every_layer(mirror_scene):
     verts = np.vstack([sc.vertices, glass_v])
     faces = np.vstack([sc.faces, slab.faces + len(sc.vertices)])
     ids = np.concatenate([sc.material_ids, np.full(len(slab.faces), 4)])
-    ids[:2] = 3                                                   # half the mirror glossy
+    ids[:1] = 3                                                   # half the mirror glossy
     both = Scene("layers", verts, faces, np.vstack([sc.colours, np.full((12, 3), 0.9)]),
                  sc.camera, sc.light, materials=tuple(mats), material_ids=ids).normalised()
     s = _settings(width=16, height=16, depth=2, glossy_rows=2, glossy_cols=2, ao_rows=2,
@@ -307,6 +307,9 @@ def test_model_agrees_with_float64_on_every_layer(mirror_scene):
     model = render(both, make_backend("model", mode="paper"), s)
     cert = render(both, make_backend("model", mode="certified"), s)
     assert set(ref.stats["ray_types"]) == set(RAY_TYPES)
+    for key in ("reflection_tri", "refraction_tri"):
+        assert (ref.layers[key] >= 0).sum() > 10, key
+    assert (ref.layers["glossy_hit"] > 0).sum() > 10
     for res in (model, cert):
         assert set(res.layers) == {"reflection_tri", "refraction_tri", "glossy_hit", "ao"}
         for key in ("reflection_tri", "refraction_tri"):
@@ -317,6 +320,13 @@ def test_model_agrees_with_float64_on_every_layer(mirror_scene):
             np.testing.assert_array_equal(np.isnan(a), np.isnan(b))
             assert np.nanmean(np.abs(a - b)) <= 0.05, key
         assert np.abs(res.image - ref.image).mean() < 0.01
+    cmp = compare(model, ref)["layers"]
+    assert set(cmp) == {"reflection_tri", "refraction_tri", "glossy_hit", "ao"}
+    some = ref.layers["reflection_tri"] != -2
+    assert cmp["reflection_tri"] == {"pixels": some.sum(), "differs": np.mean(
+        model.layers["reflection_tri"][some] != ref.layers["reflection_tri"][some])}
+    assert "refraction_tri: nearest triangle differs" in format_summary(model, compare(model,
+                                                                                       ref))
 
 
 # -- defaults, scene files, the command ---------------------------------------------------

@@ -279,7 +279,8 @@ def add_parser(subparsers):
     o.add_argument("--diff", metavar="FILE.png",
                    help="write the difference image against float64 (implies --compare)")
     o.add_argument("--ids", metavar="FILE.npz",
-                   help="write per-pixel nearest triangle IDs (and t, visibility) as .npz")
+                   help="write per-pixel nearest triangle IDs (and t, visibility, and the "
+                        "secondary rays' layers) as .npz")
     o.add_argument("--json", metavar="FILE.json", help="write the summary as JSON")
     g.add_waves_option(p, "every simulation of the rtl backend")
     return p

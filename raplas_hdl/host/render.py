@@ -459,8 +459,10 @@ def save_png(image: np.ndarray, path, linear: bool = True):
 
 
 def save_ids(result: RenderResult, path):
-    """Per-pixel nearest triangle IDs (-1: none), distances and visibility as ``.npz``."""
-    np.savez_compressed(path, tri_id=result.tri_id, t=result.t, visibility=result.visibility)
+    """Per-pixel nearest triangle IDs (-1: none), distances, visibility and the secondary
+    rays' layers (:attr:`RenderResult.layers`) as ``.npz``."""
+    np.savez_compressed(path, tri_id=result.tri_id, t=result.t, visibility=result.visibility,
+                        **result.layers)
 
 
 def difference_image(a: RenderResult, b: RenderResult, gain: float = 4.0) -> np.ndarray:
@@ -480,7 +482,12 @@ def compare(result: RenderResult, reference: RenderResult) -> dict:
     dict
         ``psnr`` (dB, on 8-bit images; ``inf`` when equal), ``max_abs`` (8-bit levels),
         ``tri_differs`` (fraction of pixels whose nearest triangle differs),
-        ``hit_differs`` (fraction where one hits and the other does not).
+        ``hit_differs`` (fraction where one hits and the other does not), and ``layers``
+        for the secondary rays both renders have (:attr:`RenderResult.layers`):
+        ``reflection_tri`` and ``refraction_tri`` as ``{"pixels", "differs"}`` (pixels where
+        either has such a ray, and the fraction of them whose nearest triangle differs),
+        ``glossy_hit`` and ``ao`` as ``{"pixels", "mean_abs"}`` (pixels where both have a
+        value, their mean absolute difference).
     """
     if result.image.shape != reference.image.shape:
         raise ValueError(f"image sizes differ: {result.image.shape} and "
@@ -489,9 +496,23 @@ def compare(result: RenderResult, reference: RenderResult) -> dict:
     b = to_uint8(reference.image).astype(np.float64)
     mse = float(np.mean((a - b) ** 2))
     psnr = math.inf if mse == 0 else 10.0 * math.log10(255.0 ** 2 / mse)
+    layers = {}
+    for key in ("reflection_tri", "refraction_tri"):
+        if key in result.layers and key in reference.layers:
+            x, y = result.layers[key], reference.layers[key]
+            some = (x != -2) | (y != -2)
+            layers[key] = {"pixels": int(some.sum()),
+                           "differs": float(np.mean(x[some] != y[some])) if some.any() else 0.0}
+    for key in ("glossy_hit", "ao"):
+        if key in result.layers and key in reference.layers:
+            x, y = result.layers[key], reference.layers[key]
+            both = ~np.isnan(x) & ~np.isnan(y)
+            layers[key] = {"pixels": int(both.sum()), "mean_abs": float(
+                np.mean(np.abs(x[both] - y[both]))) if both.any() else 0.0}
     return {"psnr": psnr, "max_abs": float(np.max(np.abs(a - b))),
             "tri_differs": float(np.mean(result.tri_id != reference.tri_id)),
-            "hit_differs": float(np.mean((result.tri_id >= 0) != (reference.tri_id >= 0)))}
+            "hit_differs": float(np.mean((result.tri_id >= 0) != (reference.tri_id >= 0))),
+            "layers": layers}
 
 
 def format_summary(result: RenderResult, comparison: dict | None = None) -> str:
@@ -543,4 +564,11 @@ def format_summary(result: RenderResult, comparison: dict | None = None) -> str:
                      f"{comparison['max_abs']:.0f}/255, nearest triangle differs on "
                      f"{100 * comparison['tri_differs']:.3f} % of pixels, hit/miss differs on "
                      f"{100 * comparison['hit_differs']:.3f} %")
+        for key, v in comparison.get("layers", {}).items():
+            if "differs" in v:
+                lines.append(f"    {key}: nearest triangle differs on "
+                             f"{100 * v['differs']:.3f} % of {v['pixels']:,} pixels")
+            else:
+                lines.append(f"    {key}: mean absolute difference {v['mean_abs']:.4f} over "
+                             f"{v['pixels']:,} pixels")
     return "\n".join(lines)
