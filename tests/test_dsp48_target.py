@@ -272,5 +272,12 @@ def test_cli_target_option(tmp_path, capsys):
     capsys.readouterr()
     assert main(["verilog", "fp-mul", "--target", "xc7", "-o", str(tmp_path / "x.v")]) == 2
     assert "target must be one of generic, virtex4" in capsys.readouterr().err
-    assert main(["verilog", "fp-add", "--target", "virtex4", "-o", str(tmp_path / "y.v")]) == 2
-    assert "--target does not apply to unit fp-add" in capsys.readouterr().err
+    # fp-add: --target is the adder's own (two DSP48, latency 7; issue 15)
+    add = tmp_path / "add.v"
+    assert main(["verilog", "fp-add", "--target", "virtex4", "-o", str(add)]) == 0
+    madd = json.loads(add.with_suffix(".json").read_text())
+    assert (madd["parameters"]["target"], madd["latency"]) == ("virtex4", 7)
+    assert add.read_text().count("DSP48 ") == 2
+    capsys.readouterr()
+    assert main(["verilog", "fp-add", "--adder", "virtex4", "-o", str(tmp_path / "y.v")]) == 2
+    assert "--adder does not apply to unit fp-add" in capsys.readouterr().err

@@ -71,18 +71,9 @@ def unit_verilog(name: str, fmt: FPFormat, **options) -> tuple[str, str, int | N
         ``options`` are the options the unit was built with (defaults dropped).
     """
     from ..rtl.emit import emit_verilog
-    from ..rtl.units import UNITS, build_unit
+    from ..rtl.units import build_unit
 
-    if name == "fp-add" and options.get("target") is not None:
-        # The DSP48 adder: FPAdd's own target option (the unit registry does not route
-        # --target to fp-add yet).
-        from ..rtl.fp_add import FPAdd
-
-        unit = UNITS[name]
-        opts = {k: v for k, v in options.items() if v is not None}
-        comp = FPAdd(fmt, **opts)
-    else:
-        unit, comp, opts = build_unit(name, fmt, **options)
+    unit, comp, opts = build_unit(name, fmt, **options)
     params = {"exp_bits": fmt.exp_bits, "man_bits": fmt.man_bits, "rounding": fmt.rounding,
               **opts}
     text, manifest = emit_verilog(comp, unit.module, params)
@@ -90,8 +81,10 @@ def unit_verilog(name: str, fmt: FPFormat, **options) -> tuple[str, str, int | N
 
 
 def synth_row(name: str, fmt: FPFormat, options: dict | None = None, *, cache_dir=None,
-              use_cache: bool = True, cached_only: bool = False) -> dict:
-    """Synthesise one unit at one format and return its report row (a flat dict)."""
+              use_cache: bool = True, cached_only: bool = False,
+              family: str = "xc4v") -> dict:
+    """Synthesise one unit at one format and return its report row (a flat dict);
+    ``family``: ``synth_xilinx -family`` (:data:`.yosys.FAMILIES`)."""
     from .yosys import synthesize
 
     opts = dict(DEFAULT_OPTIONS.get(name, {}))
@@ -100,10 +93,10 @@ def synth_row(name: str, fmt: FPFormat, options: dict | None = None, *, cache_di
     text, module, latency, used = unit_verilog(name, fmt, **opts)
     t_emit = time.monotonic() - t0
     r = synthesize(text, module, cache_dir=cache_dir, use_cache=use_cache,
-                   cached_only=cached_only)
+                   cached_only=cached_only, family=family)
     row = {"unit": name, "format": _fmt_label(fmt), "exp_bits": fmt.exp_bits,
            "man_bits": fmt.man_bits, "rounding": fmt.rounding, "options": opts,
-           "latency": latency, "emit_seconds": round(t_emit, 2)}
+           "latency": latency, "emit_seconds": round(t_emit, 2), "family": family}
     row.update(r.to_dict())
     return row
 

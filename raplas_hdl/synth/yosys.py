@@ -39,6 +39,16 @@ What is counted (:class:`SynthResult`):
   result (no wire delays, no cell delays, no placement). ``path`` gives the composition of the
   cell-count path by cell kind.
 
+**Families.** ``family="xc4v"`` (the default, the paper's Virtex-4) or ``"xc7"`` (7-series:
+``synth_xilinx -family xc7``, multiplies on ``DSP48E1``, ``RAMB18E1``/``RAMB36E1``). A 7-series
+slice holds 4 LUT6, 8 flip-flops, one ``CARRY4``, two ``MUXF7`` and one ``MUXF8``, so there::
+
+      slices_est = ceil(max((luts + lutram) / 4, ffs / 8, carry4, muxf7 / 2, muxf8))
+
+with ``luts`` every ``LUT1`` .. ``LUT6``. ``bram`` counts 18 Kbit blocks in both families
+(``RAMB36*`` counts 2). Instantiated Virtex-4 ``DSP48`` primitives (``--target virtex4``,
+``--adder virtex4``) are not 7-series cells: such Verilog is refused for ``xc7``.
+
 Results are cached under ``build/synth/<key>/result.json``, the key being a SHA-256 over the
 Verilog text, the top name, the script and the Yosys package version, so that re-running a
 report only synthesises what changed.
@@ -59,7 +69,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 __all__ = ["SynthResult", "synthesize", "yosys_command", "summarize", "longest_paths",
-           "default_cache_dir", "SCRIPT", "PARSER_VERSION"]
+           "default_cache_dir", "SCRIPT", "PARSER_VERSION", "FAMILIES", "script_for"]
 
 #: Bumped when the parsing of the netlist changes, so that cached results are recomputed.
 PARSER_VERSION = 2
@@ -69,6 +79,17 @@ SCRIPT = ("read_verilog -sv top.v; "
           "synth_xilinx -family xc4v -flatten -noiopad -noclkbuf -top {top}; "
           "tee -q -o stat.json stat -json; "
           "write_json net.json")
+
+#: Device families ``synthesize`` takes (``synth_xilinx -family``).
+FAMILIES = ("xc4v", "xc7")
+
+
+def script_for(family: str = "xc4v") -> str:
+    """:data:`SCRIPT` for ``family`` (one of :data:`FAMILIES`)."""
+    if family not in FAMILIES:
+        raise ValueError(f"family must be one of {', '.join(FAMILIES)}, not {family!r}")
+    return SCRIPT.replace("-family xc4v", f"-family {family}")
+
 
 _LUT = re.compile(r"^LUT[1-6]$")
 _LUTRAM_SITES = {
@@ -169,7 +190,7 @@ def _param_int(value, default: int) -> int:
         return default
 
 
-def _count(cells_by_type: dict) -> dict:
+def _count(cells_by_type: dict, family: str = "xc4v") -> dict:
     c = dict(cells_by_type)
     luts = sum(n for t, n in c.items() if _LUT.match(t))
     lutram = sum(_LUTRAM_SITES[t] * n for t, n in c.items() if t in _LUTRAM_SITES)
@@ -179,8 +200,13 @@ def _count(cells_by_type: dict) -> dict:
     muxf5 = c.get("MUXF5", 0)
     muxfx = sum(c.get(t, 0) for t in ("MUXF6", "MUXF7", "MUXF8"))
     dsp = sum(n for t, n in c.items() if t.startswith("DSP48"))
-    bram = sum(n for t, n in c.items() if t.startswith("RAMB") or t.startswith("FIFO"))
-    slices = math.ceil(max(luts + lutram, ffs, muxcy, xorcy, 2 * muxf5, 2 * muxfx, 0) / 2)
+    bram = sum((2 if "36" in t else 1) * n for t, n in c.items()
+               if t.startswith("RAMB") or t.startswith("FIFO"))
+    if family == "xc7":
+        slices = math.ceil(max((luts + lutram) / 4, ffs / 8, c.get("CARRY4", 0),
+                               c.get("MUXF7", 0) / 2, c.get("MUXF8", 0), 0))
+    else:
+        slices = math.ceil(max(luts + lutram, ffs, muxcy, xorcy, 2 * muxf5, 2 * muxfx, 0) / 2)
     known = set()
     for t in c:
         if (_LUT.match(t) or t in _LUTRAM_SITES or t.startswith("FD") or t in _CARRY
@@ -341,20 +367,20 @@ def longest_paths(netlist: dict, top: str) -> tuple[int, int, dict]:
     return best_c[end], max(best_l), comp
 
 
-def summarize(stat: dict, netlist: dict, top: str) -> dict:
+def summarize(stat: dict, netlist: dict, top: str, family: str = "xc4v") -> dict:
     """Counts and path figures from ``stat -json`` and ``write_json`` outputs."""
     mods = stat.get("modules", {})
     entry = mods.get("\\" + top) or mods.get(top) or stat.get("design", {})
     cells_by_type = {k.lstrip("\\"): v for k, v in entry.get("num_cells_by_type", {}).items()}
-    out = _count(cells_by_type)
+    out = _count(cells_by_type, family)
     pc, pl, comp = longest_paths(netlist, top)
     out.update(path_cells=pc, path_levels=pl, path=comp, cells_by_type=cells_by_type)
     return out
 
 
-def _key(verilog: str, top: str) -> str:
+def _key(verilog: str, top: str, family: str = "xc4v") -> str:
     h = hashlib.sha256()
-    for part in (verilog, top, SCRIPT, _yosys_version(), str(PARSER_VERSION)):
+    for part in (verilog, top, script_for(family), _yosys_version(), str(PARSER_VERSION)):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()
@@ -362,8 +388,8 @@ def _key(verilog: str, top: str) -> str:
 
 def synthesize(verilog: str, top: str, *, cache_dir: str | os.PathLike | None = None,
                use_cache: bool = True, cached_only: bool = False,
-               timeout: float = 3600.0) -> SynthResult:
-    """Synthesise ``verilog`` for Virtex-4 with Yosys and summarise it.
+               timeout: float = 3600.0, family: str = "xc4v") -> SynthResult:
+    """Synthesise ``verilog`` for Virtex-4 (or ``family``) with Yosys and summarise it.
 
     Parameters
     ----------
@@ -379,6 +405,8 @@ def synthesize(verilog: str, top: str, *, cache_dir: str | os.PathLike | None = 
         Never run Yosys: return the cached result or raise :class:`LookupError`.
     timeout : float
         Seconds before the Yosys run is abandoned.
+    family : {"xc4v", "xc7"}
+        ``synth_xilinx -family`` (see the module docstring).
 
     Returns
     -------
@@ -395,7 +423,11 @@ def synthesize(verilog: str, top: str, *, cache_dir: str | os.PathLike | None = 
     """
     if not re.search(rf"\bmodule\s+\\?{re.escape(top)}\b", verilog):
         raise ValueError(f"top module {top!r} is not defined in the Verilog text")
-    key = _key(verilog, top)
+    script = script_for(family)
+    if family != "xc4v" and re.search(r"^\s*DSP48\s", verilog, re.M):
+        raise ValueError(f"{top}: Virtex-4 DSP48 primitives (target or adder virtex4) are not "
+                         f"{family} cells; synthesise the generic RTL for {family}")
+    key = _key(verilog, top, family)
     base = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     work = base / key[:16]
     result_file = work / "result.json"
@@ -409,7 +441,7 @@ def synthesize(verilog: str, top: str, *, cache_dir: str | os.PathLike | None = 
     (work / "top.v").write_text(verilog)
     t0 = time.monotonic()
     proc = subprocess.run(
-        yosys_command() + ["-q", "-l", "synth.log", "-p", SCRIPT.format(top=top)],
+        yosys_command() + ["-q", "-l", "synth.log", "-p", script.format(top=top)],
         cwd=work, capture_output=True, text=True, timeout=timeout)
     seconds = time.monotonic() - t0
     if proc.returncode != 0:
@@ -419,7 +451,7 @@ def synthesize(verilog: str, top: str, *, cache_dir: str | os.PathLike | None = 
     stat = json.loads((work / "stat.json").read_text())
     net_path = work / "net.json"
     netlist = json.loads(net_path.read_text())
-    fields = summarize(stat, netlist, top)
+    fields = summarize(stat, netlist, top, family)
     net_path.unlink()
     r = SynthResult(top=top, verilog_sha256=hashlib.sha256(verilog.encode()).hexdigest(),
                     yosys=_yosys_version(), seconds=round(seconds, 2), **fields)

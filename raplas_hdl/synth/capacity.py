@@ -1,0 +1,340 @@
+"""Capacity per configuration: how many intersection units fit on a device, and the pairs per
+second they sustain (issue 15, point 4).
+
+A *configuration* is a device (its family), the DSP48 target of the FP units (``generic``:
+inferred multiplies, adders in the fabric; ``virtex4``: the significand multiplies and the
+FP adders as Virtex-4 ``DSP48`` primitives, ``--target virtex4 --adder virtex4``), the
+testers of the 4x4 plane-sphere array (8: one pass per sphere; 4: two passes), ``K``
+ray-triangle lanes behind the array (``UnitConfig.lanes``) and the Triangle Memory size
+``N``. One *unit* is the intersection unit of that configuration.
+
+**Resources of one unit, composed.** A whole-unit Yosys run takes minutes, so a unit is
+estimated from its parts::
+
+    unit = array(testers, target) + K x ray-triangle(target) + rest
+
+``rest`` (the memories' fabric, feeder, selector, record fetch, FIFOs, framing, counters) is
+the whole-unit run minus its array and ray-triangle unit, taken from one whole-unit run per
+family; :func:`validate` compares the composition with other whole-unit runs. Slices are the
+Yosys estimates summed (a lower bound; the x1.25 column is the packing margin). The extra
+fabric of a lane beyond the first (its job FIFO, record fetch and pair FIFO, and the
+distributor and merger) is in ``rest`` once only; the K=2 validation shows what it costs.
+
+**Block RAM** of the memories for ``N`` triangles (:func:`bram_blocks`), in 18 Kbit blocks:
+each memory is split into its write lanes, each lane mapped to the best aspect ratio of an
+18 Kbit block (16Kx1 .. 512x36), calibrated by the difference between Yosys's count and the
+model at the synthesised size. ``K`` lanes read Triangle Memory, the triangle lists and Ray
+Memory through their own read ports: Yosys builds those memories ``K`` times.
+
+**Pairs per second** = units x the modelled pairs per cycle of the configuration (testers,
+``K``) on the bench scenes x 100 MHz, not ``K`` x clock: the pairs per cycle come from the
+throughput model's results (rows ``scene, format, rows, cols, testers, lanes,
+pairs_per_cycle``). The paper: one unit, 100 M pairs/s at its board's 100 MHz.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+__all__ = ["DEVICES", "Config", "CONFIGS", "bram_blocks", "compose", "capacity_row",
+           "capacity_table", "validate", "PAPER_PAIRS_PER_SECOND", "CLOCK_MHZ"]
+
+#: Devices: family, DSP slices, logic slices, 18 Kbit block RAMs (RAMB16 / RAMB18E1).
+DEVICES = {
+    "XC4VSX35": {"family": "xc4v", "dsp48": 192, "slices": 15360, "bram18": 192},
+    "XC7A100T": {"family": "xc7", "dsp48": 240, "slices": 15850, "bram18": 270},
+    "XC7K325T": {"family": "xc7", "dsp48": 840, "slices": 50950, "bram18": 890},
+}
+
+#: The paper's sustained rate: one unit at 1 pair per clock at 100 MHz.
+PAPER_PAIRS_PER_SECOND = 100e6
+CLOCK_MHZ = 100.0
+PACKING_MARGIN = 1.25
+
+#: 18 Kbit block aspect ratios (depth, width).
+_ASPECTS = ((16384, 1), (8192, 2), (4096, 4), (2048, 9), (1024, 18), (512, 36))
+
+#: Memories read by every lane (each lane has its own read port: K copies).
+LANE_MEMORIES = ("tri", "tlist", "ray")
+
+
+@dataclass(frozen=True)
+class Config:
+    device: str
+    target: str         # generic | virtex4 (multipliers and adders)
+    testers: int
+    lanes: int
+
+    @property
+    def family(self) -> str:
+        return DEVICES[self.device]["family"]
+
+    @property
+    def label(self) -> str:
+        return f"{self.device} {self.target} t{self.testers} K{self.lanes}"
+
+
+#: The configurations of the table: Virtex-4 with both targets, the 7-series devices with
+#: the generic RTL (the DSP48 adder is a Virtex-4 primitive design).
+CONFIGS = tuple(
+    [Config("XC4VSX35", t, n, k) for t in ("generic", "virtex4") for n in (8, 4)
+     for k in (1, 2, 3)]
+    + [Config(d, "generic", n, k) for d in ("XC7A100T", "XC7K325T") for n in (8, 4)
+       for k in (1, 2, 3)])
+
+
+def _bram_lane(width: int, depth: int) -> int:
+    return min(math.ceil(width / w) * math.ceil(depth / d) for d, w in _ASPECTS)
+
+
+def bram_blocks(config, lanes: int = 1) -> dict:
+    """18 Kbit blocks per memory of ``config`` (a :class:`UnitConfig`), ``K = lanes`` copies
+    of the lanes' memories; ``{"total": n, memory: n, ...}`` (model, uncalibrated)."""
+    from ..rtl.unit.memories import memory_geometry
+
+    out = {}
+    for name, (width, depth, lane) in memory_geometry(config).items():
+        n = (width // lane) * _bram_lane(lane, depth)
+        out[name] = n * (lanes if name in LANE_MEMORIES else 1)
+    out["total"] = sum(out.values())
+    return out
+
+
+def unit_config(fmt, n_triangles: int, testers: int = 8, lanes: int = 1):
+    """The :class:`UnitConfig` of a 4x4 unit with Triangle Memory for ``n_triangles`` (and
+    Sphere Memory for one sphere per 4 triangles, the ratio of the unit's defaults: 1,024 and 256)."""
+    from ..model.memory_image import UnitConfig
+
+    spheres = max(1, math.ceil(n_triangles / 4))
+    return UnitConfig(fmt=fmt, rows=4, cols=4, testers=testers, max_triangles=n_triangles,
+                      max_spheres=spheres, lanes=lanes)
+
+
+def compose(array: dict, rtu: dict, rest: dict, lanes: int) -> dict:
+    """``array + lanes x rtu + rest`` for ``dsp48``, ``slices_est``, ``luts``, ``ffs``."""
+    return {k: array[k] + lanes * rtu[k] + rest[k] for k in ("dsp48", "slices_est", "luts", "ffs")}
+
+
+def rest_of(unit: dict, array: dict, rtu: dict, lanes: int = 1) -> dict:
+    """The whole-unit row minus its array and ray-triangle units."""
+    return {k: unit[k] - array[k] - lanes * rtu[k] for k in ("dsp48", "slices_est", "luts", "ffs")}
+
+
+def _limit(avail, per):
+    return None if not per else int(avail // per)
+
+
+def capacity_row(cfg: Config, need: dict, bram: dict, ppc: dict, path_cells: int) -> dict:
+    """One row of the table: ``need`` (``dsp48``, ``slices_est``), ``bram`` ({label: blocks}),
+    ``ppc`` ({scene: pairs per cycle})."""
+    dev = DEVICES[cfg.device]
+    limits = {"dsp48": _limit(dev["dsp48"], need["dsp48"]),
+              "slices": _limit(dev["slices"], need["slices_est"]),
+              "slices_x1.25": _limit(dev["slices"], math.ceil(need["slices_est"] * PACKING_MARGIN))}
+    bram_limits = {label: _limit(dev["bram18"], n) for label, n in bram.items()}
+    row = {"device": cfg.device, "family": cfg.family, "target": cfg.target,
+           "testers": cfg.testers, "lanes": cfg.lanes, "dsp48": need["dsp48"],
+           "slices_est": need["slices_est"],
+           "slices_x1.25": math.ceil(need["slices_est"] * PACKING_MARGIN),
+           "bram18": bram, "limits": limits, "bram_limits": bram_limits,
+           "path_cells": path_cells, "pairs_per_cycle": ppc}
+    lo = min(ppc.values()) if ppc else None
+    for label in bram:
+        for margin in ("", "_x1.25"):
+            cand = [limits["dsp48"], limits["slices" + margin], bram_limits[label]]
+            units = min(v for v in cand if v is not None)
+            row[f"units{margin}[{label}]"] = units
+            row[f"pairs_per_s{margin}[{label}]"] = (None if lo is None
+                                                   else units * lo * CLOCK_MHZ * 1e6)
+    return row
+
+
+def validate(predicted: dict, actual: dict) -> dict:
+    """Relative error of a composed estimate against a whole-unit run."""
+    return {k: {"predicted": predicted[k], "actual": actual[k],
+                "error": (predicted[k] - actual[k]) / actual[k] if actual[k] else None}
+            for k in ("dsp48", "slices_est", "luts", "ffs")}
+
+
+def load_throughput(path) -> list[dict]:
+    """Rows of the throughput results (a list, or ``{"rows": [...]}``)."""
+    import json
+    from pathlib import Path
+
+    data = json.loads(Path(path).read_text())
+    rows = data["rows"] if isinstance(data, dict) else data
+    need = {"scene", "testers", "lanes", "pairs_per_cycle"}
+    for r in rows:
+        if not need <= set(r):
+            raise ValueError(f"{path}: a throughput row lacks {', '.join(sorted(need - set(r)))}")
+    return rows
+
+
+def pairs_per_cycle(rows, testers: int, lanes: int, fmt_name: str | None = None) -> dict:
+    """``{scene: pairs per cycle}`` of the 4x4 rows with ``testers`` and ``lanes``."""
+    out = {}
+    for r in rows:
+        if (r["testers"], r["lanes"]) != (testers, lanes):
+            continue
+        if r.get("rows", 4) != 4 or r.get("cols", 4) != 4:
+            continue
+        if fmt_name and r.get("format") and not str(r["format"]).startswith(fmt_name):
+            continue
+        out[r["scene"]] = float(r["pairs_per_cycle"])
+    return out
+
+
+def capacity_table(parts: dict, throughput_rows, n_triangles: dict, fmt, *,
+                   configs=CONFIGS, bram_calibration: dict | None = None) -> list[dict]:
+    """The rows for ``configs``.
+
+    ``parts[(family, target)]`` holds ``array`` ({testers: row}), ``rtu`` (row) and ``rest``
+    (dict) — rows of :func:`.report.synth_row`. ``n_triangles``: {label: N}.
+    ``bram_calibration``: {family: blocks to add to the model (Yosys minus model at the
+    synthesised size)}.
+    """
+    out = []
+    for cfg in configs:
+        p = parts.get((cfg.family, cfg.target))
+        if p is None or cfg.testers not in p["array"]:
+            continue
+        array, rtu = p["array"][cfg.testers], p["rtu"]
+        need = compose(array, rtu, p["rest"], cfg.lanes)
+        cal = (bram_calibration or {}).get(cfg.family, 0)
+        bram = {label: bram_blocks(unit_config(fmt, n, cfg.testers), cfg.lanes)["total"] + cal
+                for label, n in n_triangles.items()}
+        path = max(array["path_cells"], rtu["path_cells"], p.get("unit_path_cells", 0))
+        ppc = pairs_per_cycle(throughput_rows, cfg.testers, cfg.lanes)
+        out.append(capacity_row(cfg, need, bram, ppc, path))
+    return out
+
+
+# -- gathering the parts ------------------------------------------------------------------
+
+#: Option defaults of the rows, so that rows written before an option existed still match.
+_DEFAULTS = {"target": "generic", "adder": "generic", "rows": 4, "cols": 4}
+_UNIT_DEFAULTS = {"plane-sphere": {"testers": 8}, "intersection-unit": {"testers": 8},
+                  "ray-triangle": {"mode": "paper"}}
+
+
+def _norm(unit: str, options: dict) -> dict:
+    o = {**_DEFAULTS, **_UNIT_DEFAULTS.get(unit, {}), **(options or {})}
+    if unit in ("ray-triangle",):
+        o.pop("rows"), o.pop("cols")
+    return o
+
+
+def find_row(rows, unit: str, fmt, options: dict, family: str = "xc4v"):
+    """The row of ``rows`` (report rows) for ``unit`` at ``fmt`` with ``options``."""
+    want = _norm(unit, options)
+    for r in rows:
+        if (r.get("unit") == unit and r.get("rounding") == fmt.rounding
+                and r.get("family", "xc4v") == family
+                and (r.get("exp_bits"), r.get("man_bits")) == (fmt.exp_bits, fmt.man_bits)
+                and _norm(unit, r.get("options", {})) == want):
+            return r
+    return None
+
+
+def _targets(target: str) -> dict:
+    return {} if target == "generic" else {"target": target, "adder": target}
+
+
+#: The syntheses behind the table: (family, target) -> units and options.
+def needed_runs(families=("xc4v", "xc7")) -> list[tuple]:
+    """``(unit, options, family)`` of every synthesis the table uses, the most useful first."""
+    runs = []
+    for family in families:
+        for target in (("generic", "virtex4") if family == "xc4v" else ("generic",)):
+            t = _targets(target)
+            runs.append(("ray-triangle", {**t}, family))
+            for testers in (8, 4):
+                runs.append(("plane-sphere", {"rows": 4, "cols": 4, "testers": testers, **t},
+                             family))
+        runs.append(("intersection-unit", {"rows": 4, "cols": 4, "testers": 8}, family))
+    runs.append(("intersection-unit", {"rows": 4, "cols": 4, "testers": 4,
+                                       **_targets("virtex4")}, "xc4v"))
+    return runs
+
+
+def gather(fmt, *, rows=(), cached_only: bool = True, progress=None, runs=None) -> dict:
+    """Synthesis rows for :func:`needed_runs`: from ``rows`` (an earlier report's rows), the
+    Yosys cache, or (``cached_only`` False) a Yosys run. ``{(unit, options key, family):
+    row}`` and the runs that had no result under ``"missing"``."""
+    from .report import synth_row
+
+    found, missing = {}, []
+    for unit, options, family in runs or needed_runs():
+        key = (unit, tuple(sorted(_norm(unit, options).items())), family)
+        row = find_row(rows, unit, fmt, options, family)
+        if row is None:
+            try:
+                row = synth_row(unit, fmt, dict(options), cached_only=cached_only,
+                                family=family)
+            except LookupError:
+                missing.append({"unit": unit, "options": options, "family": family})
+                if progress:
+                    progress(f"{unit} {options} {family}: no result")
+                continue
+            if progress:
+                progress(f"{unit} {options} {family}: slices~ {row['slices_est']}, "
+                         f"DSP {row['dsp48']}, path {row['path_cells']}"
+                         + (" (cached)" if row.get("cached") else f" ({row['seconds']:.0f} s)"))
+        found[key] = row
+    return {"rows": found, "missing": missing}
+
+
+def _get(found, unit, options, family):
+    return found.get((unit, tuple(sorted(_norm(unit, options).items())), family))
+
+
+def build_capacity(fmt, found: dict, throughput_rows, n_triangles: dict) -> dict:
+    """The table, its inputs and the validation of the composition (see module docstring).
+
+    ``rest`` of a family comes from its generic 8-tester whole-unit run (xc4v) or any
+    whole-unit run of the family; the other whole-unit runs validate the composition."""
+    parts, validation, rests = {}, [], {}
+    units = [(opts, fam, r) for (u, okey, fam), r in found.items()
+             if u == "intersection-unit" for opts in [dict(okey)]]
+    # the rest of each family: prefer the generic 8-tester unit
+    units.sort(key=lambda x: (x[0].get("target") != "generic", x[0].get("testers") != 8))
+    cal = {}
+    for opts, fam, r in units:
+        tgt = opts.get("target", "generic")
+        arr = _get(found, "plane-sphere", {"testers": opts["testers"], **_targets(tgt)}, fam)
+        rtu = _get(found, "ray-triangle", _targets(tgt), fam)
+        if arr is None or rtu is None:
+            continue
+        lanes = opts.get("lanes", 1)
+        if fam not in rests:
+            rests[fam] = {**rest_of(r, arr, rtu, lanes), "basis": {**opts, "family": fam},
+                          "path_cells": r["path_cells"]}
+            model = bram_blocks(unit_config(fmt, 1024, opts["testers"]), lanes)["total"]
+            cal[fam] = r["bram"] - model
+            continue
+        pred = compose(arr, rtu, rests[fam], lanes)
+        validation.append({"family": fam, "options": opts, **validate(pred, r)})
+    for fam, rest in rests.items():
+        for target in ("generic", "virtex4"):
+            t = _targets(target)
+            rtu = _get(found, "ray-triangle", t, fam)
+            arrays = {n: a for n in (8, 4)
+                      if (a := _get(found, "plane-sphere", {"testers": n, **t}, fam))}
+            if rtu is None or not arrays:
+                continue
+            parts[(fam, target)] = {"array": arrays, "rtu": rtu, "rest": rest,
+                                    "unit_path_cells": rest["path_cells"]}
+    table = capacity_table(parts, throughput_rows, n_triangles, fmt, bram_calibration=cal)
+    inputs = {f"{fam}/{target}": {
+        "array": {n: _brief(a) for n, a in p["array"].items()}, "rtu": _brief(p["rtu"]),
+        "rest": {k: v for k, v in p["rest"].items()}} for (fam, target), p in parts.items()}
+    return {"format": fmt.name, "table": table, "validation": validation, "inputs": inputs,
+            "bram_calibration": cal, "n_triangles": n_triangles, "devices": DEVICES,
+            "clock_mhz": CLOCK_MHZ, "paper_pairs_per_second": PAPER_PAIRS_PER_SECOND,
+            "packing_margin": PACKING_MARGIN}
+
+
+def _brief(row: dict) -> dict:
+    return {k: row[k] for k in ("dsp48", "slices_est", "luts", "ffs", "bram", "path_cells",
+                                "path_levels", "latency", "seconds") if k in row}

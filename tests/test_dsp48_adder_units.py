@@ -1,0 +1,165 @@
+# amaranth: UnusedElaboratable=no
+"""The DSP48 adder inside the units (issue 15, point 1's remainder): ``adder="virtex4"``.
+
+Every unit built from FP adders (the plane-sphere tester and array, the ray-triangle unit in
+all its modes, the intersection unit, the board top) takes ``adder`` beside ``multiplier``;
+``raplas-hdl verilog``/``cosim`` take it as ``--adder``. The two-DSP48 adder has latency 7
+instead of 4, so every schedule (the delay lines that meet the adders' results) moves.
+Checked here:
+
+* the stated latencies against ``fp_add_latency`` and the errors for a bad adder, in Python;
+* the option reaches every adder (DSP48 instances in the emitted Verilog);
+* co-simulation against the golden model, every output field of every case: the ray-triangle
+  unit with DSP48 adders under Icarus, a time-shared plane-sphere array with DSP48 adders and
+  multipliers under Verilator (make test); the conservative and certified ray-triangle unit
+  and the whole intersection unit under Verilator as ``full`` tests.
+"""
+
+import json
+
+import pytest
+
+from raplas_hdl.cli import main
+from raplas_hdl.fp import FP24
+from raplas_hdl.rtl.fp_add import fp_add_latency
+from raplas_hdl.rtl.plane_sphere import PlaneSphereArray, PlaneSphereTester
+from raplas_hdl.rtl.ray_triangle import RayTriangleUnit
+from raplas_hdl.sim.runner import require_simulator
+
+V4 = "virtex4"
+
+
+# -- latency and parameters ---------------------------------------------------------------
+
+def test_adder_latency_is_seven_for_virtex4():
+    assert fp_add_latency(FP24, 4, V4) == 7 and fp_add_latency(FP24, 4) == 4
+    assert fp_add_latency(FP24, 2, V4) == 7 and fp_add_latency(FP24, 2) == 2
+
+
+@pytest.mark.parametrize("mul, add, tester, array, paper, conservative", [
+    ("generic", "generic", 12, 14, 28, 32),
+    (V4, "generic", 13, 15, 30, 34),
+    ("generic", V4, 18, 20, 43, 50),      # La = 7: tester Lm + 2 La + 1, unit 5 La + 2 Lm + 2
+    (V4, V4, 19, 21, 45, 52),
+])
+def test_units_follow_the_adder_latency(mul, add, tester, array, paper, conservative):
+    t = PlaneSphereTester(FP24, multiplier=mul, adder=add)
+    a = PlaneSphereArray(FP24, rows=4, cols=4, multiplier=mul, adder=add)
+    assert (t.latency, t.adder, a.tester_latency, a.latency) == (tester, add, tester, array)
+    assert a.fifo_depth == array + 2
+    for mode, lat in (("paper", paper), ("conservative", conservative)):
+        u = RayTriangleUnit(FP24, mode=mode, multiplier=mul, adder=add)
+        assert (u.latency, u.adder, u.fifo_depth) == (lat, add, lat + 1)
+    # certified: the decision waits for the last bound (one cycle after the last operation)
+    cert = RayTriangleUnit(FP24, mode="certified", multiplier=mul, adder=add)
+    assert cert.latency == conservative + 1
+
+
+def test_bad_adder_names_the_option():
+    from raplas_hdl.rtl.intersection import IntersectionUnit
+
+    makers = (lambda a: PlaneSphereTester(FP24, adder=a),
+              lambda a: PlaneSphereArray(FP24, rows=2, cols=2, adder=a),
+              lambda a: RayTriangleUnit(FP24, adder=a),
+              lambda a: IntersectionUnit(rows=2, cols=2, adder=a))
+    for make, bad in zip(makers * 2, ("virtex7", "", None, "VIRTEX4", "xc7", 4, "dsp", " ")):
+        with pytest.raises(ValueError, match="adder must be one of generic, virtex4"):
+            make(bad)
+
+
+def test_fp32_refuses_the_dsp48_adder():
+    from raplas_hdl.fp import FP32
+
+    with pytest.raises(ValueError, match="at most 17 bits"):
+        RayTriangleUnit(FP32, adder=V4)
+
+
+def test_every_adder_is_two_dsp48():
+    from amaranth.back import verilog
+
+    from raplas_hdl.rtl.intersection import IntersectionUnit, build_intersection_unit
+
+    tester = verilog.convert(PlaneSphereTester(FP24, adder=V4), name="t", emit_src=False)
+    assert tester.count("DSP48 ") == 3 * 2            # generic multiplies stay inferred
+    both = verilog.convert(PlaneSphereTester(FP24, multiplier=V4, adder=V4), name="t",
+                           emit_src=False)
+    assert both.count("DSP48 ") == 3 * 2 + 3
+    unit = IntersectionUnit(rows=1, cols=2, adder=V4)
+    psa, rtu = unit._subunits()
+    psa._MustUse__silence = rtu._MustUse__silence = True    # built only to be inspected
+    assert (unit.adder, psa.adder, rtu.adder, unit.multiplier) == (V4, V4, V4, "generic")
+    assert (psa.tester_latency, rtu.latency) == (18, 43)
+    built = build_intersection_unit(FP24, adder=V4, rows=2)
+    built._MustUse__silence = True
+    assert built.adder == V4
+
+
+def test_cli_adder_option_and_manifest(tmp_path, capsys):
+    out = tmp_path / "t.v"
+    assert main(["verilog", "plane-sphere-tester", "--adder", V4, "--target", V4,
+                 "-o", str(out)]) == 0
+    man = json.loads(out.with_suffix(".json").read_text())
+    assert man["latency"] == 19
+    assert (man["parameters"]["adder"], man["parameters"]["target"]) == (V4, V4)
+    assert out.read_text().count("DSP48 ") >= 9
+    gen = tmp_path / "g.v"
+    assert main(["verilog", "plane-sphere-tester", "-o", str(gen)]) == 0
+    assert json.loads(gen.with_suffix(".json").read_text())["parameters"]["adder"] == "generic"
+    capsys.readouterr()
+    assert main(["verilog", "fp-mul", "--adder", V4, "-o", str(tmp_path / "x.v")]) == 2
+    assert "--adder does not apply to unit fp-mul" in capsys.readouterr().err
+    assert main(["verilog", "ray-triangle", "--adder", "xc7", "-o", str(tmp_path / "y.v")]) == 2
+    assert "adder must be one of generic, virtex4" in capsys.readouterr().err
+    assert main(["verilog", "ray-triangle", "--adder", V4, "--format", "FP32",
+                 "-o", str(tmp_path / "z.v")]) == 2
+    assert "at most 17 bits" in capsys.readouterr().err
+
+
+# -- co-simulation against the golden model ------------------------------------------------
+
+def _cosim(capsys, *argv):
+    """Run ``raplas-hdl cosim`` and return its report; it exits 0 only with no mismatch."""
+    capsys.readouterr()
+    code = main(["cosim", *argv])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    assert "mismatches: 0" in text
+    return text
+
+
+def test_ray_triangle_dsp48_adders_under_icarus(capsys):
+    """FP24 rne, paper mode, every adder on two DSP48: 300 pairs (gaps and back-pressure),
+    every output field against the model."""
+    require_simulator("icarus")
+    text = _cosim(capsys, "ray-triangle", "--sim", "icarus", "--adder", V4,
+                  "--format", "FP24/rne", "--random", "300", "--seed", "5",
+                  "--valid-density", "0.8", "--stall-density", "0.2")
+    assert "latency 43" in text and "cases: 300" in text
+
+
+def test_plane_sphere_array_dsp48_adders_under_verilator(capsys):
+    """A time-shared array (2x3 planes on 2 testers, 3 passes) with DSP48 adders and
+    multipliers: the plane slot, radius and ID delay lines must meet 19-cycle testers."""
+    require_simulator("verilator")
+    text = _cosim(capsys, "plane-sphere", "--sim", "verilator", "--rows", "2", "--cols", "3",
+                  "--testers", "2", "--adder", V4, "--target", V4, "--random", "200")
+    assert "latency 23" in text and "cases: 200" in text
+
+
+@pytest.mark.full
+@pytest.mark.parametrize("mode", ["conservative", "certified"])
+def test_ray_triangle_dsp48_adders_modes_under_verilator(capsys, mode):
+    require_simulator("verilator")
+    text = _cosim(capsys, "ray-triangle", "--sim", "verilator", "--adder", V4, "--target", V4,
+                  "--mode", mode, "--random", "3000", "--seed", "9")
+    assert "cases: 3000" in text
+
+
+@pytest.mark.full
+def test_intersection_unit_dsp48_adders_under_verilator(capsys):
+    """The whole unit with DSP48 adders and multipliers: every beat of every run and the
+    counters against the transaction-level model."""
+    require_simulator("verilator")
+    text = _cosim(capsys, "intersection-unit", "--sim", "verilator", "--adder", V4,
+                  "--target", V4, "--random", "40")
+    assert "cases: 40" in text
