@@ -100,18 +100,35 @@ def test_filelist_compiles_with_icarus(fp_add, tmp_path):
     assert out.stat().st_size > 0
 
 
+def _lint(core_dir, vlnv, cwd):
+    from raplas_hdl.sim.runner import simulator_env
+
+    res = subprocess.run([sys.executable, "-m", "fusesoc.main", "--cores-root", str(core_dir),
+                          "run", "--target", "lint", vlnv], cwd=cwd,
+                         env=simulator_env("verilator"), capture_output=True, text=True,
+                         timeout=300)
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert (cwd / "build" / vlnv.replace(":", "_") / "lint-verilator").is_dir()
+
+
 def test_fusesoc_runs_the_lint_target(fp_add, tmp_path):
     """FuseSoC (edalize) runs Verilator --lint-only on the core, found by its VLNV in a
     library folder."""
-    from raplas_hdl.sim.runner import simulator_env
+    _lint(fp_add, "raplas:hdl:fp_add:0.1.0", tmp_path)
 
-    env = simulator_env("verilator")
-    res = subprocess.run([sys.executable, "-m", "fusesoc.main", "--cores-root", str(fp_add), "run", "--target", "lint",
-                          "raplas:hdl:fp_add:0.1.0"], cwd=tmp_path, env=env,
-                         capture_output=True, text=True, timeout=300)
-    assert res.returncode == 0, res.stdout + res.stderr
-    assert "Running" in res.stdout + res.stderr
-    assert (tmp_path / "build" / "raplas_hdl_fp_add_0.1.0" / "lint-verilator").is_dir()
+
+def test_virtex4_core_lints_with_the_dsp48_model(tmp_path):
+    """With DSP48 primitives the lint target adds Yosys's DSP48 model (without it Verilator
+    fails on the unknown module); the .f lists it for simulators."""
+    out = tmp_path / "mul"
+    assert main(["fusesoc", "fp-mul", "--target", "virtex4", "-o", str(out)]) == 0
+    core = _core(out / "fp_mul.core")
+    assert "target=virtex4" in core.get_description()
+    assert [f["name"] for f in core.get_files(_flags("lint"))] == ["fp_mul.v", "dsp48_sim.v"]
+    assert [f["name"] for f in core.get_files(_flags("default"))] == ["fp_mul.v"]
+    assert "\nmodule DSP48 (" in (out / "dsp48_sim.v").read_text()
+    assert (out / "fp_mul.f").read_text() == "fp_mul.v\ndsp48_sim.v\n"
+    _lint(out, "raplas:hdl:fp_mul:0.1.0", tmp_path)
 
 
 def test_core_name_option(tmp_path):

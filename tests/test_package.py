@@ -144,8 +144,8 @@ def test_clean_venv_install(wheel, tmp_path):
     site = _run([str(py), "-c", "import raplas_hdl; print(raplas_hdl.__file__)"],
                 cwd=cwd, env=env).stdout.strip()
     assert site.startswith(str(env_dir)) and "/site-packages/" in site
-    step("verilog fp-add", exe, "verilog", "fp-add", "-o", "v/fp_add.v")
-    assert (cwd / "v" / "fp_add.json").is_file()
+    step("verilog fp-add", exe, "verilog", "fp-add", "-o", "fp_add.v")
+    assert (cwd / "fp_add.json").is_file()
     out = step("render showcase (model)", exe, "render", "--scene", "showcase", "--size",
                "32x32", "--backend", "model", "-o", "showcase.png")
     assert (cwd / "showcase.png").stat().st_size > 0, out

