@@ -241,8 +241,9 @@ class DaskExecutor(Executor):
         self.workers = max(1, sum(self.client.nthreads().values()))
         return self.client
 
-    def _check_versions(self):
-        mine = versions()
+    def _check_versions(self, mine: dict | None = None):
+        """Every worker reports :func:`versions` equal to ``mine`` (default this process's)."""
+        mine = versions() if mine is None else mine
         try:
             theirs = self.client.run(versions)
         except (ImportError, ModuleNotFoundError) as exc:

@@ -84,7 +84,7 @@ __all__ = ["BOUND_CAP", "MODEL_METRICS", "REFERENCE_METRICS", "CAPPED_METRICS", 
            "domain_bound",
            "find_meshes", "plan", "stress_metrics", "run_sweep", "missing_metrics",
            "device_figures", "DEFAULT_MESH_DIR", "DEFAULT_MAX_PAIRS", "DEFAULT_PAIR_SAMPLE",
-           "PREPASS_DIVISOR"]
+           "PREPASS_DIVISOR", "RUN_KEYS", "results_of"]
 
 #: Largest normalisation bound used (beyond it only the host's float64 shading changes).
 BOUND_CAP = 256.0
@@ -739,11 +739,131 @@ def _measure_point(p, fmt, scene, settings, spec, ref) -> dict:
     return out
 
 
-def run_sweep(spec: BenchSpec, progress=print, cost_thread: bool = True) -> dict:
+def _model_row(p, fmt, settings, bound, spec, fig) -> dict:
+    return {"grid": p["grid"], "backend": "model", "format": _label(fmt),
+            "rounding": fmt.rounding, "mode": p["mode"], "scene": _scene_name(p["scene"]),
+            "bundle": f"{p['bundle'][0]}x{p['bundle'][1]}",
+            "size": f"{settings.width}x{settings.height}", "bound": bound,
+            "shadow": f"{spec.shadow[0]}x{spec.shadow[1]}", **fig}
+
+
+def _point_line(k, n, p, fmt, row) -> str:
+    head = (f"[{k + 1:3d}/{n}] {p['grid']:7s} {_label(fmt)}/{fmt.rounding:4s} "
+            f"{p['mode']:12s} {row['scene']:18s} {row['bundle']:>5s}: ")
+    if row["capped"]:
+        return head + f"CAPPED ({row['capped_reason']}), {row['t_total']:.2f} s"
+    return (head + f"{row['t_total']:6.2f} s (CPU {row['cpu_total']:.2f})  "
+            f"{row['pairs_issued'] / 1e6:7.2f} M pairs  device "
+            f"{row['device_cycles'] / 1e6:8.2f} M cycles  t_rel "
+            f"{row['t_rel_median']:.2e}  pixels {100 * row['tri_differs']:.2f} %  "
+            f"PSNR {row['psnr']:.1f}")
+
+
+#: What this process has warmed (numba compile or cache load, outside the timings).
+_WARMED: set = set()
+
+
+def _ensure_warm(spec: BenchSpec, fmt: FPFormat | None = None, mode: str | None = None):
+    key = (tuple(map(tuple, spec.bundles)), tuple(spec.shadow), spec.threads)
+    if fmt is None:
+        if key not in _WARMED:
+            _warm_up(spec)
+            _WARMED.add(key)
+    elif key + (str(fmt), mode) not in _WARMED:
+        _warm_model(fmt, mode, spec)
+        _WARMED.add(key + (str(fmt), mode))
+
+
+def _settings_for(spec: BenchSpec, name, bundle, bound) -> RenderSettings:
+    w, h = spec.mesh_size if name not in SCENES else spec.size
+    return RenderSettings(w, h, bundle[0], bundle[1], spec.shadow[0], spec.shadow[1],
+                          bound=bound, progress=False, threads=spec.threads)
+
+
+def _run_group(spec: BenchSpec, name: str, bundle, bound: float, points, n_points: int,
+               say=None) -> dict:
+    """The float64 reference of ``(scene, bundle, bound)`` and the model points that use
+    it, in order: one task of the sweep (it runs wherever the executor puts it).
+
+    ``points`` holds ``(k, point)`` with ``k`` the point's index in the plan.
+
+    Returns
+    -------
+    dict
+        ``reference`` (its row, or None when the scene failed), ``error`` (why it failed),
+        ``points``: ``(k, row or None, note or None)``, ``lines`` (progress), ``cpu_s``.
+    """
+    c0 = time.process_time()
+    lines = []
+
+    def tell(line):
+        lines.append(line)
+        if say:
+            say(line)
+
+    out = {"reference": None, "error": None, "points": [], "lines": lines}
+    _ensure_warm(spec)
+    settings = _settings_for(spec, name, bundle, bound)
+    try:
+        scene = get_scene(name, bound=bound)
+        _, ref, wall, cpu = _timed_render(scene, lambda: make_backend("float64"), settings,
+                                          spec.repeats)
+    except (ValueError, FileNotFoundError) as exc:
+        out["error"] = str(exc)
+        out["cpu_s"] = time.process_time() - c0
+        return out
+    out["reference"] = {"grid": "reference", "backend": "float64", "format": "float64",
+                        "rounding": "-", "mode": "-", "scene": _scene_name(name),
+                        "bundle": f"{bundle[0]}x{bundle[1]}", "size": ref.stats["size"],
+                        "bound": bound, **_run_figures(ref, wall, cpu)}
+    tell(f"float64      {_scene_name(name):18s} {out['reference']['bundle']:>5s} bound "
+         f"{bound:g}: {wall:6.2f} s (CPU {cpu:.2f} s)")
+    for k, p in points:
+        fmt = _fmt(p["format"], p["rounding"])
+        _ensure_warm(spec, fmt, p["mode"])
+        try:
+            fig = _measure_point(p, fmt, scene, settings, spec, ref)
+        except ValueError as exc:
+            out["points"].append((k, None, f"point {_label(fmt)}/{fmt.rounding} {p['mode']} "
+                                           f"{name} skipped: {exc}"))
+            continue
+        row = _model_row(p, fmt, settings, bound, spec, fig)
+        out["points"].append((k, row, None))
+        tell(_point_line(k, n_points, p, fmt, row))
+    out["cpu_s"] = time.process_time() - c0
+    return out
+
+
+def _sweep_task(task):
+    """A task of the sweep on an executor: ``("stress", spec, f, r)`` or ``("group", spec,
+    name, bundle, bound, points, n_points)``."""
+    c0 = time.process_time()
+    if task[0] == "stress":
+        _, spec, f, r = task
+        return {"stress": stress_metrics(_fmt(f, r), spec.modes, spec.per_family, spec.seed),
+                "cpu_s": time.process_time() - c0}
+    return _run_group(*task[1:])
+
+
+def _stress_line(key, metrics) -> str:
+    return f"stress vs R  {key}: " + ", ".join(
+        f"{m}: FH {v['r_false_hits']} FM {v['r_false_misses']} leaks {v['r_leaks']}"
+        for m, v in metrics.items())
+
+
+def run_sweep(spec: BenchSpec, progress=print, cost_thread: bool = True,
+              executor=None) -> dict:
     """Run every point of ``spec`` and return the results (see :mod:`.report`).
 
     The hardware costs and synthesis checks (:mod:`.cost`) run in a background thread while
     the renders run (Yosys is a subprocess: on a cold cache it takes the other core).
+
+    The work is cut into tasks: the R metrics of each format and rounding, and each
+    ``(scene, bundle size, bound)`` group (its float64 reference, then its model points in
+    plan order). Without ``executor`` they run here, one after the other; with one
+    (:mod:`raplas_hdl.cluster`: a process pool or a Dask cluster) they run there and this
+    process puts the rows back in plan order: the results are the same, only the timings
+    differ (and each point's timings are those of the worker that rendered it).
 
     Returns
     -------
@@ -751,7 +871,8 @@ def run_sweep(spec: BenchSpec, progress=print, cost_thread: bool = True) -> dict
         ``spec``, ``points`` (one flat dict per point), ``stress`` (R metrics per format,
         rounding and mode), ``costs`` (per format and rounding, with the ``device`` unit),
         ``device`` (the device model's constants), ``synth_checks``, ``notes``, ``rtl`` (or
-        None), ``wall_seconds``, ``cpu_seconds``, ``started``, ``load_average``.
+        None), ``wall_seconds``, ``cpu_seconds`` (this process and the executor's tasks),
+        ``started``, ``load_average``, ``executor``.
     """
     from concurrent.futures import ThreadPoolExecutor
     from datetime import datetime, timezone
@@ -789,89 +910,63 @@ def run_sweep(spec: BenchSpec, progress=print, cost_thread: bool = True) -> dict
     pool = ThreadPoolExecutor(max_workers=1)
     fut = pool.submit(costs_job) if cost_thread else None
 
-    # R metrics, once per format, rounding (and mode)
-    stress = {}
-    for (f, r), fmt in fmts.items():
-        stress[f"{_label(fmt)}/{r}"] = stress_metrics(fmt, spec.modes, spec.per_family,
-                                                      spec.seed)
-        say(f"stress vs R  {_label(fmt)}/{r}: " + ", ".join(
-            f"{m}: FH {v['r_false_hits']} FM {v['r_false_misses']} leaks {v['r_leaks']}"
-            for m, v in stress[f"{_label(fmt)}/{r}"].items()))
+    # the groups: points sharing a scene, bundle size and bound (so a float64 reference)
+    groups = {}
+    for k, p in enumerate(points):
+        key = (p["scene"], tuple(p["bundle"]), domain_bound(fmts[(p["format"], p["rounding"])]))
+        groups.setdefault(key, []).append((k, p))
+    stress, done, task_cpu = {}, {}, 0.0
+    if executor is None:
+        for (f, r), fmt in fmts.items():
+            stress[f"{_label(fmt)}/{r}"] = stress_metrics(fmt, spec.modes, spec.per_family,
+                                                          spec.seed)
+            say(_stress_line(f"{_label(fmt)}/{r}", stress[f"{_label(fmt)}/{r}"]))
+        t0 = time.perf_counter()
+        _ensure_warm(spec)
+        say(f"warm-up (numba compile, excluded from the timings): "
+            f"{time.perf_counter() - t0:.1f} s")
+        for key, items in groups.items():
+            done[key] = _run_group(spec, *key, items, len(points), say=say)
+    else:
+        if executor.local:      # compile once here: the workers load numba's cache
+            _ensure_warm(spec)
+        tasks = [("stress", spec, f, r) for f, r in fmts]
+        tasks += [("group", spec, *key, items, len(points)) for key, items in groups.items()]
+        for task, res in executor.run(_sweep_task, tasks):
+            task_cpu += res["cpu_s"]
+            if task[0] == "stress":
+                k = f"{_label(fmts[task[2:]])}/{task[3]}"
+                stress[k] = res["stress"]
+                say(_stress_line(k, stress[k]))
+            else:
+                done[task[2:5]] = res
+                for line in res["lines"]:
+                    say(line)
+        stress = {f"{_label(fmt)}/{r}": stress[f"{_label(fmt)}/{r}"]
+                  for (f, r), fmt in fmts.items()}
 
-    scenes, refs, rows = {}, {}, []
-
-    def scene_for(name, bound):
-        key = (name, bound)
-        if key not in scenes:
-            scenes[key] = get_scene(name, bound=bound)
-        return scenes[key]
-
-    def settings_for(name, bundle, bound):
-        w, h = spec.mesh_size if name not in SCENES else spec.size
-        return RenderSettings(w, h, bundle[0], bundle[1], spec.shadow[0], spec.shadow[1],
-                              bound=bound, progress=False, threads=spec.threads)
-
-    def reference(name, bundle, bound):
-        key = (name, bundle, bound)
-        if key not in refs:
-            scene = scene_for(name, bound)
-            _, res, wall, cpu = _timed_render(scene, lambda: make_backend("float64"),
-                                              settings_for(name, bundle, bound), spec.repeats)
-            row = {"grid": "reference", "backend": "float64", "format": "float64",
-                   "rounding": "-", "mode": "-", "scene": _scene_name(name),
-                   "bundle": f"{bundle[0]}x{bundle[1]}", "size": res.stats["size"],
-                   "bound": bound, **_run_figures(res, wall, cpu)}
-            rows.append(row)
-            refs[key] = res
-            say(f"float64      {_scene_name(name):18s} {row['bundle']:>5s} bound {bound:g}: "
-                f"{wall:6.2f} s (CPU {cpu:.2f} s)")
-        return refs[key]
-
-    t0 = time.perf_counter()
-    _warm_up(spec)
-    warm = set()
-    say(f"warm-up (numba compile, excluded from the timings): {time.perf_counter() - t0:.1f} s")
-
-    bad_scenes = set()
+    # the rows in plan order, a reference before the first point that uses it
+    rows, bad_scenes, emitted = [], set(), set()
+    by_point = {k: (row, why) for res in done.values() for k, row, why in res["points"]}
     for k, p in enumerate(points):
         fmt = fmts[(p["format"], p["rounding"])]
-        bound = domain_bound(fmt)
-        name = p["scene"]
-        if name in bad_scenes:
+        key = (p["scene"], tuple(p["bundle"]), domain_bound(fmt))
+        if p["scene"] in bad_scenes:
             continue
-        try:
-            ref = reference(name, p["bundle"], bound)
-        except (ValueError, FileNotFoundError) as exc:
-            notes.append(f"scene {name} skipped: {exc}")
-            bad_scenes.add(name)
+        res = done[key]
+        if res["reference"] is None:
+            notes.append(f"scene {p['scene']} skipped: {res['error']}")
+            bad_scenes.add(p["scene"])
             continue
-        if (str(fmt), p["mode"]) not in warm:
-            _warm_model(fmt, p["mode"], spec)
-            warm.add((str(fmt), p["mode"]))
-        scene = scene_for(name, bound)
-        settings = settings_for(name, p["bundle"], bound)
-        try:
-            fig = _measure_point(p, fmt, scene, settings, spec, ref)
-        except ValueError as exc:
-            notes.append(f"point {_label(fmt)}/{fmt.rounding} {p['mode']} {name} skipped: {exc}")
+        if key not in emitted:
+            rows.append(res["reference"])
+            emitted.add(key)
+        row, why = by_point[k]
+        if row is None:
+            notes.append(why)
             continue
-        row = {"grid": p["grid"], "backend": "model", "format": _label(fmt),
-               "rounding": fmt.rounding, "mode": p["mode"], "scene": _scene_name(name),
-               "bundle": f"{p['bundle'][0]}x{p['bundle'][1]}",
-               "size": f"{settings.width}x{settings.height}", "bound": bound,
-               "shadow": f"{spec.shadow[0]}x{spec.shadow[1]}", **fig}
         row.update(stress[f"{_label(fmt)}/{fmt.rounding}"][p["mode"]])
         rows.append(row)
-        head = (f"[{k + 1:3d}/{len(points)}] {p['grid']:7s} {_label(fmt)}/{fmt.rounding:4s} "
-                f"{p['mode']:12s} {row['scene']:18s} {row['bundle']:>5s}: ")
-        if row["capped"]:
-            say(head + f"CAPPED ({row['capped_reason']}), {row['t_total']:.2f} s")
-        else:
-            say(head + f"{row['t_total']:6.2f} s (CPU {row['cpu_total']:.2f})  "
-                f"{row['pairs_issued'] / 1e6:7.2f} M pairs  device "
-                f"{row['device_cycles'] / 1e6:8.2f} M cycles  t_rel "
-                f"{row['t_rel_median']:.2e}  pixels {100 * row['tri_differs']:.2f} %  "
-                f"PSNR {row['psnr']:.1f}")
 
     rtl = None
     if spec.rtl:
@@ -900,8 +995,35 @@ def run_sweep(spec: BenchSpec, progress=print, cost_thread: bool = True) -> dict
                        "clocks_mhz": dict(dev.CLOCKS_MHZ), "clock_mhz": clock},
             "synth_checks": checks, "notes": notes, "meshes": [_scene_name(m) for m in meshes],
             "rtl": rtl, "started": started, "wall_seconds": time.perf_counter() - t_start,
-            "cpu_seconds": time.process_time() - c_start,
-            "load_average": list(os.getloadavg())}
+            "cpu_seconds": time.process_time() - c_start + task_cpu,
+            "load_average": list(os.getloadavg()),
+            "executor": "this process" if executor is None else executor.describe()}
+
+
+#: ``t_*`` keys of a point that are not times.
+TIMELESS = ("t_rel_median", "t_rel_p99", "t_pairs")
+
+
+def _is_timing(key: str) -> bool:
+    """Is ``key`` (of a point or a stress metric) a measured time, or a rate from one?"""
+    return (key.startswith(("t_", "cpu_")) and key not in TIMELESS) or key in (
+        "rays_per_s", "pairs_per_s", "prepass_seconds", "r_seconds")
+
+
+#: Keys of the results document that describe a run rather than its results.
+RUN_KEYS = ("started", "wall_seconds", "cpu_seconds", "load_average", "executor")
+
+
+def results_of(results: dict) -> dict:
+    """The results of :func:`run_sweep` without what describes the run (:data:`RUN_KEYS`)
+    and without the measured times of each point and stress metric: the same for two runs of
+    one spec, whatever executor ran them (compare their JSON: some metrics may be NaN)."""
+    out = {k: v for k, v in results.items() if k not in RUN_KEYS}
+    out["points"] = [{k: v for k, v in p.items() if not _is_timing(k)}
+                     for p in results["points"]]
+    out["stress"] = {f: {m: {k: v for k, v in d.items() if not _is_timing(k)}
+                         for m, d in modes.items()} for f, modes in results["stress"].items()}
+    return out
 
 
 _WARM_SCENE = ("cornell", 8.0)

@@ -14,7 +14,10 @@ Nothing goes to docs/ unless asked: to regenerate the committed report give
 minutes of CPU (one thread per render; estimated from measured points, most of it the
 conservative mode at FP16/FP20 on terrain and the meshes at 256x256), about an hour on 2
 shared cores; --max-pairs 100000000 makes it about 25 minutes of CPU (more points capped).
---quick takes 10-20 s with warm caches.
+--quick takes 10-20 s with warm caches. The points run in this process, one after the
+other (the timings are per core); with --scheduler ADDRESS or --dask-workers N they run on a
+Dask cluster (pip install 'raplas-hdl[cluster]'), grouped by scene, bundle size and bound:
+the same results, in less wall time.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ import os
 import shlex
 from pathlib import Path
 
+from .. import cluster
 from ..model.modes import MODES
 from . import grammar as g
 
@@ -38,7 +42,7 @@ SCENE_NAMES = ("cornell", "spheres", "terrain", "soup")
 #: The options of a sweep (none applies with --from-json).
 SWEEP_OPTIONS = ("quick", "format", "rounding", "modes", "scenes", "meshes", "bundles",
                  "size", "mesh_size", "shadow", "rtl", "per_family", "seed", "repeat",
-                 "max_pairs", "waves")
+                 "max_pairs", "waves", "scheduler", "dask_workers")
 
 
 def add_parser(subparsers):
@@ -95,6 +99,7 @@ def add_parser(subparsers):
                    help="do not run: rewrite the CSV, plots and report from a results.json")
     p.add_argument("--quiet", action="store_true", help="no per-point progress lines")
     g.add_waves_option(p, "the --rtl point's simulations")
+    cluster.add_options(p, "points (the --rtl point and the Yosys costs stay here)")
     return p
 
 
@@ -163,6 +168,7 @@ def check(args) -> None:
                       why="without --rtl (only the rtl point simulates)")
         if args.rtl:
             g.require_simulator(args.rtl)
+        cluster.check_options(args)
     args.out = args.out or (QUICK_OUT if args.quick else BENCH_OUT)
     g.check_output_dir(args.out, "--out")
     args.report = args.report or os.path.join(args.out, "bench.md")
@@ -178,8 +184,14 @@ def run(args) -> int:
         for f in write_outputs(args.results, args.out, args.report, command=command):
             print(f"  wrote {f}")
         return 0
-    with g.waves(args):
-        results = run_sweep(args.spec, progress=None if args.quiet else _say)
+    executor = cluster.executor_from_args(args) if cluster.command_options(args) else None
+    try:
+        with g.waves(args):
+            results = run_sweep(args.spec, progress=None if args.quiet else _say,
+                                executor=executor)
+    finally:
+        if executor is not None:
+            executor.close()
     files = write_outputs(results, args.out, args.report, command=command)
     print(f"bench: {len(results['points'])} points in {results['wall_seconds']:.0f} s")
     for f in files:
@@ -213,6 +225,7 @@ def _command(args) -> str:
         parts += ["--seed", str(args.seed)]
     if args.repeat and args.repeat != 1:
         parts += ["--repeat", str(args.repeat)]
+    parts += cluster.command_options(args)
     return " ".join(shlex.quote(p) for p in parts)
 
 
