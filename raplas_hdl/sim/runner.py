@@ -30,6 +30,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from ..locks import file_lock
+from ..paths import build_root
 
 __all__ = ["SIMULATORS", "SimulatorNotFound", "available_simulators", "require_simulator",
            "simulator_env", "build", "mark_ports_public", "run_cocotb", "build_plain_verilator",
@@ -40,17 +41,9 @@ _file_lock = file_lock
 
 SIMULATORS = ("icarus", "verilator")
 REPO_ROOT = Path(__file__).resolve().parents[2]
-
-
-def _build_root() -> Path:
-    """``build/sim`` of the checkout when the package runs from one (an editable install),
-    else of the working directory (an installed wheel: never inside site-packages)."""
-    if (REPO_ROOT / "pyproject.toml").is_file() and (REPO_ROOT / "raplas_hdl").is_dir():
-        return REPO_ROOT / "build" / "sim"
-    return Path.cwd().resolve() / "build" / "sim"
-
-
-BUILD_ROOT = _build_root()
+#: ``build/sim`` of the checkout, or of the working directory for an installed wheel
+#: (:func:`raplas_hdl.paths.build_root`).
+BUILD_ROOT = build_root() / "sim"
 
 #: Verilator options shared by the cocotb build and the plain C++ harness of the benchmark.
 VERILATOR_OPT = ("--timing", "-O3", "--x-assign", "fast", "--x-initial", "fast", "--noassert",

@@ -137,11 +137,12 @@ class SynthResult:
 
 
 def default_cache_dir() -> Path:
-    """``build/synth`` in the repository (or ``$RAPLAS_BUILD/synth`` when that is set)."""
+    """``$RAPLAS_BUILD/synth`` when that is set, else ``build/synth`` of the checkout, or of the
+    working directory for an installed wheel (:func:`raplas_hdl.paths.build_root`)."""
+    from ..paths import build_root
+
     root = os.environ.get("RAPLAS_BUILD")
-    if root:
-        return Path(root) / "synth"
-    return Path(__file__).resolve().parents[2] / "build" / "synth"
+    return Path(root) / "synth" if root else build_root() / "synth"
 
 
 def yosys_command() -> list[str]:
