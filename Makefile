@@ -6,7 +6,7 @@ STAMP   := $(VENV)/.installed
 JOBS    ?= 2
 PYTEST  := $(VPY) -m pytest -n $(JOBS) --durations=10
 
-.PHONY: all setup sysdeps demo verilog test test-full bench campaign synth constraints lint clean distclean
+.PHONY: all setup sysdeps demo verilog test test-full bench campaign synth constraints wheel lint clean distclean
 
 all: demo
 
@@ -50,6 +50,10 @@ constraints: setup
 
 synth: setup
 	$(VENV)/bin/raplas-hdl synth all
+
+## The sdist and the wheel, into build/dist (docs/integration.md).
+wheel: setup
+	$(VPY) -m build --no-isolation --outdir build/dist .
 
 clean:
 	rm -rf build .pytest_cache
