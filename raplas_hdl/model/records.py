@@ -50,7 +50,7 @@ from .memory_image import COUNTER_NAMES
 
 __all__ = ["Field", "Record", "Layout", "Slot", "unit_params", "words_to_ints",
            "ints_to_words", "PARAMETERS", "EVENT_COUNT_BITS", "RAY", "TRIANGLE", "PAIR",
-           "RT_RESULT", "RESULT", "ANSWER", "CMD", "COUNTERS", "PLANE", "SPHERE", "PS_RESULT", "RECORDS"]
+           "RT_RESULT", "RESULT", "ANSWER", "output_record", "CMD", "COUNTERS", "PLANE", "SPHERE", "PS_RESULT", "RECORDS"]
 
 #: Width parameters a field may name, and what they are.
 PARAMETERS = {
@@ -537,6 +537,12 @@ ANSWER = Record("answer", (
     Field("last", 1, "the run's last beat"),
     Field("empty", 1, "no ray of the run has an answer: the only beat, every other field 0"),
 ), "intersection unit result stream (o) with the on-chip reduction")
+
+def output_record(config) -> Record:
+    """The record of the intersection unit's ``o`` stream: :data:`ANSWER` for a unit built
+    with the on-chip reduction (``config.reduce``), else :data:`RESULT`."""
+    return ANSWER if getattr(config, "reduce", False) else RESULT
+
 
 #: The intersection unit's run command.
 CMD = Record("cmd", [

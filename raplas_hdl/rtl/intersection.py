@@ -22,7 +22,10 @@ The unit is its stages, components of :mod:`raplas_hdl.rtl.unit` joined by strea
    fetch, jobs -> pairs -> the pair FIFO (``fifo_depth``);
 6. :class:`~raplas_hdl.rtl.ray_triangle.RayTriangleUnit`: pairs -> results;
 7. :class:`~raplas_hdl.rtl.unit.framing.ResultFraming`: results -> beats (``last``,
-   ``empty``) -> a 4-deep output FIFO -> ``o``;
+   ``empty``) -> a 4-deep output FIFO -> ``o``; with ``UnitConfig.reduce`` the beats go
+   through :class:`~raplas_hdl.rtl.unit.reducer.Reducer` first (one answer per ray, the
+   record ``ANSWER``; its ``blocked`` rays feed back to the selector: the any-hit
+   early-out);
 8. :class:`~raplas_hdl.rtl.unit.framing.EventCounters`: the counters.
 
 Every boundary is a stall pipeline or a FIFO; no ready signal reaches further back than the
@@ -53,6 +56,7 @@ from .unit.fetch import RecordFetch
 from .unit.framing import EventCounters, ResultFraming
 from .unit.lanes import JobDistributor, ResultMerger
 from .unit.memories import MEMORIES, WriteDecoder, bind_read, bind_write, memory_geometry
+from .unit.reducer import RUN_FIFO_DEPTH, Reducer, answer_layout
 from .unit.selector import PairSelector
 from .unit.streams import job_layout, pair_layout
 
@@ -63,15 +67,19 @@ COUNTER_PORTS = COUNTERS.names
 COUNTER_BITS = COUNTERS["cycles"].width
 OUT_FIFO_DEPTH = 4
 JOB_FIFO_DEPTH = 4
+#: Width of the run numbers the reducer and the selector compare (runs between them are
+#: fewer than the reducer's run FIFO plus its stages).
+SEQ_BITS = 4
 
 
 def port_layouts(cfg: UnitConfig) -> dict:
     """The struct layouts of the ``cmd``, ``o`` (``result``) and ``counters`` ports.
 
     They are the records :data:`~raplas_hdl.model.records.CMD`,
-    :data:`~raplas_hdl.model.records.RESULT` and :data:`~raplas_hdl.model.records.COUNTERS`
-    bound to ``cfg``."""
-    return {"cmd": struct_layout(CMD, cfg), "result": struct_layout(RESULT, cfg),
+    :data:`~raplas_hdl.model.records.RESULT` (``ANSWER`` with ``cfg.reduce``) and
+    :data:`~raplas_hdl.model.records.COUNTERS` bound to ``cfg``."""
+    return {"cmd": struct_layout(CMD, cfg),
+            "result": answer_layout(cfg) if cfg.reduce else struct_layout(RESULT, cfg),
             "counters": struct_layout(COUNTERS, cfg)}
 
 
@@ -108,7 +116,8 @@ class IntersectionUnit(wiring.Component):
         (cull nothing: the masks of every sphere of the run are all ones).
     o : Out(stream.Signature(result_layout))
         Results: ``ray_id``, ``tri_id``, ``hit``, ``t``, ``u``, ``v``, ``det``, ``flags``,
-        ``last``, ``empty``.
+        ``last``, ``empty``; with ``config.reduce`` the answers (``ANSWER``: one per ray
+        with an answer, :mod:`raplas_hdl.model.reduction`).
     counters : Out(counter_layout)
         ``cycles`` and the counters of
         :data:`~raplas_hdl.model.memory_image.COUNTER_NAMES`, 32 bits each.
@@ -214,11 +223,26 @@ class IntersectionUnit(wiring.Component):
             rtu._MustUse__silence = True              # each lane builds its own
         m.submodules.writes = writes = WriteDecoder(cfg)
         m.submodules.feeder = feeder = SphereFeeder(cfg, capacity=2 * psa.latency + 8)
-        m.submodules.selector = selector = PairSelector(cfg)
+        m.submodules.selector = selector = PairSelector(cfg, seq_bits=SEQ_BITS)
 
         # the streams, in data-flow order; the back end (job FIFO, record fetch, pair FIFO,
         # ray-triangle unit) once, or in lanes between a distributor and a merger
-        wiring.connect(m, wiring.flipped(self.cmd), feeder.cmd)
+        if cfg.reduce:
+            # the reducer learns each run's bank at the command (a run is accepted when
+            # both the feeder and the reducer's run FIFO can take it)
+            m.submodules.reducer = reducer = Reducer(cfg, ram=self._ram, seq_bits=SEQ_BITS)
+            room, idle = reducer.run_bank.ready, feeder.cmd.ready
+            m.d.comb += [feeder.cmd.payload.eq(self.cmd.payload),
+                         feeder.cmd.valid.eq(self.cmd.valid & room),
+                         reducer.run_bank.payload.eq(self.cmd.payload.bank),
+                         reducer.run_bank.valid.eq(self.cmd.valid & idle),
+                         self.cmd.ready.eq(idle & room),
+                         reducer.wr_en.eq(self.wr_en), reducer.wr_addr.eq(self.wr_addr),
+                         reducer.wr_data.eq(self.wr_data),
+                         selector.blocked.eq(reducer.blocked),
+                         selector.blocked_seq.eq(reducer.seq)]
+        else:
+            wiring.connect(m, wiring.flipped(self.cmd), feeder.cmd)
         wiring.connect(m, feeder.o, psa.i)
         wiring.connect(m, psa.o, selector.i)
         if cfg.lanes == 1:
@@ -241,7 +265,11 @@ class IntersectionUnit(wiring.Component):
                                                             depth=OUT_FIFO_DEPTH)
         m.submodules.events = events = EventCounters(cfg)
         wiring.connect(m, results, framing.i)
-        wiring.connect(m, framing.o, out_fifo.w_stream)
+        if cfg.reduce:
+            wiring.connect(m, framing.o, reducer.i)
+            wiring.connect(m, reducer.o, out_fifo.w_stream)
+        else:
+            wiring.connect(m, framing.o, out_fifo.w_stream)
         wiring.connect(m, out_fifo.r_stream, wiring.flipped(self.o))
         level = pair_fifos[0].level
         for fifo in pair_fifos[1:]:
@@ -272,7 +300,7 @@ class IntersectionUnit(wiring.Component):
         # slot between cmd and o
         lane_slots = cfg.fifo_depth + rtu.latency + rtu.fifo_depth + JOB_FIFO_DEPTH
         outstanding = Signal(range(psa.fifo_depth + psa.latency + cfg.lanes * lane_slots
-                                   + OUT_FIFO_DEPTH + 16))
+                                   + OUT_FIFO_DEPTH + RUN_FIFO_DEPTH + 16))
         started = self.cmd.valid & self.cmd.ready
         finished = self.o.valid & self.o.ready & self.o.payload.last
         m.d.sync += outstanding.eq(outstanding + started - finished)

@@ -29,7 +29,7 @@ from cocotb.clock import Clock
 from cocotb.triggers import FallingEdge, RisingEdge
 
 from raplas_hdl.model.memory_image import UnitConfig
-from raplas_hdl.model.records import CMD, COUNTERS, RESULT
+from raplas_hdl.model.records import CMD, COUNTERS, output_record
 
 
 def _handle(dut, path):
@@ -48,7 +48,7 @@ class UnitTB:
         config = UnitConfig.from_params(meta["params"])
         self.cmd = CMD.bind(config)
         self.counters = COUNTERS.bind(config)
-        self.last_bit = RESULT.bind(config)["last"].offset
+        self.last_bit = output_record(config).bind(config)["last"].offset
         self.rng = random.Random(meta.get("seed", 1))
         self.ready_density = float(meta.get("ready_density", 1.0))
         self.fifo_depth = config.fifo_depth

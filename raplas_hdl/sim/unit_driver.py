@@ -25,7 +25,7 @@ import numpy as np
 from raplas_hdl.fp import model as fpm
 from raplas_hdl.model.memory_image import (BundleMemory, SceneMemory, UnitConfig, as_run,
                                            bundle_writes, run_list_writes, scene_writes)
-from raplas_hdl.model.records import COUNTERS, RESULT
+from raplas_hdl.model.records import COUNTERS, output_record
 
 __all__ = ["random_scene", "random_bundle", "unit_verilog", "run_runs", "encode_runs",
            "decode_results"]
@@ -200,7 +200,8 @@ def _contiguous(ids):
 
 def _same_geometry(a: BundleMemory, b: BundleMemory) -> bool:
     return a is b or all(np.array_equal(getattr(a, f), getattr(b, f))
-                         for f in ("plane_n", "plane_p", "ray_o", "ray_d"))
+                         for f in ("plane_n", "plane_p", "ray_o", "ray_d", "tmin", "tmax",
+                                   "exclude", "any_hit"))
 
 
 def encode_runs(config: UnitConfig, scene: SceneMemory, runs, *, overlap: bool = False,
@@ -262,8 +263,8 @@ def encode_runs(config: UnitConfig, scene: SceneMemory, runs, *, overlap: bool =
 def decode_results(config: UnitConfig, beats) -> np.ndarray:
     """Raw ``o`` payload integers -> structured array of
     :data:`~raplas_hdl.model.intersection.RESULT_DTYPE` (the record
-    :data:`~raplas_hdl.model.records.RESULT` of ``config``)."""
-    return RESULT.bind(config).unpack(beats)
+    :data:`~raplas_hdl.model.records.RESULT` of ``config``, ``ANSWER`` with ``config.reduce``)."""
+    return output_record(config).bind(config).unpack(beats)
 
 
 def run_runs(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,

@@ -3,7 +3,9 @@
 For each sphere from the plane-sphere array with a hit row, a hit column and triangles: one
 ray per cycle, rows ascending, columns ascending (priority encoders on the masks); one job
 for a marker. A disabled ray (Ray Memory's enable bit) is dropped at the enable lookup and
-its pairs are counted as skipped; the others leave as jobs.
+its pairs are counted as skipped; the others leave as jobs. With the on-chip reduction
+(``UnitConfig.reduce``) the enable lookup also drops the jobs of rays the reducer reports
+blocked (an any-hit ray with an answer: the early-out), without counting them.
 """
 
 from __future__ import annotations
@@ -53,16 +55,26 @@ class PairSelector(wiring.Component):
     count, enable : Out(read_signature(...))
         Read ports of the triangle counts (Sphere Memory field 4) and the enable bits.
     skipped : Out(count_bits)
-        Pairs of the ray dropped this cycle (0 if none).
+        Pairs of the disabled ray dropped this cycle (0 if none).
+    blocked, blocked_seq : In(rows * cols), In(seq_bits)
+        Only with ``config.reduce``: the rays of run number ``blocked_seq`` whose jobs are
+        dropped (:class:`~raplas_hdl.rtl.unit.reducer.Reducer`'s ``blocked`` and ``seq``);
+        the selector numbers its runs as the reducer does (runs whose marker it has sent)
+        and takes both a cycle late, so a change of run can never apply one run's bits to
+        another.
     """
 
-    def __init__(self, config: UnitConfig):
+    def __init__(self, config: UnitConfig, seq_bits: int = 8):
         self._cfg = config
+        self._seq_bits = int(seq_bits)
+        early = {"blocked": In(config.n_rays), "blocked_seq": In(self._seq_bits)} \
+            if config.reduce else {}
         super().__init__({
             **read_ports(config, "count", "enable"),
             "i": In(stream.Signature(mask_layout(config))),
             "o": Out(stream.Signature(job_layout(config))),
             "skipped": Out(config.count_bits),
+            **early,
         })
 
     def elaborate(self, platform):
@@ -110,7 +122,17 @@ class PairSelector(wiring.Component):
         e_v = Signal()
         job = Signal(job_layout(cfg))
         drop = Signal()
-        m.d.comb += [drop.eq(e_v & ~job.marker & ~self.enable.data),
+        disabled = e_v & ~job.marker & ~self.enable.data
+        blocked = Signal()
+        if cfg.reduce:
+            seq, blk_seq = Signal(self._seq_bits), Signal(self._seq_bits)
+            blk = Signal(cfg.n_rays)
+            m.d.sync += [blk.eq(self.blocked), blk_seq.eq(self.blocked_seq)]
+            with m.If(self.o.valid & self.o.ready & job.marker):
+                m.d.sync += seq.eq(seq + 1)
+            m.d.comb += blocked.eq(e_v & ~job.marker & (blk_seq == seq)
+                                   & blk.bit_select(job.ray, 1))
+        m.d.comb += [drop.eq(disabled | blocked),
                      adv.eq(~e_v | drop | self.o.ready),
                      self.enable.addr.eq(Mux(it.bank, ray + cfg.n_rays, ray)),
                      self.enable.en.eq(adv)]
@@ -118,5 +140,5 @@ class PairSelector(wiring.Component):
             m.d.sync += [e_v.eq(emit), job.ray.eq(ray), job.sid.eq(it.sid),
                          job.bank.eq(it.bank), job.marker.eq(it.marker), job.ntris.eq(ntris)]
         m.d.comb += [self.o.payload.eq(job), self.o.valid.eq(e_v & ~drop),
-                     self.skipped.eq(Mux(drop, job.ntris, 0))]
+                     self.skipped.eq(Mux(disabled, job.ntris, 0))]
         return m
