@@ -81,7 +81,7 @@ def add_parser(subparsers):
                           f"{MAX_CASES:,} (intersection-unit: runs, at most {MAX_RUNS:,}); "
                           "default " + ", ".join(f"{u} {n:,}" for u, n in DEFAULT_CASES.items()))
     add_unit_options(p, UNITS, only=("stages", "rows", "cols", "testers", "tris_per_sphere",
-                                     "target", "adder"))
+                                     "lanes", "target", "adder"))
     p.add_argument("--mode", type=_mode_or_driver, default=None,
                    metavar="{" + ",".join(MODES) + "}",
                    help="ray-triangle mode (default paper); ray-triangle, intersection-unit. "

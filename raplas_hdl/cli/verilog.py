@@ -26,6 +26,7 @@ UNIT_LIMITS = {
     "max_triangles": {"board-top": (1, 65536, 1024)},
     "max_spheres": {"board-top": (1, 16384, 256)},
     "fifo_depth": {"board-top": (2, 1024, 16)},
+    "lanes": {"intersection-unit": (1, 8, 1)},
 }
 CHOICE_OPTIONS = {
     "mode": (RTL_MODES, "paper",
@@ -46,6 +47,7 @@ _HELP = {
     "max_triangles": "Triangle Memory depth (larger units take minutes to emit)",
     "max_spheres": "Sphere Memory depth",
     "fifo_depth": "pair FIFO depth",
+    "lanes": "ray-triangle lanes behind the one culling array (results in the same order)",
     "mode": "ray-triangle mode",
     "target": "multiplier target: inferred multiplies (generic) or Virtex-4 DSP48 "
               "primitives (virtex4); fp-add: its shifts and add in two DSP48",

@@ -670,13 +670,15 @@ class IntersectionCosim(UnitCosim):
         from raplas_hdl.model.memory_image import UnitConfig
 
         kw = {k: self.options[k] for k in ("rows", "cols", "testers", "tris_per_sphere",
-                                           "mode") if k in self.options}
+                                           "mode", "lanes") if k in self.options}
         # the memories of tests/test_unit_harness.py's unit (one build serves both)
         self.config = UnitConfig(fmt=fmt, max_triangles=256, max_spheres=128, fifo_depth=8,
                                  **kw)
         self.header_params = {"rows": self.config.rows, "cols": self.config.cols,
                               "tris_per_sphere": self.config.tris_per_sphere,
-                              "mode": self.config.mode}
+                              "mode": self.config.mode,
+                              **({"lanes": self.config.lanes} if self.config.lanes != 1
+                                 else {})}
 
     def random(self, n, seed):
         from raplas_hdl.fp import model as fpm
