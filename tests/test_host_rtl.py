@@ -1,7 +1,9 @@
 """An RTL render equals the model render bit for bit, under both simulators.
 
-A small scene (a soup of 16 triangles on a floor): 4x4 primary bundles and 4x4 soft-shadow
-bundles (one unit configuration, so one live simulation for the whole render), with
+A small scene (a soup of 16 triangles on a floor): 2x2 primary bundles and 2x2 soft-shadow
+bundles (one unit configuration, so one live simulation for the whole render; the same
+configuration, so the same cached simulator build, as the 2x2 bundles of
+``test_render_secondary_rtl.py``), with
 early-out rounds, through the intersection unit's Verilog (the job-stream harness of
 :mod:`raplas_hdl.sim.unit_harness`: the scene loaded once, then one round of runs per pass
 and early-out batch) and through the golden model. Image, nearest triangle per pixel,
@@ -21,7 +23,7 @@ from raplas_hdl.host.scenes import get_scene
 @pytest.mark.parametrize("sim, size", [("icarus", (8, 4)), ("verilator", (32, 32))])
 def test_rtl_render_equals_model(sim, size):
     scene = get_scene("soup", n=16)
-    st = RenderSettings(*size, rows=4, cols=4, shadow_rows=4, shadow_cols=4, tris_per_sphere=4,
+    st = RenderSettings(*size, rows=2, cols=2, shadow_rows=2, shadow_cols=2, tris_per_sphere=4,
                         batch_spheres=4, chunk=4096, progress=False)
     model = render(scene, make_backend("model", FP24, mode="paper"), st)
     backend = make_backend("rtl", FP24, mode="paper", sim=sim)
