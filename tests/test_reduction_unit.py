@@ -14,13 +14,15 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from unit_amaranth_tb import simulate_runs
 from unit_scenes import scene_and_runs
 
-from raplas_hdl.fp import FP24
+from raplas_hdl.fp import FP24, FPFormat
 from raplas_hdl.fp import model as fpm
 from raplas_hdl.model.intersection import run_runs
 from raplas_hdl.model.memory_image import Run, UnitConfig, as_run
 from raplas_hdl.model.reduction import inf_pattern
+from raplas_hdl.rtl.intersection import IntersectionUnit
 from raplas_hdl.sim.unit_harness import UnitSession
 
 CFG = UnitConfig(fmt=FP24, rows=2, cols=4, testers=3, tris_per_sphere=4, max_triangles=128,
@@ -29,11 +31,11 @@ EXACT = ("spheres", "plane_tests", "pairs_skipped")
 AT_MOST = ("pairs_issued", "hits", "overflow", "underflow", "invalid")
 
 
-def windowed_runs(config, scene, runs, seed):
+def windowed_runs(config, scene, runs, seed, scale=1.0):
     rng = np.random.default_rng(seed)
     out = []
     for k, run in enumerate(map(as_run, runs)):
-        tmax = fpm.encode(rng.uniform(6.0, 20.0, config.n_rays), config.fmt)
+        tmax = fpm.encode(rng.uniform(6.0, 20.0, config.n_rays) * scale, config.fmt)
         tmax[rng.random(config.n_rays) < 0.4] = inf_pattern(config.fmt)
         used = scene.tri_lists[scene.tri_counts > 0, 0]
         bundle = replace(run.bundle, tmin=int(fpm.encode(np.array([0.05 * (k % 3)]),
@@ -85,3 +87,20 @@ def test_reduced_unit_matches_model_icarus(scene_runs):
 @pytest.mark.full
 def test_reduced_unit_matches_model_verilator(scene_runs):
     session_check("verilator", scene_runs)
+
+
+SMALL = UnitConfig(fmt=FPFormat(5, 6), rows=2, cols=3, testers=2, tris_per_sphere=3,
+                   max_triangles=32, max_spheres=24, fifo_depth=4, reduce=True)
+
+
+@pytest.mark.parametrize("lanes", [pytest.param(1, marks=pytest.mark.full), 2])
+def test_reduced_unit_amaranth(lanes):
+    """The same in Amaranth's simulator, a small format, with one and two ray-triangle
+    lanes (the reducer sees the merged stream, the early-out reaches the one selector)."""
+    cfg = replace(SMALL, lanes=lanes)
+    scene, runs = scene_and_runs(cfg, 24, seed=5, size=3.0, extent=2.0)
+    runs = windowed_runs(cfg, scene, runs, seed=lanes)
+    want = run_runs(cfg, scene, runs)
+    assert sum(int((~r["empty"].astype(bool)).sum()) for r, _ in want) > 5
+    got = simulate_runs(IntersectionUnit(cfg), scene, runs, seed=2, ready_density=0.5)
+    check(cfg, runs, got, want)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from amaranth.sim import Simulator
 
-from raplas_hdl.model.records import CMD, COUNTERS, RESULT
+from raplas_hdl.model.records import CMD, COUNTERS, output_record
 from raplas_hdl.sim.unit_driver import encode_runs
 
 
@@ -26,7 +26,7 @@ def simulate_runs(unit, scene, runs, *, seed=0, ready_density=0.7, overlap=False
     state = {"done": 0, "beats": [], "run_of_beat": [], "max_level": 0, "cycles": 0}
     counters = [None] * n_runs
     # the ports' payloads as integers, packed and unpacked with the model's records
-    cmd, result, ctrs = CMD.bind(cfg), RESULT.bind(cfg), COUNTERS.bind(cfg)
+    cmd, result, ctrs = CMD.bind(cfg), output_record(cfg).bind(cfg), COUNTERS.bind(cfg)
     last_bit = result["last"].offset
 
     async def write(ctx, addrs, datas):
