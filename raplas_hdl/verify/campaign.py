@@ -105,7 +105,8 @@ from ..fp.format import ROUNDINGS, FPFormat, parse_format
 from ..model.modes import MODES
 
 __all__ = ["VERSION", "RUN_KEYS", "MODES", "KINDS", "CampaignParams", "Shard", "plan",
-           "shard_path", "compute_shard", "write_shard", "run_shard", "run_campaign", "merge", "markdown", "culling_shard",
+           "shard_path", "compute_shard", "write_shard", "run_shard", "run_campaign", "merge",
+           "markdown", "culling_shard",
            "raytri_shard", "random_bundle", "random_spheres", "adversarial_spheres",
            "exact_line_hit", "quantile_from_hist", "results_of", "write_outputs"]
 
@@ -801,7 +802,8 @@ def markdown(doc: dict) -> str:
         lines.append(
             f"| {r['format']} | {r['mode']} | {r['cases']:,} | {r['in_domain']:,} | "
             f"{r['r_hits']:,} | {r['false_hits']:,} | {r['false_misses']:,} | "
-            f"{r.get('uncertain', 0):,} | {r['leaks']:,} / {r['edge_rays']:,} | {_e(r['t_rel_median'])} | "
+            f"{r.get('uncertain', 0):,} | {r['leaks']:,} / {r['edge_rays']:,} | "
+            f"{_e(r['t_rel_median'])} | "
             f"{_e(r['t_rel_p99'])} | {_e(r['t_rel_max'])} | {r['unguaranteed']:,} |")
     fams = list(doc["ray_triangle"][0]["families"]) if doc["ray_triangle"] else []
     for mode in MODES:
