@@ -10,10 +10,18 @@ the XC4VSX35 capacity). The DSP48 option rows also hold the FP adder with
 that fits (FP16, FP20, FP24) and rounding. Results are cached under ``build/synth/``: a
 re-run only synthesises what changed.
 
+``--capacity`` (issue 15, point 4) instead synthesises the parts of every configuration of
+:mod:`raplas_hdl.synth.capacity` (xc4v generic and virtex4, xc7 generic: the arrays with 8
+and 4 testers, the ray-triangle unit, whole units for the rest and the validation), taking
+rows already in ``docs/results/synthesis.json`` as they are, composes the table with the
+pairs per cycle of ``docs/results/throughput.json``, writes ``docs/results/capacity.json``
+and replaces the section "Capacity per configuration" of ``docs/synthesis.md``.
+
 Usage::
 
     python benchmarks/bench_synth.py [--big-formats FP24 FP16 ...] [--roundings rtz ...]
                                      [--units ...] [--no-cache]
+    python benchmarks/bench_synth.py --capacity [--cached-only] [--throughput FILE]
 """
 
 from __future__ import annotations
@@ -56,7 +64,13 @@ def main(argv=None) -> int:
                         "point 4, issue 15 point 1)")
     p.add_argument("--md", default=str(ROOT / "docs" / "synthesis.md"))
     p.add_argument("--json", default=str(ROOT / "docs" / "results" / "synthesis.json"))
+    p.add_argument("--capacity", action="store_true",
+                   help="the capacity per configuration (issue 15) only")
+    p.add_argument("--throughput", default=str(ROOT / "docs" / "results" / "throughput.json"))
+    p.add_argument("--capacity-json", default=str(ROOT / "docs" / "results" / "capacity.json"))
     args = p.parse_args(argv)
+    if args.capacity:
+        return capacity_main(args)
 
     def fmts(names, roundings):
         return [parse_format(n).with_rounding(r) for n in names for r in roundings]
@@ -84,6 +98,57 @@ def main(argv=None) -> int:
     for m in report["missing"]:
         print(f"missing: {m['unit']} ({m['reason']})")
     return 0
+
+
+def capacity_main(args) -> int:
+    """``--capacity``: gather the parts, compose, validate, write JSON and the md section."""
+    import json
+    import os
+    import resource
+
+    from raplas_hdl.cli.synth import CAPACITY_TRIANGLES
+    from raplas_hdl.fp import FP24
+    from raplas_hdl.synth.capacity import (build_capacity, gather, load_throughput,
+                                           render_capacity)
+
+    t0, c0 = time.monotonic(), time.process_time()
+    earlier = json.loads(Path(args.json).read_text())["rows"] if Path(args.json).exists() else []
+    fmt = FP24
+    found = gather(fmt, rows=earlier, cached_only=args.cached_only,
+                   progress=lambda line: print(line, flush=True))
+    tp = load_throughput(args.throughput)
+    cap = build_capacity(fmt, found["rows"], tp, CAPACITY_TRIANGLES)
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cap.update(missing=found["missing"], throughput_file=os.path.relpath(args.throughput, ROOT),
+               command="python benchmarks/bench_synth.py --capacity"
+                       + (" --cached-only" if args.cached_only else ""),
+               wall_seconds=round(time.monotonic() - t0, 1),
+               cpu_seconds=round(time.process_time() - c0 + children.ru_utime
+                                 + children.ru_stime, 1),
+               yosys_seconds={f"{u} {dict(o)} {f}": r.get("seconds")
+                              for (u, o, f), r in found["rows"].items()})
+    Path(args.capacity_json).write_text(json.dumps(cap, indent=1, sort_keys=True,
+                                                   default=str) + "\n")
+    lines = render_capacity(cap, worst_path=WORST_PATH_CELLS)
+    md = Path(args.md)
+    text = md.read_text()
+    head = "## Capacity per configuration (issue 15)"
+    if head in text:
+        before, rest = text.split(head, 1)
+        i = rest.find("\n## ")
+        after = rest[i + 1:] if i >= 0 else ""
+    else:
+        before, after = text.rstrip("\n") + "\n\n", ""
+    md.write_text(before + "\n".join(lines) + "\n" + ("\n" + after if after else ""))
+    print(f"wrote {args.capacity_json} and {md}")
+    for m in found["missing"]:
+        print(f"missing: {m}")
+    return 0
+
+
+#: Today's worst unit at FP24 (the longest combinational path, cells): the ray-triangle and
+#: intersection units in rtz (docs/synthesis.md, Units).
+WORST_PATH_CELLS = 40
 
 
 if __name__ == "__main__":

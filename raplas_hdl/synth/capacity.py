@@ -252,7 +252,10 @@ def needed_runs(families=("xc4v", "xc7")) -> list[tuple]:
             for testers in (8, 4):
                 runs.append(("plane-sphere", {"rows": 4, "cols": 4, "testers": testers, **t},
                              family))
-        runs.append(("intersection-unit", {"rows": 4, "cols": 4, "testers": 8}, family))
+        # the whole unit behind the rest: the 8-tester generic one on xc4v (the paper's
+        # array), the cheaper 4-tester one on xc7
+        runs.append(("intersection-unit",
+                     {"rows": 4, "cols": 4, "testers": 8 if family == "xc4v" else 4}, family))
     runs.append(("intersection-unit", {"rows": 4, "cols": 4, "testers": 4,
                                        **_targets("virtex4")}, "xc4v"))
     return runs
@@ -338,3 +341,93 @@ def build_capacity(fmt, found: dict, throughput_rows, n_triangles: dict) -> dict
 def _brief(row: dict) -> dict:
     return {k: row[k] for k in ("dsp48", "slices_est", "luts", "ffs", "bram", "path_cells",
                                 "path_levels", "latency", "seconds") if k in row}
+
+
+# -- markdown ---------------------------------------------------------------------------
+
+def _lim(v):
+    return "-" if v is None else str(v)
+
+
+def _mps(v):
+    return "-" if v is None else f"{v / 1e6:.0f} M"
+
+
+def best(table, device: str = "XC4VSX35", label: str | None = None, margin: str = ""):
+    """The row of ``device`` with the most pairs per second (N = ``label``)."""
+    rows = [r for r in table if r["device"] == device]
+    if not rows:
+        return None
+    label = label or next(iter(rows[0]["bram18"]))
+    key = f"pairs_per_s{margin}[{label}]"
+    rows = [r for r in rows if r.get(key) is not None]
+    return max(rows, key=lambda r: (r[key], -r["slices_est"])) if rows else None
+
+
+def render_capacity(cap: dict, *, worst_path: int | None = None) -> list[str]:
+    """The capacity section (markdown lines) of :func:`build_capacity`'s result."""
+    table = cap["table"]
+    labels = list(cap["n_triangles"])
+    first = labels[0]
+    out = ["## Capacity per configuration (issue 15)", ""]
+    devs = ", ".join(f"{name} ({d['family']}: {d['dsp48']} DSP, {d['slices']:,} slices, "
+                     f"{d['bram18']} x 18 Kbit BRAM)" for name, d in cap["devices"].items())
+    out += [f"Devices: {devs}. Format {cap['format']}; 4x4 bundles. **target** `virtex4` is "
+            "`--target virtex4 --adder virtex4` (significand multiplies and FP adders in "
+            "Virtex-4 DSP48 primitives); the 7-series rows are the generic RTL (Yosys maps "
+            "the multiplies to DSP48E1; the two-DSP48 adder is a Virtex-4 primitive design). "
+            "**t** = testers of the array, **K** = ray-triangle lanes behind it. One unit = "
+            "array + K x ray-triangle + the rest (see the method below). BRAM in 18 Kbit "
+            "blocks for Triangle Memory of N triangles ("
+            + ", ".join(f"{k}: N = {v:,}" for k, v in cap["n_triangles"].items())
+            + "). Each limit is the device's amount over the unit's need; **units** is the "
+            "minimum (x1.25: with the slice estimate raised 25 % for packing). "
+            f"**pairs/s** = units x the modelled pairs per cycle of (t, K) on the bench "
+            f"scenes (the minimum over the scenes) x {cap['clock_mhz']:g} MHz; the paper: "
+            f"{cap['paper_pairs_per_second'] / 1e6:.0f} M pairs/s (one unit, 1 pair per "
+            "clock). **path**: the longest combinational path (cells) of the unit's parts.",
+            ""]
+    hdr = ["device", "target", "t", "K", "DSP48", "slices~", "x1.25"]
+    hdr += [f"BRAM ({k})" for k in labels]
+    hdr += ["DSP limit", "slice limit", "x1.25 limit"] + [f"BRAM limit ({k})" for k in labels]
+    hdr += [f"units ({first})", f"units x1.25 ({first})", "pairs/cycle (scenes)",
+            "pairs/s", "pairs/s x1.25", "vs paper", "vs paper x1.25", "path"]
+    out += ["| " + " | ".join(hdr) + " |", "|" + "---|" * len(hdr)]
+    paper = cap["paper_pairs_per_second"]
+    for r in table:
+        ppc = r["pairs_per_cycle"]
+        ppc_s = (f"{min(ppc.values()):.2f}-{max(ppc.values()):.2f}" if ppc else "n/a")
+        p, p125 = r[f"pairs_per_s[{first}]"], r[f"pairs_per_s_x1.25[{first}]"]
+        ratio = "-" if p is None else f"{p / paper:.2f}x"
+        ratio125 = "-" if p125 is None else f"{p125 / paper:.2f}x"
+        path = str(r["path_cells"]) + (" (!)" if worst_path and r["path_cells"] > worst_path
+                                       else "")
+        cells = [r["device"], r["target"], r["testers"], r["lanes"], r["dsp48"],
+                 r["slices_est"], r["slices_x1.25"]]
+        cells += [r["bram18"][k] for k in labels]
+        cells += [_lim(r["limits"]["dsp48"]), _lim(r["limits"]["slices"]),
+                  _lim(r["limits"]["slices_x1.25"])]
+        cells += [_lim(r["bram_limits"][k]) for k in labels]
+        cells += [f"**{r[f'units[{first}]']}**", r[f"units_x1.25[{first}]"], ppc_s,
+                  _mps(p), _mps(p125), ratio, ratio125, path]
+        out.append("| " + " | ".join(str(c) for c in cells) + " |")
+    out.append("")
+    for dev in cap["devices"]:
+        b, b125 = best(table, dev, first), best(table, dev, first, "_x1.25")
+        if b is None:
+            continue
+        p, p125 = b[f"pairs_per_s[{first}]"], b125[f"pairs_per_s_x1.25[{first}]"]
+        out.append(
+            f"* **{dev}**: best by the estimate {b['target']} t{b['testers']} K{b['lanes']}, "
+            f"{b[f'units[{first}]']} unit(s), {p / 1e6:.0f} M pairs/s = **{p / paper:.2f}x** "
+            f"the paper; with the x1.25 packing margin {b125['target']} t{b125['testers']} "
+            f"K{b125['lanes']}, {b125[f'units_x1.25[{first}]']} unit(s), {p125 / 1e6:.0f} M "
+            f"pairs/s = **{p125 / paper:.2f}x**.")
+    for label in labels[1:]:
+        fits = [r for r in table if r[f"units[{label}]"] > 0]
+        if not fits:
+            need = min(r["bram18"][label] for r in table)
+            out.append(f"* N = {cap['n_triangles'][label]:,} ({label}) fits on no device: its "
+                       f"memories alone take {need:,} block RAMs; a scene that large needs "
+                       "Triangle Memory outside the FPGA.")
+    return out

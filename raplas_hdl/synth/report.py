@@ -200,7 +200,7 @@ def _fmt_label(fmt: FPFormat) -> str:
 
 def build_report(units, formats, *, options: dict | None = None, cache_dir=None,
                  use_cache: bool = True, cached_only: bool = False, progress=None,
-                 skip_missing: bool = True) -> dict:
+                 skip_missing: bool = True, family: str = "xc4v") -> dict:
     """Synthesise ``units`` x ``formats`` and assemble the report.
 
     Parameters
@@ -217,6 +217,8 @@ def build_report(units, formats, *, options: dict | None = None, cache_dir=None,
         Use cached results only; rows without one are recorded as missing.
     skip_missing : bool
         Record a unit whose module cannot be imported yet as missing instead of raising.
+    family : {"xc4v", "xc7"}
+        ``synth_xilinx -family``.
 
     Returns
     -------
@@ -231,7 +233,7 @@ def build_report(units, formats, *, options: dict | None = None, cache_dir=None,
         for fmt in fmts:
             try:
                 row = synth_row(name, fmt, (options or {}).get(name), cache_dir=cache_dir,
-                                use_cache=use_cache, cached_only=cached_only)
+                                use_cache=use_cache, cached_only=cached_only, family=family)
             except LookupError as exc:
                 missing.append({"unit": name, "format": str(fmt), "reason": str(exc)})
                 if progress:
