@@ -190,6 +190,17 @@ class IntersectionUnit(wiring.Component):
         """None: the unit's delay depends on the scene (see the stage list)."""
         return None
 
+    def cycle_timing(self):
+        """The constants of the cycle model of this unit
+        (:class:`raplas_hdl.model.throughput.Timing`): the array's and the ray-triangle
+        unit's latencies and depths."""
+        from ..model.throughput import Timing
+
+        psa, rtu = self._subunits()
+        psa._MustUse__silence = rtu._MustUse__silence = True   # built only to be inspected
+        return Timing.of(self._cfg, psa.latency, psa.fifo_depth, rtu.latency,
+                         rtu.fifo_depth)
+
     # ------------------------------------------------------------------------------------
     def _subunits(self):
         """The plane-sphere array and the (first lane's) ray-triangle unit."""
