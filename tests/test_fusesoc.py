@@ -151,3 +151,18 @@ def test_bad_input_is_one_line(argv, message, tmp_path, monkeypatch, capsys):
     assert len(err) == 1 and err[0].startswith("raplas-hdl fusesoc: error:"), err
     assert message in err[0]
     assert not (tmp_path / "x").exists()
+
+
+def test_help_is_plain_and_reads_the_format(capsys):
+    from raplas_hdl.cli import build_parser
+    from raplas_hdl.cli import grammar as g
+    from raplas_hdl.fp import FP24
+
+    with pytest.raises(SystemExit) as exc:
+        main(["fusesoc", "--help"])
+    assert exc.value.code == 0
+    text = capsys.readouterr().out
+    assert "``" not in text and ":mod:" not in text and "(default None)" not in text
+    assert "--core-name VLNV" in text and "--target {generic,virtex4}" in text
+    args = build_parser().parse_args(["fusesoc", "fp-add", "-o", "d", "--format", "e7m16-rne"])
+    assert g.format_from_args(args) == FP24.with_rounding("rne")

