@@ -1,0 +1,145 @@
+"""On-chip reduction: result traffic with and without it, and pairs the any-hit early-out
+saves, on real render passes through the FP24 golden model.
+
+Each scene is rendered through the model backend (:func:`raplas_hdl.host.reduction_passes.
+recorded_runs`): every pass the renderer hands the unit (primary tiles, and the soft-shadow
+bundles of every early-out round the host already runs) is kept with its window. Each pass's
+runs then go through the model's ``run_runs`` twice, without and with
+``UnitConfig.reduce``:
+
+- without: one ``RESULT`` beat per issued pair (one ``empty`` beat for a run without pairs);
+- with: one ``ANSWER`` beat per ray with an answer (one ``empty`` beat for a run without);
+
+bits = beats x the record's width for the pass's unit configuration. The reduced answers are
+checked against the host's choice on the unreduced stream, ray for ray (``host_choice``),
+and the count of rays where they differ is reported (expected 0). Early-out: pairs of an
+any-hit run issued after their ray's first accepted hit (``early_out_saving``, the saving of
+an early-out without latency; the RTL saves at most this, ``tests/test_reduction_unit.py``).
+
+Usage::
+
+    python benchmarks/bench_reduction.py [--scenes cornell,stanford-bunny,showcase]
+        [--size 128x128] [--shadow 3x3] [--out docs/results/reduction.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from raplas_hdl.host.reduction_passes import host_choice, pass_runs, recorded_runs  # noqa: E402
+from raplas_hdl.host.render import RenderSettings  # noqa: E402
+from raplas_hdl.model.intersection import run_runs  # noqa: E402
+from raplas_hdl.model.records import ANSWER, RESULT  # noqa: E402
+from raplas_hdl.model.reduction import early_out_saving  # noqa: E402
+
+
+def _pair(text):
+    a, b = text.lower().split("x")
+    return int(a), int(b)
+
+
+def measure(scene: str, size, shadow, rows: int, cols: int) -> dict:
+    t0, c0 = time.perf_counter(), time.process_time()
+    settings = RenderSettings(width=size[0], height=size[1], rows=rows, cols=cols,
+                              shadow_rows=shadow[0], shadow_cols=shadow[1], progress=False)
+    backend, passes = recorded_runs(scene, settings)
+    out = {}
+    for kind in ("primary", "shadow"):
+        out[kind] = dict.fromkeys(("runs", "rays", "pairs", "beats", "bits", "answers",
+                                   "answer_beats", "answer_bits", "early_out_pairs",
+                                   "differs"), 0)
+    for rec in passes:
+        row = out["shadow" if rec.any_hit else "primary"]
+        cfg = backend.config(rec.batch.rows, rec.batch.cols)
+        red_cfg = replace(cfg, reduce=True)
+        runs = pass_runs(backend, rec, cfg)
+        plain = run_runs(cfg, backend.scene_memory, runs)
+        reduced = run_runs(red_cfg, backend.scene_memory, runs)
+        rw, aw = RESULT.bind(cfg).size, ANSWER.bind(red_cfg).size
+        for run, (beats, ctr), (ans, _) in zip(runs, plain, reduced):
+            row["runs"] += 1
+            row["rays"] += int(run.bundle.enable.sum())
+            row["pairs"] += ctr["pairs_issued"]
+            row["beats"] += beats.size
+            row["bits"] += beats.size * rw
+            row["answer_beats"] += ans.size
+            row["answer_bits"] += ans.size * aw
+            got = np.full(cfg.n_rays, -1)
+            if not ans["empty"][0]:
+                got[ans["ray_id"].astype(np.int64)] = ans["tri_id"]
+                row["answers"] += ans.size
+            tri, _ = host_choice(cfg, beats, run.bundle)
+            row["differs"] += int(np.count_nonzero((got >= 0) != (tri >= 0)) if rec.any_hit
+                                  else np.count_nonzero(got != tri))
+            row["early_out_pairs"] += early_out_saving(red_cfg, beats, run.bundle)
+        row["beat_bits"], row["answer_beat_bits"] = rw, aw
+    for row in out.values():
+        row["result_bits_per_answer_bit"] = row["bits"] / max(1, row["answer_bits"])
+        row["traffic_saved"] = 1.0 - row["answer_bits"] / max(1, row["bits"])
+        row["early_out_fraction"] = row["early_out_pairs"] / max(1, row["pairs"])
+    out["wall_s"] = time.perf_counter() - t0
+    out["cpu_s"] = time.process_time() - c0
+    return out
+
+
+def table(results: dict) -> str:
+    head = ("| scene | pass | runs | pairs | result beats | bits | answer beats | bits | "
+            "traffic saved | early-out pairs saved | answers differing from host |")
+    lines = [head, "|" + "---|" * 11]
+    for scene, res in results.items():
+        for kind in ("primary", "shadow"):
+            r = res[kind]
+            lines.append(
+                f"| {scene} | {kind} | {r['runs']:,} | {r['pairs']:,} | {r['beats']:,} | "
+                f"{r['bits'] / 8e6:.2f} MB | {r['answer_beats']:,} | "
+                f"{r['answer_bits'] / 8e6:.3f} MB | {100 * r['traffic_saved']:.1f} % | "
+                f"{r['early_out_pairs']:,} ({100 * r['early_out_fraction']:.1f} %) | "
+                f"{r['differs']} |")
+    return "\n".join(lines)
+
+
+def save(doc: dict, path: Path) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(doc, indent=1) + "\n")
+    return path
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--scenes", default="cornell,stanford-bunny,showcase")
+    ap.add_argument("--size", type=_pair, default=(128, 128))
+    ap.add_argument("--shadow", type=_pair, default=(3, 3))
+    ap.add_argument("--tile", type=_pair, default=(8, 8))
+    ap.add_argument("--out", default="build/reduction/reduction.json")
+    args = ap.parse_args(argv)
+    results = {}
+    for scene in args.scenes.split(","):
+        results[scene] = measure(scene, args.size, args.shadow, *args.tile)
+        print(f"{scene}: {results[scene]['wall_s']:.1f} s wall, "
+              f"{results[scene]['cpu_s']:.1f} s CPU", flush=True)
+    print(table(results))
+    doc = {"what": "result traffic with and without the on-chip reduction, FP24 model, paper "
+                   "mode; early-out pairs: the zero-latency bound",
+           "size": list(args.size), "shadow": list(args.shadow), "tile": list(args.tile),
+           "machine": {"cpus": os.cpu_count(), "load": list(os.getloadavg()),
+                       "python": platform.python_version()},
+           "scenes": results}
+    print(f"wrote {save(doc, Path(args.out))}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
