@@ -22,7 +22,7 @@ from . import verilog
 
 #: Units whose core carries the board constraints.
 BOARD_UNITS = ("board-top",)
-#: The simulation model of the DSP48 primitive (``--target virtex4``).
+#: The simulation model of the DSP48 primitive (virtex4 options: ``--target``, ``--adder``).
 DSP48_MODEL = "dsp48_sim.v"
 
 
