@@ -13,16 +13,17 @@ Stages (a pipeline that moves as a whole, ``en``, while no run's answers are bei
    not zero, ``tmin * |det| <= t' * sign(det) <= tmax * |det|`` and ``tri_id + 1 !=
    exclude`` (``tmin``, ``exclude`` and the any-hit bit per bank, snooped from the WINDOW
    region). The products are exact: :func:`product_key` multiplies the significands (an
-   integer multiply, one DSP48 per 17-bit significand pair at FP24) and packs sign,
-   exponent and normalised product into a signed integer that orders as the product's
-   value. Read the ray's current answer (a RAM of ``rows * cols`` answers).
+   integer multiply, one DSP48 per 17-bit significand pair at FP24) and give the sign and a
+   magnitude key (exponent sum above the normalised product) that orders as the product's
+   value (:func:`key_lt`). Read the ray's current answer (a RAM of ``rows * cols``
+   answers).
 3. **fold**: the ray's answer (the RAM's word, or the one written in the cycle the read was
    made) and a *valid* bit per ray (registers). A candidate replaces the answer when the
    ray has none or, in a nearest-hit bundle, ``t'_n * |det_a| < t'_a * |det_n|`` (signs of
    ``det`` on the numerators), equal ratios going to the lower triangle ID. On the run's
    ``last`` (or ``empty``) beat the unit stops taking beats and
-4. **sends** the answers: the lowest ray with an answer each cycle (a priority encoder on the
-   valid bits, the answer RAM read a cycle ahead), the last marked ``last``, or one
+4. **sends** the answers: the lowest ray with an answer each cycle (a tree of priority
+   encoders on the valid bits, :func:`lowest_set_tree`; the answer RAM read a cycle ahead), the last marked ``last``, or one
    ``empty`` beat; then clears the valid bits and counts the run (``seq``).
 
 Early-out: in an any-hit bundle a ray with an answer is *blocked*; ``blocked`` is the
@@ -47,7 +48,8 @@ from ..records import struct_layout
 from .selector import lowest_set
 from .streams import result_layout
 
-__all__ = ["Reducer", "answer_layout", "product_key", "RUN_FIFO_DEPTH", "SEQ_BITS"]
+__all__ = ["Reducer", "answer_layout", "product_key", "key_lt", "key_eq", "RUN_FIFO_DEPTH",
+           "SEQ_BITS"]
 
 #: Runs accepted but not yet reduced that the run-bank FIFO holds (the top stalls ``cmd``
 #: when it is full).
@@ -60,10 +62,11 @@ def answer_layout(cfg: UnitConfig) -> data.StructLayout:
     return struct_layout(ANSWER, cfg)
 
 
-def product_key(m: Module, x, y, sign, fmt, name: str) -> Signal:
-    """A signed integer that orders as ``(-1)**sign * |x| * |y|`` (``x``, ``y`` finite
-    patterns of ``fmt``; zero when either is zero): the exponent sum and the normalised
-    significand product, negated for a negative sign."""
+def product_key(m: Module, x, y, sign, fmt, name: str):
+    """``(s, mag)``: the sign and the magnitude key of ``(-1)**sign * |x| * |y|`` (``x``,
+    ``y`` finite patterns of ``fmt``): ``mag`` is the exponent sum above the normalised
+    significand product (it orders as ``|x| * |y|``), 0 when either is zero, and ``s`` is 0
+    for a zero. :func:`key_lt` and :func:`key_eq` compare two keys."""
     M, E = fmt.man_bits, fmt.exp_bits
     ex, ey = x[M:M + E], y[M:M + E]
     p = Signal(2 * M + 2, name=f"{name}_p")
@@ -72,11 +75,42 @@ def product_key(m: Module, x, y, sign, fmt, name: str) -> Signal:
     sig = Signal(2 * M + 1, name=f"{name}_sig")      # the product without its leading one
     m.d.comb += sig.eq(Mux(top, p[:2 * M + 1], Cat(0, p[:2 * M])))
     mag = Signal(2 * M + 1 + E + 2, name=f"{name}_mag")
+    s = Signal(name=f"{name}_s")
     zero = (ex == 0) | (ey == 0)
-    m.d.comb += mag.eq(Mux(zero, 0, Cat(sig, ex + ey + top)))
-    key = Signal(range(-(1 << len(mag)), 1 << len(mag)), name=name)
-    m.d.comb += key.eq(Mux(sign, -mag, mag))
-    return key
+    m.d.comb += [mag.eq(Mux(zero, 0, Cat(sig, ex + ey + top))), s.eq(sign & ~zero)]
+    return s, mag
+
+
+def key_lt(a, b):
+    """``a < b`` for two :func:`product_key` keys (two magnitude compares side by side, no
+    negation in series)."""
+    (sa, ma), (sb, mb) = a, b
+    return (sa & ~sb) | (~sa & ~sb & (ma < mb)) | (sa & sb & (mb < ma))
+
+
+def key_eq(a, b):
+    return (a[0] == b[0]) & (a[1] == b[1])
+
+
+def lowest_set_tree(m: Module, mask, n: int, name: str):
+    """(index, only) of the lowest set bit of ``mask`` (``n`` bits): ``only`` when it is the
+    only one. Above 16 bits a tree of 8-bit priority encoders (the group, then the bit in
+    it), so no carry chain is longer than 16."""
+    if n <= 16:
+        index, hot = lowest_set(m, mask, n, name)
+        return index, (mask & ~hot) == 0
+    g = 8
+    ng = -(-n // g)
+    padded = Cat(mask, Const(0, ng * g - n))
+    groups = Signal(ng, name=f"{name}_groups")
+    m.d.comb += groups.eq(Cat(*[padded[k * g:(k + 1) * g].any() for k in range(ng)]))
+    gi, g_only = lowest_set_tree(m, groups, ng, f"{name}_g")
+    sub = Signal(g, name=f"{name}_sub")
+    m.d.comb += sub.eq(padded.word_select(gi, g))
+    si, s_hot = lowest_set(m, sub, g, f"{name}_s")
+    index = Signal(max(1, (n - 1).bit_length()), name=f"{name}_index")
+    m.d.comb += index.eq(Cat(si, gi))
+    return index, g_only & ((sub & ~s_hot) == 0)
 
 
 class Reducer(wiring.Component):
@@ -196,7 +230,7 @@ class Reducer(wiring.Component):
         ok = Signal()
         m.d.comb += ok.eq(a.hit & ~a.empty & (exp_of(a.t) != e_max)
                           & (exp_of(a.det) != e_max) & (exp_of(a.det) != 0)
-                          & (k_lo <= k_num) & (tmax_inf | (k_num <= k_hi))
+                          & ~key_lt(k_num, k_lo) & (tmax_inf | ~key_lt(k_hi, k_num))
                           & (excl[a.bank] != a.tri_id + 1))
         ans_ram = SyncRAM(ans.size, R, impl=self._ram, name="answer_mem")
         aw = ans_ram.write_port()
@@ -221,8 +255,8 @@ class Reducer(wiring.Component):
         k_new = product_key(m, b.t, cur.det, sign_of(b.t) ^ sign_of(b.det), fmt, "k_new")
         k_cur = product_key(m, cur.t, b.det, sign_of(cur.t) ^ sign_of(cur.det), fmt, "k_cur")
         better = Signal()
-        m.d.comb += better.eq(~has | (~b_any & ((k_new < k_cur)
-                                                | ((k_new == k_cur)
+        m.d.comb += better.eq(~has | (~b_any & (key_lt(k_new, k_cur)
+                                                | (key_eq(k_new, k_cur)
                                                    & (b.tri_id < cur.tri_id)))))
         write = Signal()
         m.d.comb += [write.eq(en & b_v & b_ok & better),
@@ -242,7 +276,7 @@ class Reducer(wiring.Component):
         o_last = Signal()
         o_empty = Signal()
         o_ray = Signal(cfg.ray_id_bits)
-        idx, hot = lowest_set(m, valid, R, "next")
+        idx, only = lowest_set_tree(m, valid, R, "next")
         step = scanning & (~o_v | self.o.ready)
         m.d.comb += [ar.addr.eq(Mux(scanning, idx, a.ray)),
                      ar.en.eq(Mux(scanning, step & (valid != 0), en))]
@@ -251,8 +285,8 @@ class Reducer(wiring.Component):
                 m.d.sync += [scanning.eq(0), o_v.eq(0), cur_any.eq(0),
                              self.seq.eq(self.seq + 1)]
             with m.Elif(valid != 0):
-                m.d.sync += [o_v.eq(1), o_ray.eq(idx), o_empty.eq(0),
-                             o_last.eq((valid & ~hot) == 0), valid.eq(valid & ~hot)]
+                m.d.sync += [o_v.eq(1), o_ray.eq(idx), o_empty.eq(0), o_last.eq(only),
+                             valid.bit_select(idx, 1).eq(0)]
             with m.Else():
                 m.d.sync += [o_v.eq(1), o_empty.eq(1), o_last.eq(1)]
         out = self.o.payload
