@@ -204,7 +204,7 @@ def capacity_table(parts: dict, throughput_rows, n_triangles: dict, fmt, *,
         cal = (bram_calibration or {}).get(cfg.family, 0)
         bram = {label: bram_blocks(unit_config(fmt, n, cfg.testers), cfg.lanes)["total"] + cal
                 for label, n in n_triangles.items()}
-        path = max(array["path_cells"], rtu["path_cells"], p.get("unit_path_cells", 0))
+        path = max(array["path_cells"], rtu["path_cells"])
         ppc = pairs_per_cycle(throughput_rows, cfg.testers, cfg.lanes)
         out.append(capacity_row(cfg, need, bram, ppc, path))
     return out
@@ -256,8 +256,11 @@ def needed_runs(families=("xc4v", "xc7")) -> list[tuple]:
         # array), the cheaper 4-tester one on xc7
         runs.append(("intersection-unit",
                      {"rows": 4, "cols": 4, "testers": 8 if family == "xc4v" else 4}, family))
-    runs.append(("intersection-unit", {"rows": 4, "cols": 4, "testers": 4,
-                                       **_targets("virtex4")}, "xc4v"))
+    # validation of the composition: other targets, testers and K than the rest's unit
+    for lanes in (1, 2):
+        runs.append(("intersection-unit", {"rows": 4, "cols": 4, "testers": 4,
+                                           **({"lanes": lanes} if lanes > 1 else {}),
+                                           **_targets("virtex4")}, "xc4v"))
     return runs
 
 
@@ -317,7 +320,10 @@ def build_capacity(fmt, found: dict, throughput_rows, n_triangles: dict) -> dict
             cal[fam] = r["bram"] - model
             continue
         pred = compose(arr, rtu, rests[fam], lanes)
-        validation.append({"family": fam, "options": opts, **validate(pred, r)})
+        bram = bram_blocks(unit_config(fmt, 1024, opts["testers"]), lanes)["total"] + cal[fam]
+        validation.append({"family": fam, "options": opts, **validate(pred, r),
+                           "bram": {"predicted": bram, "actual": r["bram"]},
+                           "path_cells": r["path_cells"]})
     for fam, rest in rests.items():
         for target in ("generic", "virtex4"):
             t = _targets(target)
@@ -385,7 +391,8 @@ def render_capacity(cap: dict, *, worst_path: int | None = None) -> list[str]:
             f"**pairs/s** = units x the modelled pairs per cycle of (t, K) on the bench "
             f"scenes (the minimum over the scenes) x {cap['clock_mhz']:g} MHz; the paper: "
             f"{cap['paper_pairs_per_second'] / 1e6:.0f} M pairs/s (one unit, 1 pair per "
-            "clock). **path**: the longest combinational path (cells) of the unit's parts.",
+            "clock). **path**: the longest combinational path (cells) of the array and the "
+            "ray-triangle unit (the whole units' paths are in the validation table).",
             ""]
     hdr = ["device", "target", "t", "K", "DSP48", "slices~", "x1.25"]
     hdr += [f"BRAM ({k})" for k in labels]
@@ -423,6 +430,7 @@ def render_capacity(cap: dict, *, worst_path: int | None = None) -> list[str]:
             f"the paper; with the x1.25 packing margin {b125['target']} t{b125['testers']} "
             f"K{b125['lanes']}, {b125[f'units_x1.25[{first}]']} unit(s), {p125 / 1e6:.0f} M "
             f"pairs/s = **{p125 / paper:.2f}x**.")
+    out += _render_method(cap)
     for label in labels[1:]:
         fits = [r for r in table if r[f"units[{label}]"] > 0]
         if not fits:
@@ -430,4 +438,50 @@ def render_capacity(cap: dict, *, worst_path: int | None = None) -> list[str]:
             out.append(f"* N = {cap['n_triangles'][label]:,} ({label}) fits on no device: its "
                        f"memories alone take {need:,} block RAMs; a scene that large needs "
                        "Triangle Memory outside the FPGA.")
+    return out
+
+
+def _render_method(cap: dict) -> list[str]:
+    out = ["", "### Parts, composition and its validation", "",
+           "The parts (Yosys, FP24 rtz; the array is 4x4; `seconds`: Yosys's wall time on "
+           "the shared machine):", "",
+           "| family / target | part | latency | DSP48 | LUT | FF | slices~ | path cells | "
+           "Yosys s |", "|---|---|---|---|---|---|---|---|---|"]
+    for name, p in cap["inputs"].items():
+        parts = [(f"array, {n} testers", a) for n, a in sorted(p["array"].items(),
+                                                             key=lambda x: -int(x[0]))]
+        parts.append(("ray-triangle", p["rtu"]))
+        for label, r in parts:
+            out.append(f"| {name} | {label} | {r.get('latency', '-')} | {r['dsp48']} | "
+                       f"{r['luts']} | {r['ffs']} | {r['slices_est']} | {r['path_cells']} | "
+                       f"{r.get('seconds', '-')} |")
+        rest = p["rest"]
+        basis = ", ".join(f"{k}={v}" for k, v in rest["basis"].items()
+                          if k not in ("rows", "cols"))
+        out.append(f"| {name} | rest (whole unit {basis} minus its parts) | - | "
+                   f"{rest['dsp48']} | {rest['luts']} | {rest['ffs']} | {rest['slices_est']} "
+                   f"| ({rest['path_cells']}: whole unit) | - |")
+    cal = ", ".join(f"{fam} {n:+d}" for fam, n in cap["bram_calibration"].items())
+    out += ["", "Block RAM: the per-lane model plus the difference to Yosys's count at the "
+            f"synthesised size (1,024 triangles, 256 spheres): {cal} blocks.", ""]
+    if cap["validation"]:
+        out += ["The composition against whole-unit syntheses it was not built from:", "",
+                "| family | unit | DSP48 predicted / actual | slices~ predicted / actual | "
+                "error | LUT error | FF error | BRAM predicted / actual | whole unit's path "
+                "cells |", "|---|---|---|---|---|---|---|---|---|"]
+        for v in cap["validation"]:
+            o = ", ".join(f"{k}={x}" for k, x in v["options"].items() if k not in ("rows", "cols"))
+            err = {k: v[k]["error"] for k in ("slices_est", "luts", "ffs")}
+            out.append(f"| {v['family']} | {o} | {v['dsp48']['predicted']} / "
+                       f"{v['dsp48']['actual']} | {v['slices_est']['predicted']} / "
+                       f"{v['slices_est']['actual']} | {err['slices_est']:+.1%} | "
+                       f"{err['luts']:+.1%} | {err['ffs']:+.1%} | {v['bram']['predicted']} / "
+                       f"{v['bram']['actual']} | {v['path_cells']} |")
+    else:
+        out += ["No whole-unit synthesis other than the rest's basis was available: the "
+                "composition is not validated in this run."]
+    miss = cap.get("missing") or []
+    if miss:
+        out += ["", "Not synthesised in this run (rows that need them are left out): "
+                + "; ".join(f"{m['unit']} {m['options']} {m['family']}" for m in miss) + "."]
     return out
