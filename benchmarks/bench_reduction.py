@@ -16,10 +16,16 @@ and the count of rays where they differ is reported (expected 0). Early-out: pai
 any-hit run issued after their ray's first accepted hit (``early_out_saving``, the saving of
 an early-out without latency; the RTL saves at most this, ``tests/test_reduction_unit.py``).
 
+With ``--rtl icarus|verilator`` the shadow passes of the first scene at ``--rtl-size`` also
+go through the reduced unit's Verilog in a live simulation
+(:class:`raplas_hdl.sim.unit_harness.UnitSession`): its answers must equal the model's, and
+its ``pairs_issued`` gives the early-out's real saving beside the zero-latency bound.
+
 Usage::
 
     python benchmarks/bench_reduction.py [--scenes cornell,stanford-bunny,showcase]
-        [--size 128x128] [--shadow 3x3] [--out docs/results/reduction.json]
+        [--size 128x128] [--shadow 3x3] [--rtl verilator] [--rtl-size 32x32]
+        [--out docs/results/reduction.json]
 """
 
 from __future__ import annotations
@@ -95,6 +101,55 @@ def measure(scene: str, size, shadow, rows: int, cols: int) -> dict:
     return out
 
 
+def measure_rtl(scene: str, size, shadow, rows: int, cols: int, sim: str) -> dict:
+    """Shadow passes of ``scene`` through the reduced unit's RTL: answers against the model,
+    pairs issued with the hardware early-out against the model's (no early-out) and the
+    zero-latency bound."""
+    import resource
+
+    from raplas_hdl.sim.unit_harness import UnitSession
+
+    def children():
+        ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return ru.ru_utime + ru.ru_stime
+
+    t0, c0, k0 = time.perf_counter(), time.process_time(), children()
+    settings = RenderSettings(width=size[0], height=size[1], rows=rows, cols=cols,
+                              shadow_rows=shadow[0], shadow_cols=shadow[1], progress=False)
+    backend, passes = recorded_runs(scene, settings)
+    row = dict.fromkeys(("runs", "answers", "answers_differing", "model_pairs", "rtl_pairs",
+                         "bound_pairs_saved", "cycles"), 0)
+    sessions = {}
+    try:
+        for rec in passes:
+            if not rec.any_hit:
+                continue
+            cfg = replace(backend.config(rec.batch.rows, rec.batch.cols), reduce=True)
+            runs = pass_runs(backend, rec, cfg)
+            if cfg not in sessions:
+                sessions[cfg] = UnitSession(sim, cfg, backend.scene_memory)
+            got = sessions[cfg].run(runs)
+            plain = run_runs(replace(cfg, reduce=False), backend.scene_memory, runs)
+            want = run_runs(cfg, backend.scene_memory, runs)
+            for run, (ans, ctr), (ref, rctr), (beats, _) in zip(runs, got, want, plain):
+                row["runs"] += 1
+                row["answers"] += int(np.count_nonzero(ref["empty"] == 0))
+                row["answers_differing"] += int(ans.size != ref.size or
+                                                np.count_nonzero(ans != ref))
+                row["model_pairs"] += rctr["pairs_issued"]
+                row["rtl_pairs"] += ctr["pairs_issued"]
+                row["bound_pairs_saved"] += early_out_saving(cfg, beats, run.bundle)
+                row["cycles"] += ctr["cycles"]
+    finally:
+        for s in sessions.values():
+            s.close()
+    row["rtl_pairs_saved"] = row["model_pairs"] - row["rtl_pairs"]
+    row.update(scene=scene, size=list(size), simulator=sim,
+               wall_s=time.perf_counter() - t0, cpu_s=time.process_time() - c0,
+               simulator_cpu_s=children() - k0)
+    return row
+
+
 def table(results: dict) -> str:
     head = ("| scene | pass | runs | pairs | result beats | bits | answer beats | bits | "
             "traffic saved | early-out pairs saved | answers differing from host |")
@@ -123,6 +178,8 @@ def main(argv=None) -> int:
     ap.add_argument("--size", type=_pair, default=(128, 128))
     ap.add_argument("--shadow", type=_pair, default=(3, 3))
     ap.add_argument("--tile", type=_pair, default=(8, 8))
+    ap.add_argument("--rtl", choices=("icarus", "verilator"), default=None)
+    ap.add_argument("--rtl-size", type=_pair, default=(32, 32))
     ap.add_argument("--out", default="build/reduction/reduction.json")
     args = ap.parse_args(argv)
     results = {}
@@ -131,12 +188,23 @@ def main(argv=None) -> int:
         print(f"{scene}: {results[scene]['wall_s']:.1f} s wall, "
               f"{results[scene]['cpu_s']:.1f} s CPU", flush=True)
     print(table(results))
+    rtl = None
+    if args.rtl:
+        rtl = measure_rtl(args.scenes.split(",")[0], args.rtl_size, args.shadow, *args.tile,
+                          args.rtl)
+        print(f"RTL ({args.rtl}), {rtl['scene']} {rtl['size'][0]}x{rtl['size'][1]} shadow "
+              f"passes: {rtl['runs']} runs, {rtl['answers']} answers, "
+              f"{rtl['answers_differing']} runs differing from the model; pairs issued "
+              f"{rtl['rtl_pairs']:,} of the model's {rtl['model_pairs']:,} (early-out saved "
+              f"{rtl['rtl_pairs_saved']:,}; zero-latency bound {rtl['bound_pairs_saved']:,}); "
+              f"{rtl['wall_s']:.0f} s wall, {rtl['cpu_s']:.0f} s CPU here and "
+              f"{rtl['simulator_cpu_s']:.0f} s in the simulator")
     doc = {"what": "result traffic with and without the on-chip reduction, FP24 model, paper "
                    "mode; early-out pairs: the zero-latency bound",
            "size": list(args.size), "shadow": list(args.shadow), "tile": list(args.tile),
            "machine": {"cpus": os.cpu_count(), "load": list(os.getloadavg()),
                        "python": platform.python_version()},
-           "scenes": results}
+           "scenes": results, "rtl": rtl}
     print(f"wrote {save(doc, Path(args.out))}")
     return 0
 
