@@ -50,7 +50,8 @@ from .memory_image import COUNTER_NAMES
 
 __all__ = ["Field", "Record", "Layout", "Slot", "unit_params", "words_to_ints",
            "ints_to_words", "PARAMETERS", "EVENT_COUNT_BITS", "RAY", "TRIANGLE", "PAIR",
-           "RT_RESULT", "RESULT", "ANSWER", "output_record", "CMD", "COUNTERS", "PLANE", "SPHERE", "PS_RESULT", "RECORDS"]
+           "RT_RESULT", "RESULT", "ANSWER", "output_record", "CMD", "COUNTERS", "PLANE",
+           "SPHERE", "PS_RESULT", "RECORDS"]
 
 #: Width parameters a field may name, and what they are.
 PARAMETERS = {

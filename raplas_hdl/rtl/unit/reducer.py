@@ -23,8 +23,9 @@ Stages (a pipeline that moves as a whole, ``en``, while no run's answers are bei
    ``det`` on the numerators), equal ratios going to the lower triangle ID. On the run's
    ``last`` (or ``empty``) beat the unit stops taking beats and
 4. **sends** the answers: the lowest ray with an answer each cycle (a tree of priority
-   encoders on the valid bits, :func:`lowest_set_tree`; the answer RAM read a cycle ahead), the last marked ``last``, or one
-   ``empty`` beat; then clears the valid bits and counts the run (``seq``).
+   encoders on the valid bits, :func:`lowest_set_tree`; the answer RAM read a cycle ahead),
+   the last marked ``last``, or one ``empty`` beat; then clears the valid bits and counts
+   the run (``seq``).
 
 Early-out: in an any-hit bundle a ray with an answer is *blocked*; ``blocked`` is the
 valid-bit vector of the run being reduced while that run is any-hit (else 0) and ``seq``
@@ -48,7 +49,8 @@ from ..records import struct_layout
 from .selector import lowest_set
 from .streams import result_layout
 
-__all__ = ["Reducer", "answer_layout", "product_key", "key_lt", "key_eq", "RUN_FIFO_DEPTH",
+__all__ = ["Reducer", "answer_layout", "product_key", "key_lt", "key_eq", "lowest_set_tree",
+           "RUN_FIFO_DEPTH",
            "SEQ_BITS"]
 
 #: Runs accepted but not yet reduced that the run-bank FIFO holds (the top stalls ``cmd``
