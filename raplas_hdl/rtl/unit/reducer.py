@@ -50,8 +50,7 @@ from .selector import lowest_set
 from .streams import result_layout
 
 __all__ = ["Reducer", "answer_layout", "product_key", "key_lt", "key_eq", "lowest_set_tree",
-           "RUN_FIFO_DEPTH",
-           "SEQ_BITS"]
+           "RUN_FIFO_DEPTH", "SEQ_BITS"]
 
 #: Runs accepted but not yet reduced that the run-bank FIFO holds (the top stalls ``cmd``
 #: when it is full).
