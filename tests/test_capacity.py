@@ -80,11 +80,19 @@ def test_build_capacity_from_parts_and_validation():
         key("plane-sphere", {**base, **v4, "testers": 4}): _row(36, 3430, 33),
         key("ray-triangle", {**v4, "mode": "paper"}): _row(48, 5596, 35),
         key("intersection-unit", {**base, **v4, "testers": 4}): _row(84, 9400, 38, bram=46),
+        key("intersection-unit", {**base, **v4, "testers": 4, "reduce": True}):
+            _row(90, 9900, 38, bram=47),
     }
     tp = [{"scene": "s", "testers": t, "lanes": k, "pairs_per_cycle": 0.5 * k}
           for t in (8, 4) for k in (1, 2, 3)]
     cap = build_capacity(FP24, found, tp, {"1k": 1024})
-    rows = {(r["target"], r["testers"], r["lanes"]): r for r in cap["table"]}
+    rows = {(r["target"], r["testers"], r["lanes"]): r for r in cap["table"] if not r["reduce"]}
+    red = {(r["target"], r["testers"], r["lanes"]): r for r in cap["table"] if r["reduce"]}
+    # the reduction's cost (the unit with it minus the unit without) on every xc4v row
+    assert red["virtex4", 4, 2]["slices_est"] == rows["virtex4", 4, 2]["slices_est"] + 500
+    assert red["generic", 8, 1]["dsp48"] == rows["generic", 8, 1]["dsp48"] + 6
+    assert red["generic", 8, 1]["bram18"]["1k"] == 47
+    assert not any(r["family"] == "xc7" for r in red.values())
     assert rows["generic", 8, 1]["slices_est"] == 14798            # its own rest: exact
     assert rows["virtex4", 4, 1]["slices_est"] == 3430 + 5596 + 271
     assert rows["virtex4", 4, 2]["dsp48"] == 36 + 2 * 48
@@ -94,7 +102,7 @@ def test_build_capacity_from_parts_and_validation():
     assert val["slices_est"]["predicted"] == 3430 + 5596 + 271
     assert val["slices_est"]["error"] == pytest.approx((9297 - 9400) / 9400)
     text = "\n".join(render_capacity(cap, worst_path=40))
-    assert "| XC4VSX35 | virtex4 | 4 | 2 |" in text and "**XC4VSX35**" in text
+    assert "| XC4VSX35 | virtex4 | 4 | 2 | off |" in text and "**XC4VSX35**" in text
 
 
 def test_cli_capacity_errors(tmp_path, capsys):

@@ -65,6 +65,7 @@ class Config:
     target: str         # generic | virtex4 (multipliers and adders)
     testers: int
     lanes: int
+    reduce: bool = False    # the on-chip nearest-hit / any-hit reduction (UnitConfig.reduce)
 
     @property
     def family(self) -> str:
@@ -72,7 +73,8 @@ class Config:
 
     @property
     def label(self) -> str:
-        return f"{self.device} {self.target} t{self.testers} K{self.lanes}"
+        return (f"{self.device} {self.target} t{self.testers} K{self.lanes}"
+                + (" reduce" if self.reduce else ""))
 
 
 #: The configurations of the table: Virtex-4 with both targets, the 7-series devices with
@@ -80,6 +82,8 @@ class Config:
 CONFIGS = tuple(
     [Config("XC4VSX35", t, n, k) for t in ("generic", "virtex4") for n in (8, 4)
      for k in (1, 2, 3)]
+    + [Config("XC4VSX35", t, n, k, True) for t in ("generic", "virtex4") for n in (8, 4)
+       for k in (1, 2)]
     + [Config(d, "generic", n, k) for d in ("XC7A100T", "XC7K325T") for n in (8, 4)
        for k in (1, 2, 3)])
 
@@ -134,7 +138,8 @@ def capacity_row(cfg: Config, need: dict, bram: dict, ppc: dict, path_cells: int
               "slices_x1.25": _limit(dev["slices"], math.ceil(need["slices_est"] * PACKING_MARGIN))}
     bram_limits = {label: _limit(dev["bram18"], n) for label, n in bram.items()}
     row = {"device": cfg.device, "family": cfg.family, "target": cfg.target,
-           "testers": cfg.testers, "lanes": cfg.lanes, "dsp48": need["dsp48"],
+           "testers": cfg.testers, "lanes": cfg.lanes, "reduce": cfg.reduce,
+           "dsp48": need["dsp48"],
            "slices_est": need["slices_est"],
            "slices_x1.25": math.ceil(need["slices_est"] * PACKING_MARGIN),
            "bram18": bram, "limits": limits, "bram_limits": bram_limits,
@@ -186,13 +191,16 @@ def pairs_per_cycle(rows, testers: int, lanes: int, fmt_name: str | None = None)
 
 
 def capacity_table(parts: dict, throughput_rows, n_triangles: dict, fmt, *,
-                   configs=CONFIGS, bram_calibration: dict | None = None) -> list[dict]:
+                   configs=CONFIGS, bram_calibration: dict | None = None,
+                   reduce_cost: dict | None = None) -> list[dict]:
     """The rows for ``configs``.
 
     ``parts[(family, target)]`` holds ``array`` ({testers: row}), ``rtu`` (row) and ``rest``
     (dict) — rows of :func:`.report.synth_row`. ``n_triangles``: {label: N}.
     ``bram_calibration``: {family: blocks to add to the model (Yosys minus model at the
-    synthesised size)}.
+    synthesised size)}. ``reduce_cost``: {family: the reduction's ``dsp48``,
+    ``slices_est``, ``luts``, ``ffs``, ``bram`` over the same unit without it}; the
+    ``reduce`` configurations of a family without it are left out.
     """
     out = []
     for cfg in configs:
@@ -202,6 +210,12 @@ def capacity_table(parts: dict, throughput_rows, n_triangles: dict, fmt, *,
         array, rtu = p["array"][cfg.testers], p["rtu"]
         need = compose(array, rtu, p["rest"], cfg.lanes)
         cal = (bram_calibration or {}).get(cfg.family, 0)
+        if cfg.reduce:
+            extra = (reduce_cost or {}).get(cfg.family)
+            if extra is None:
+                continue
+            need = {k: v + extra[k] for k, v in need.items()}
+            cal += extra["bram"]
         bram = {label: bram_blocks(unit_config(fmt, n, cfg.testers), cfg.lanes)["total"] + cal
                 for label, n in n_triangles.items()}
         path = max(array["path_cells"], rtu["path_cells"])
@@ -256,12 +270,35 @@ def needed_runs(families=("xc4v", "xc7")) -> list[tuple]:
         # array), the cheaper 4-tester one on xc7
         runs.append(("intersection-unit",
                      {"rows": 4, "cols": 4, "testers": 8 if family == "xc4v" else 4}, family))
+    # the on-chip reduction (UnitConfig.reduce): its cost over the same unit without it
+    runs.append(("intersection-unit", {"rows": 4, "cols": 4, "testers": 4, "reduce": True,
+                                       **_targets("virtex4")}, "xc4v"))
     # validation of the composition: other targets, testers and K than the rest's unit
     for lanes in (1, 2):
         runs.append(("intersection-unit", {"rows": 4, "cols": 4, "testers": 4,
                                            **({"lanes": lanes} if lanes > 1 else {}),
                                            **_targets("virtex4")}, "xc4v"))
     return runs
+
+
+def unit_row(fmt, options: dict, family: str = "xc4v", *, cached_only: bool = False) -> dict:
+    """:func:`.report.synth_row` for ``intersection-unit`` with ``UnitConfig`` fields the
+    unit registry has no option for (``reduce``): the unit built directly."""
+    from ..model.memory_image import UnitConfig
+    from ..rtl.emit import emit_verilog
+    from ..rtl.intersection import IntersectionUnit
+    from .yosys import synthesize
+
+    o = dict(options)
+    targets = {"multiplier": o.pop("target", "generic"), "adder": o.pop("adder", "generic")}
+    comp = IntersectionUnit(UnitConfig(fmt=fmt, **o), **targets)
+    params = {"exp_bits": fmt.exp_bits, "man_bits": fmt.man_bits, "rounding": fmt.rounding,
+              **options}
+    text, _ = emit_verilog(comp, "intersection_unit", params)
+    r = synthesize(text, "intersection_unit", cached_only=cached_only, family=family)
+    return {"unit": "intersection-unit", "format": fmt.name, "exp_bits": fmt.exp_bits,
+            "man_bits": fmt.man_bits, "rounding": fmt.rounding, "options": dict(options),
+            "latency": None, "family": family, **r.to_dict()}
 
 
 def gather(fmt, *, rows=(), cached_only: bool = True, progress=None, runs=None) -> dict:
@@ -276,8 +313,11 @@ def gather(fmt, *, rows=(), cached_only: bool = True, progress=None, runs=None) 
         row = find_row(rows, unit, fmt, options, family)
         if row is None:
             try:
-                row = synth_row(unit, fmt, dict(options), cached_only=cached_only,
-                                family=family)
+                if "reduce" in options:
+                    row = unit_row(fmt, options, family, cached_only=cached_only)
+                else:
+                    row = synth_row(unit, fmt, dict(options), cached_only=cached_only,
+                                    family=family)
             except LookupError:
                 missing.append({"unit": unit, "options": options, "family": family})
                 if progress:
@@ -305,8 +345,17 @@ def build_capacity(fmt, found: dict, throughput_rows, n_triangles: dict) -> dict
              if u == "intersection-unit" for opts in [dict(okey)]]
     # the rest of each family: prefer the generic 8-tester unit
     units.sort(key=lambda x: (x[0].get("target") != "generic", x[0].get("testers") != 8))
-    cal = {}
+    cal, reduce_cost = {}, {}
     for opts, fam, r in units:
+        if opts.get("reduce"):
+            plain = _get(found, "intersection-unit",
+                         {k: v for k, v in opts.items() if k != "reduce"}, fam)
+            if plain is not None:
+                reduce_cost[fam] = {k: r[k] - plain[k]
+                                    for k in ("dsp48", "slices_est", "luts", "ffs", "bram")}
+                reduce_cost[fam].update(basis={**opts, "family": fam},
+                                        path_cells=r["path_cells"])
+            continue
         tgt = opts.get("target", "generic")
         arr = _get(found, "plane-sphere", {"testers": opts["testers"], **_targets(tgt)}, fam)
         rtu = _get(found, "ray-triangle", _targets(tgt), fam)
@@ -334,12 +383,14 @@ def build_capacity(fmt, found: dict, throughput_rows, n_triangles: dict) -> dict
                 continue
             parts[(fam, target)] = {"array": arrays, "rtu": rtu, "rest": rest,
                                     "unit_path_cells": rest["path_cells"]}
-    table = capacity_table(parts, throughput_rows, n_triangles, fmt, bram_calibration=cal)
+    table = capacity_table(parts, throughput_rows, n_triangles, fmt, bram_calibration=cal,
+                           reduce_cost=reduce_cost)
     inputs = {f"{fam}/{target}": {
         "array": {n: _brief(a) for n, a in p["array"].items()}, "rtu": _brief(p["rtu"]),
         "rest": {k: v for k, v in p["rest"].items()}} for (fam, target), p in parts.items()}
     return {"format": fmt.name, "table": table, "validation": validation, "inputs": inputs,
-            "bram_calibration": cal, "n_triangles": n_triangles, "devices": DEVICES,
+            "bram_calibration": cal, "reduce_cost": reduce_cost,
+            "n_triangles": n_triangles, "devices": DEVICES,
             "clock_mhz": CLOCK_MHZ, "paper_pairs_per_second": PAPER_PAIRS_PER_SECOND,
             "packing_margin": PACKING_MARGIN}
 
@@ -394,7 +445,7 @@ def render_capacity(cap: dict, *, worst_path: int | None = None) -> list[str]:
             "clock). **path**: the longest combinational path (cells) of the array and the "
             "ray-triangle unit (the whole units' paths are in the validation table).",
             ""]
-    hdr = ["device", "target", "t", "K", "DSP48", "slices~", "x1.25"]
+    hdr = ["device", "target", "t", "K", "reduce", "DSP48", "slices~", "x1.25"]
     hdr += [f"BRAM ({k})" for k in labels]
     hdr += ["DSP limit", "slice limit", "x1.25 limit"] + [f"BRAM limit ({k})" for k in labels]
     hdr += [f"units ({first})", f"units x1.25 ({first})", "pairs/cycle (scenes)",
@@ -409,8 +460,8 @@ def render_capacity(cap: dict, *, worst_path: int | None = None) -> list[str]:
         ratio125 = "-" if p125 is None else f"{p125 / paper:.2f}x"
         path = str(r["path_cells"]) + (" (!)" if worst_path and r["path_cells"] > worst_path
                                        else "")
-        cells = [r["device"], r["target"], r["testers"], r["lanes"], r["dsp48"],
-                 r["slices_est"], r["slices_x1.25"]]
+        cells = [r["device"], r["target"], r["testers"], r["lanes"],
+                 "on" if r["reduce"] else "off", r["dsp48"], r["slices_est"], r["slices_x1.25"]]
         cells += [r["bram18"][k] for k in labels]
         cells += [_lim(r["limits"]["dsp48"]), _lim(r["limits"]["slices"]),
                   _lim(r["limits"]["slices_x1.25"])]
@@ -461,6 +512,11 @@ def _render_method(cap: dict) -> list[str]:
         out.append(f"| {name} | rest (whole unit {basis} minus its parts) | - | "
                    f"{rest['dsp48']} | {rest['luts']} | {rest['ffs']} | {rest['slices_est']} "
                    f"| ({rest['path_cells']}: whole unit) | - |")
+    for fam, rc in cap.get("reduce_cost", {}).items():
+        basis = ", ".join(f"{k}={v}" for k, v in rc["basis"].items() if k not in ("rows", "cols"))
+        out.append(f"| {fam} | the reduction (whole unit {basis} minus the same unit without "
+                   f"it; BRAM {rc['bram']:+d}) | - | {rc['dsp48']} | {rc['luts']} | "
+                   f"{rc['ffs']} | {rc['slices_est']} | ({rc['path_cells']}: whole unit) | - |")
     cal = ", ".join(f"{fam} {n:+d}" for fam, n in cap["bram_calibration"].items())
     out += ["", "Block RAM: the per-lane model plus the difference to Yosys's count at the "
             f"synthesised size (1,024 triangles, 256 spheres): {cal} blocks.", ""]
