@@ -41,7 +41,7 @@ def test_emit_other_format_and_depth(tmp_path):
     manifest = json.loads((tmp_path / "x.json").read_text())
     assert manifest["latency"] == 2
     assert manifest["parameters"] == {"exp_bits": 8, "man_bits": 23, "rounding": "rne",
-                                      "stages": 2}
+                                      "stages": 2, "target": "generic"}
     assert {p["name"]: p["width"] for p in manifest["ports"]}["a"] == 32
 
 
