@@ -168,7 +168,8 @@ def test_bad_vectors_file(tmp_path, argv, text, needles):
 @pytest.mark.parametrize("argv, needle", [
     (["ray-triangle", "--rows", "2"], "--rows does not apply to unit ray-triangle"),
     (["plane-sphere", "--mode", "conservative"], "--mode does not apply to unit plane-sphere"),
-    (["fp-add", "--target", "virtex4"], "--target does not apply to unit fp-add"),
+    (["fp-mul", "--adder", "virtex4"], "--adder does not apply to unit fp-mul"),
+    (["ray-triangle", "--adder", "virtex4", "--format", "FP32"], "at most 17 bits"),
     (["plane-sphere", "--rows", "2", "--cols", "2", "--testers", "5"],
      "--testers 5 is more than rows+cols = 4"),
     (["ray-triangle", "--driver", "percycle"], "--driver percycle applies to fp-add and fp-mul"),

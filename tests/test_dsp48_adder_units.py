@@ -127,6 +127,14 @@ def _cosim(capsys, *argv):
     return text
 
 
+def test_cli_cosim_fp_add_target_virtex4(capsys):
+    """``cosim fp-add --target virtex4``: the DSP48 adder through the batch harness."""
+    require_simulator("icarus")
+    text = _cosim(capsys, "fp-add", "--sim", "icarus", "--target", V4, "--random", "2000",
+                  "--format", "FP24/rne", "--stall-density", "0.3")
+    assert "latency 7" in text and "cases: 2000" in text
+
+
 def test_ray_triangle_dsp48_adders_under_icarus(capsys):
     """FP24 rne, paper mode, every adder on two DSP48: 300 pairs (gaps and back-pressure),
     every output field against the model."""
