@@ -5,6 +5,8 @@ repeated triangles, windows with tmin, per-ray tmax and an excluded triangle), n
 and any-hit runs in both banks, runs without answers, empty runs, random gaps and
 back-pressure."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -17,6 +19,8 @@ from raplas_hdl.sim.reducer_harness import cosim_reducer
 from test_reduction_model import _bundle, random_beats
 
 CFG = UnitConfig(FP24, rows=2, cols=4, max_triangles=16, reduce=True)
+#: 35 rays: the tree of priority encoders (5 padded groups of 8)
+WIDE = UnitConfig(FP24, rows=5, cols=7, max_triangles=16, reduce=True)
 
 
 def reducer_runs(cfg, n_runs, seed, beats_per_run=40):
@@ -40,9 +44,9 @@ def reducer_runs(cfg, n_runs, seed, beats_per_run=40):
     return runs
 
 
-def check(simulator, n_runs, seed, **kw):
-    runs = reducer_runs(CFG, n_runs, seed)
-    got, want, info = cosim_reducer(simulator, CFG, runs, seed=seed, **kw)
+def check(simulator, n_runs, seed, cfg=CFG, **kw):
+    runs = reducer_runs(cfg, n_runs, seed, beats_per_run=4 * cfg.n_rays)
+    got, want, info = cosim_reducer(simulator, cfg, runs, seed=seed, **kw)
     assert got.size == want.size
     for name in want.dtype.names:
         bad = np.flatnonzero(got[name] != want[name])
@@ -56,8 +60,15 @@ def test_reducer_matches_model(simulator):
     check(simulator, 30, seed=1)
 
 
+@pytest.mark.parametrize("simulator", ["icarus", pytest.param("verilator",
+                                                                marks=pytest.mark.full)])
+def test_wide_reducer_matches_model(simulator):
+    check(simulator, 20, seed=4, cfg=WIDE)
+
+
 @pytest.mark.full
 @pytest.mark.parametrize("simulator", ["icarus", "verilator"])
 @pytest.mark.parametrize("seed", [2, 3])
-def test_reducer_matches_model_long(simulator, seed):
-    check(simulator, 600, seed=seed, valid_density=0.6, stall_density=0.5)
+@pytest.mark.parametrize("cfg", [CFG, replace(WIDE, rows=8, cols=8)], ids=["2x4", "8x8"])
+def test_reducer_matches_model_long(simulator, seed, cfg):
+    check(simulator, 600, seed=seed, cfg=cfg, valid_density=0.6, stall_density=0.5)
