@@ -115,14 +115,52 @@ def unit_config(fmt, n_triangles: int, testers: int = 8, lanes: int = 1):
                       max_spheres=spheres, lanes=lanes)
 
 
-def compose(array: dict, rtu: dict, rest: dict, lanes: int) -> dict:
-    """``array + lanes x rtu + rest`` for ``dsp48``, ``slices_est``, ``luts``, ``ffs``."""
-    return {k: array[k] + lanes * rtu[k] + rest[k] for k in ("dsp48", "slices_est", "luts", "ffs")}
+_FIELDS = ("dsp48", "slices_est", "luts", "ffs")
+
+
+def _with_cells(*rows) -> bool:
+    return all(r.get("cells_by_type") is not None for r in rows)
+
+
+def compose(array: dict, rtu: dict, rest: dict, lanes: int, family: str = "xc4v", *,
+            cells: bool = False) -> dict:
+    """``array + lanes x rtu + rest``: ``dsp48``, ``slices_est``, ``luts``, ``ffs``.
+
+    By default the parts' own figures are summed, slices included: an upper bound, since a
+    part bound by its flip-flops and another bound by its LUTs could share slices. With
+    ``cells`` (and the cell counts of every part, ``cells_by_type``) the cells are summed
+    and the slice estimate is taken of the sum (:func:`.yosys.summarize`'s formula)."""
+    if cells and _with_cells(array, rtu, rest):
+        from .yosys import _count
+
+        types = set(array["cells_by_type"]) | set(rtu["cells_by_type"]) | set(rest["cells_by_type"])
+        cells = {t: array["cells_by_type"].get(t, 0) + lanes * rtu["cells_by_type"].get(t, 0)
+                 + rest["cells_by_type"].get(t, 0) for t in types}
+        c = _count(cells, family)
+        return {k: c[k] for k in _FIELDS}
+    return {k: array[k] + lanes * rtu[k] + rest[k] for k in _FIELDS}
+
+
+def _plus(a: dict, b: dict) -> dict:
+    """Fields (and cells, when both have them) of ``a`` plus ``b``."""
+    out = {k: a[k] + b[k] for k in _FIELDS}
+    if _with_cells(a, b):
+        types = set(a["cells_by_type"]) | set(b["cells_by_type"])
+        out["cells_by_type"] = {t: a["cells_by_type"].get(t, 0) + b["cells_by_type"].get(t, 0)
+                                for t in types}
+    return out
 
 
 def rest_of(unit: dict, array: dict, rtu: dict, lanes: int = 1) -> dict:
-    """The whole-unit row minus its array and ray-triangle units."""
-    return {k: unit[k] - array[k] - lanes * rtu[k] for k in ("dsp48", "slices_est", "luts", "ffs")}
+    """The whole-unit row minus its array and ray-triangle units (cell by cell too, when
+    the rows have their cell counts)."""
+    out = {k: unit[k] - array[k] - lanes * rtu[k] for k in _FIELDS}
+    if _with_cells(unit, array, rtu):
+        types = set(unit["cells_by_type"]) | set(array["cells_by_type"]) | set(rtu["cells_by_type"])
+        out["cells_by_type"] = {t: unit["cells_by_type"].get(t, 0)
+                                - array["cells_by_type"].get(t, 0)
+                                - lanes * rtu["cells_by_type"].get(t, 0) for t in types}
+    return out
 
 
 def _limit(avail, per):
@@ -176,8 +214,10 @@ def load_throughput(path) -> list[dict]:
     return rows
 
 
-def pairs_per_cycle(rows, testers: int, lanes: int, fmt_name: str | None = None) -> dict:
-    """``{scene: pairs per cycle}`` of the 4x4 rows with ``testers`` and ``lanes``."""
+def pairs_per_cycle(rows, testers: int, lanes: int, fmt_name: str | None = None,
+                    key: str = "pairs_per_cycle") -> dict:
+    """``{scene: pairs per cycle}`` of the 4x4 rows with ``testers`` and ``lanes``
+    (``key``: another column of the rows, e.g. ``pairs_per_cycle_lane_results``)."""
     out = {}
     for r in rows:
         if (r["testers"], r["lanes"]) != (testers, lanes):
@@ -186,7 +226,8 @@ def pairs_per_cycle(rows, testers: int, lanes: int, fmt_name: str | None = None)
             continue
         if fmt_name and r.get("format") and not str(r["format"]).startswith(fmt_name):
             continue
-        out[r["scene"]] = float(r["pairs_per_cycle"])
+        if key in r:
+            out[r["scene"]] = float(r[key])
     return out
 
 
@@ -208,19 +249,23 @@ def capacity_table(parts: dict, throughput_rows, n_triangles: dict, fmt, *,
         if p is None or cfg.testers not in p["array"]:
             continue
         array, rtu = p["array"][cfg.testers], p["rtu"]
-        need = compose(array, rtu, p["rest"], cfg.lanes)
+        rest = p["rest"]
         cal = (bram_calibration or {}).get(cfg.family, 0)
         if cfg.reduce:
             extra = (reduce_cost or {}).get(cfg.family)
             if extra is None:
                 continue
-            need = {k: v + extra[k] for k, v in need.items()}
+            rest = _plus(rest, extra)
             cal += extra["bram"]
+        need = compose(array, rtu, rest, cfg.lanes, cfg.family)
         bram = {label: bram_blocks(unit_config(fmt, n, cfg.testers), cfg.lanes)["total"] + cal
                 for label, n in n_triangles.items()}
         path = max(array["path_cells"], rtu["path_cells"])
         ppc = pairs_per_cycle(throughput_rows, cfg.testers, cfg.lanes)
-        out.append(capacity_row(cfg, need, bram, ppc, path))
+        row = capacity_row(cfg, need, bram, ppc, path)
+        row["pairs_per_cycle_lane_results"] = pairs_per_cycle(
+            throughput_rows, cfg.testers, cfg.lanes, key="pairs_per_cycle_lane_results")
+        out.append(row)
     return out
 
 
@@ -353,6 +398,11 @@ def build_capacity(fmt, found: dict, throughput_rows, n_triangles: dict) -> dict
             if plain is not None:
                 reduce_cost[fam] = {k: r[k] - plain[k]
                                     for k in ("dsp48", "slices_est", "luts", "ffs", "bram")}
+                if _with_cells(r, plain):
+                    types = set(r["cells_by_type"]) | set(plain["cells_by_type"])
+                    reduce_cost[fam]["cells_by_type"] = {
+                        t: r["cells_by_type"].get(t, 0) - plain["cells_by_type"].get(t, 0)
+                        for t in types}
                 reduce_cost[fam].update(basis={**opts, "family": fam},
                                         path_cells=r["path_cells"])
             continue
@@ -368,9 +418,11 @@ def build_capacity(fmt, found: dict, throughput_rows, n_triangles: dict) -> dict
             model = bram_blocks(unit_config(fmt, 1024, opts["testers"]), lanes)["total"]
             cal[fam] = r["bram"] - model
             continue
-        pred = compose(arr, rtu, rests[fam], lanes)
+        pred = compose(arr, rtu, rests[fam], lanes, fam)
+        by_cells = compose(arr, rtu, rests[fam], lanes, fam, cells=True)
         bram = bram_blocks(unit_config(fmt, 1024, opts["testers"]), lanes)["total"] + cal[fam]
         validation.append({"family": fam, "options": opts, **validate(pred, r),
+                           "slices_of_summed_cells": by_cells["slices_est"],
                            "bram": {"predicted": bram, "actual": r["bram"]},
                            "path_cells": r["path_cells"]})
     for fam, rest in rests.items():
@@ -387,9 +439,12 @@ def build_capacity(fmt, found: dict, throughput_rows, n_triangles: dict) -> dict
                            reduce_cost=reduce_cost)
     inputs = {f"{fam}/{target}": {
         "array": {n: _brief(a) for n, a in p["array"].items()}, "rtu": _brief(p["rtu"]),
-        "rest": {k: v for k, v in p["rest"].items()}} for (fam, target), p in parts.items()}
+        "rest": {k: v for k, v in p["rest"].items() if k != "cells_by_type"}}
+        for (fam, target), p in parts.items()}
     return {"format": fmt.name, "table": table, "validation": validation, "inputs": inputs,
-            "bram_calibration": cal, "reduce_cost": reduce_cost,
+            "bram_calibration": cal,
+            "reduce_cost": {f: {k: v for k, v in rc.items() if k != "cells_by_type"}
+                            for f, rc in reduce_cost.items()},
             "n_triangles": n_triangles, "devices": DEVICES,
             "clock_mhz": CLOCK_MHZ, "paper_pairs_per_second": PAPER_PAIRS_PER_SECOND,
             "packing_margin": PACKING_MARGIN}
@@ -440,7 +495,10 @@ def render_capacity(cap: dict, *, worst_path: int | None = None) -> list[str]:
             + "). Each limit is the device's amount over the unit's need; **units** is the "
             "minimum (x1.25: with the slice estimate raised 25 % for packing). "
             f"**pairs/s** = units x the modelled pairs per cycle of (t, K) on the bench "
-            f"scenes (the minimum over the scenes) x {cap['clock_mhz']:g} MHz; the paper: "
+            f"scenes (the minimum over the scenes) x {cap['clock_mhz']:g} MHz, the unit as "
+            "built (its lanes' results merge into one stream, one beat per cycle; the next "
+            "column is what K lanes would sustain if each consumed its own results, a "
+            "per-lane reduction that is not built); the paper: "
             f"{cap['paper_pairs_per_second'] / 1e6:.0f} M pairs/s (one unit, 1 pair per "
             "clock). **path**: the longest combinational path (cells) of the array and the "
             "ray-triangle unit (the whole units' paths are in the validation table).",
@@ -449,12 +507,16 @@ def render_capacity(cap: dict, *, worst_path: int | None = None) -> list[str]:
     hdr += [f"BRAM ({k})" for k in labels]
     hdr += ["DSP limit", "slice limit", "x1.25 limit"] + [f"BRAM limit ({k})" for k in labels]
     hdr += [f"units ({first})", f"units x1.25 ({first})", "pairs/cycle (scenes)",
+            "if lanes kept their results",
             "pairs/s", "pairs/s x1.25", "vs paper", "vs paper x1.25", "path"]
     out += ["| " + " | ".join(hdr) + " |", "|" + "---|" * len(hdr)]
     paper = cap["paper_pairs_per_second"]
     for r in table:
         ppc = r["pairs_per_cycle"]
-        ppc_s = (f"{min(ppc.values()):.2f}-{max(ppc.values()):.2f}" if ppc else "n/a")
+        ppc_s = (f"{min(ppc.values()):.3f}-{max(ppc.values()):.3f}" if ppc else "n/a")
+        lane = r.get("pairs_per_cycle_lane_results") or {}
+        lane_s = (f"{min(lane.values()):.2f}-{max(lane.values()):.2f}"
+                  if lane and r["lanes"] > 1 else "")
         p, p125 = r[f"pairs_per_s[{first}]"], r[f"pairs_per_s_x1.25[{first}]"]
         ratio = "-" if p is None else f"{p / paper:.2f}x"
         ratio125 = "-" if p125 is None else f"{p125 / paper:.2f}x"
@@ -466,7 +528,7 @@ def render_capacity(cap: dict, *, worst_path: int | None = None) -> list[str]:
         cells += [_lim(r["limits"]["dsp48"]), _lim(r["limits"]["slices"]),
                   _lim(r["limits"]["slices_x1.25"])]
         cells += [_lim(r["bram_limits"][k]) for k in labels]
-        cells += [f"**{r[f'units[{first}]']}**", r[f"units_x1.25[{first}]"], ppc_s,
+        cells += [f"**{r[f'units[{first}]']}**", r[f"units_x1.25[{first}]"], ppc_s, lane_s,
                   _mps(p), _mps(p125), ratio, ratio125, path]
         out.append("| " + " | ".join(str(c) for c in cells) + " |")
     out.append("")
@@ -481,7 +543,7 @@ def render_capacity(cap: dict, *, worst_path: int | None = None) -> list[str]:
             f"the paper; with the x1.25 packing margin {b125['target']} t{b125['testers']} "
             f"K{b125['lanes']}, {b125[f'units_x1.25[{first}]']} unit(s), {p125 / 1e6:.0f} M "
             f"pairs/s = **{p125 / paper:.2f}x**.")
-    out += _render_method(cap)
+    out += _render_method(cap) + [""]
     for label in labels[1:]:
         fits = [r for r in table if r[f"units[{label}]"] > 0]
         if not fits:
@@ -523,15 +585,18 @@ def _render_method(cap: dict) -> list[str]:
     if cap["validation"]:
         out += ["The composition against whole-unit syntheses it was not built from:", "",
                 "| family | unit | DSP48 predicted / actual | slices~ predicted / actual | "
-                "error | LUT error | FF error | BRAM predicted / actual | whole unit's path "
-                "cells |", "|---|---|---|---|---|---|---|---|---|"]
+                "error | LUT error | FF error | slices~ of the summed cells (error) | BRAM "
+                "predicted / actual | whole unit's path cells |",
+                "|---|---|---|---|---|---|---|---|---|---|"]
         for v in cap["validation"]:
             o = ", ".join(f"{k}={x}" for k, x in v["options"].items() if k not in ("rows", "cols"))
             err = {k: v[k]["error"] for k in ("slices_est", "luts", "ffs")}
             out.append(f"| {v['family']} | {o} | {v['dsp48']['predicted']} / "
                        f"{v['dsp48']['actual']} | {v['slices_est']['predicted']} / "
                        f"{v['slices_est']['actual']} | {err['slices_est']:+.1%} | "
-                       f"{err['luts']:+.1%} | {err['ffs']:+.1%} | {v['bram']['predicted']} / "
+                       f"{err['luts']:+.1%} | {err['ffs']:+.1%} | {v['slices_of_summed_cells']} "
+                       f"({v['slices_of_summed_cells'] / v['slices_est']['actual'] - 1:+.1%}) | "
+                       f"{v['bram']['predicted']} / "
                        f"{v['bram']['actual']} | {v['path_cells']} |")
     else:
         out += ["No whole-unit synthesis other than the rest's basis was available: the "
