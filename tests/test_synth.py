@@ -93,3 +93,15 @@ def test_capacity_of_the_papers_design_is_one_unit():
     assert cap["ratio_vs_paper"] == pytest.approx(1.0)
     text = render_markdown({"generated": "now", "rows": [], "capacity": [cap]})
     assert "| FP24 | chop |" in text and "1.00x" in text
+
+
+def test_fp24_multiplier_on_7_series_uses_one_dsp48e1(cache):
+    """``family="xc7"``: the multiply on a DSP48E1, the 7-series slice estimate (4 LUT6 and
+    8 flip-flops per slice) and the refusal of Virtex-4 primitives."""
+    row = synth_row("fp-mul", FP24, cache_dir=cache, family="xc7")
+    assert row["family"] == "xc7" and not row["cached"]
+    assert row["cells_by_type"].get("DSP48E1") == 1 and row["dsp48"] == 1
+    assert row["slices_est"] >= max(row["luts"] / 4, row["ffs"] / 8)
+    assert row["slices_est"] < synth_row("fp-mul", FP24, cache_dir=cache)["slices_est"]
+    with pytest.raises(ValueError, match="not xc7 cells"):
+        synth_row("fp-mul", FP24, {"target": "virtex4"}, cache_dir=cache, family="xc7")

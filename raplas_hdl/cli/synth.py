@@ -48,6 +48,7 @@ def add_parser(subparsers):
     p.add_argument("--no-cache", action="store_true",
                    help="synthesise again even when a cached result exists")
     p.add_argument("--family", type=g.choice("xc4v", "xc7", what="family"), default="xc4v",
+                   metavar="{xc4v,xc7}",
                    help="synth_xilinx -family (default xc4v; xc7: 7-series, generic RTL only)")
     p.add_argument("--throughput", default=None, metavar="FILE.json",
                    help="capacity: pairs per cycle per (scene, testers, lanes) "

