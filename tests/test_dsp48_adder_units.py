@@ -92,6 +92,12 @@ def test_every_adder_is_two_dsp48():
     built = build_intersection_unit(FP24, adder=V4, rows=2)
     built._MustUse__silence = True
     assert built.adder == V4
+    # the board top hands it to its unit
+    from raplas_hdl.rtl.board_top import build_board_top
+
+    top = build_board_top(FP24, adder=V4, rows=2, cols=2, max_triangles=64, max_spheres=16)
+    inner = top.elaborate(None)._named_submodules["unit"][0]
+    assert (inner.adder, inner.multiplier) == (V4, "generic")
 
 
 def test_cli_adder_option_and_manifest(tmp_path, capsys):

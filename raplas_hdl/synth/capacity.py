@@ -356,23 +356,28 @@ def gather(fmt, *, rows=(), cached_only: bool = True, progress=None, runs=None) 
     found, missing = {}, []
     for unit, options, family in runs or needed_runs():
         key = (unit, tuple(sorted(_norm(unit, options).items())), family)
-        row = find_row(rows, unit, fmt, options, family)
+
+        def synth(only):
+            if "reduce" in options:
+                return unit_row(fmt, options, family, cached_only=only)
+            return synth_row(unit, fmt, dict(options), cached_only=only, family=family)
+
+        # the cache (today's RTL) first, then an earlier report's row, then Yosys
+        try:
+            row = synth(True)
+        except LookupError:
+            row = find_row(rows, unit, fmt, options, family)
+            if row is None and not cached_only:
+                row = synth(False)
         if row is None:
-            try:
-                if "reduce" in options:
-                    row = unit_row(fmt, options, family, cached_only=cached_only)
-                else:
-                    row = synth_row(unit, fmt, dict(options), cached_only=cached_only,
-                                    family=family)
-            except LookupError:
-                missing.append({"unit": unit, "options": options, "family": family})
-                if progress:
-                    progress(f"{unit} {options} {family}: no result")
-                continue
+            missing.append({"unit": unit, "options": options, "family": family})
             if progress:
-                progress(f"{unit} {options} {family}: slices~ {row['slices_est']}, "
-                         f"DSP {row['dsp48']}, path {row['path_cells']}"
-                         + (" (cached)" if row.get("cached") else f" ({row['seconds']:.0f} s)"))
+                progress(f"{unit} {options} {family}: no result")
+            continue
+        if progress:
+            progress(f"{unit} {options} {family}: slices~ {row['slices_est']}, "
+                     f"DSP {row['dsp48']}, path {row['path_cells']}"
+                     + (" (cached)" if row.get("cached") else f" ({row['seconds']:.0f} s)"))
         found[key] = row
     return {"rows": found, "missing": missing}
 
