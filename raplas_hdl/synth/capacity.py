@@ -447,7 +447,9 @@ def build_capacity(fmt, found: dict, throughput_rows, n_triangles: dict) -> dict
         "array": {n: _brief(a) for n, a in p["array"].items()}, "rtu": _brief(p["rtu"]),
         "rest": {k: v for k, v in p["rest"].items() if k != "cells_by_type"}}
         for (fam, target), p in parts.items()}
-    return {"format": fmt.name, "table": table, "validation": validation, "inputs": inputs,
+    from .report import _fmt_label
+
+    return {"format": f"{_fmt_label(fmt)}/{fmt.rounding}", "table": table, "validation": validation, "inputs": inputs,
             "bram_calibration": cal,
             "reduce_cost": {f: {k: v for k, v in rc.items() if k != "cells_by_type"}
                             for f, rc in reduce_cost.items()},
@@ -487,6 +489,7 @@ def render_capacity(cap: dict, *, worst_path: int | None = None) -> list[str]:
     table = cap["table"]
     labels = list(cap["n_triangles"])
     first = labels[0]
+    scenes = sorted({s for r in table for s in r["pairs_per_cycle"]})
     out = ["## Capacity per configuration (issue 15)", ""]
     devs = ", ".join(f"{name} ({d['family']}: {d['dsp48']} DSP, {d['slices']:,} slices, "
                      f"{d['bram18']} x 18 Kbit BRAM)" for name, d in cap["devices"].items())
@@ -501,7 +504,8 @@ def render_capacity(cap: dict, *, worst_path: int | None = None) -> list[str]:
             + "). Each limit is the device's amount over the unit's need; **units** is the "
             "minimum (x1.25: with the slice estimate raised 25 % for packing). "
             f"**pairs/s** = units x the modelled pairs per cycle of (t, K) on the bench "
-            f"scenes (the minimum over the scenes) x {cap['clock_mhz']:g} MHz, the unit as "
+            f"scenes ({', '.join(scenes) or 'none'}; the minimum over them) x "
+            f"{cap['clock_mhz']:g} MHz, the unit as "
             "built (its lanes' results merge into one stream, one beat per cycle; the next "
             "column is what K lanes would sustain if each consumed its own results, a "
             "per-lane reduction that is not built); the paper: "
