@@ -48,11 +48,12 @@ from raplas_hdl.host.scenes import get_scene  # noqa: E402
 from raplas_hdl.model.memory_image import UnitConfig  # noqa: E402
 from raplas_hdl.model.throughput import Timing, profile_arrays, simulate  # noqa: E402
 
-SCENES = ("stanford-bunny", "teapot", "cornell", "showcase")
+SCENES = ("showcase", "cornell", "teapot", "stanford-bunny")
 TESTERS = (8, 4)
 LANES = (1, 2, 3, 4)
 DEFAULT_OUT = ROOT / "build" / "throughput" / "throughput.json"
 PAIRS = COUNTERS.index("pairs_issued")
+ROWS = COLS = 4
 
 
 class RecordingBackend(ModelBackend):
@@ -63,6 +64,7 @@ class RecordingBackend(ModelBackend):
         super().__init__(*args, **kwargs)
         self.runs = []
         self.pairs = 0
+        self.other_pairs = 0
 
     def warm_pass(self, *args, **kwargs):
         """As the model's; the throw-away pass's runs are not kept."""
@@ -74,6 +76,11 @@ class RecordingBackend(ModelBackend):
 
     def trace(self, batch, run_b, run_start, run_sph, *args, **kwargs):
         ctr = super().trace(batch, run_b, run_start, run_sph, *args, **kwargs)
+        if (batch.rows, batch.cols) != (ROWS, COLS):
+            # another unit configuration (a scene file's glossy or ambient-occlusion
+            # bundles): not this unit's runs
+            self.other_pairs += int(np.asarray(ctr)[:, PAIRS].sum())
+            return ctr
         sm = self.scene_memory
         P = batch.n_planes
         for u, b in enumerate(np.asarray(run_b, np.int64)):
@@ -100,17 +107,17 @@ def measure(scene_name: str, size, threads=None):
     unit configuration (4x4, FP24, paper)."""
     scene = get_scene(scene_name)
     be = RecordingBackend(FP24, "paper")
-    settings = RenderSettings.for_scene(scene, width=size[0], height=size[1], rows=4,
-                                        cols=4, shadow_rows=4, shadow_cols=4,
+    settings = RenderSettings.for_scene(scene, width=size[0], height=size[1], rows=ROWS,
+                                        cols=COLS, shadow_rows=ROWS, shadow_cols=COLS,
                                         progress=False, threads=threads)
     t0 = time.process_time()
     render(scene, be, settings)
-    cfg = be.config(4, 4)
+    cfg = be.config(ROWS, COLS)
     profile = profile_arrays(cfg, be.runs)
     if profile.pairs != be.pairs:
         raise AssertionError(f"{scene_name}: the profile has {profile.pairs} pairs, the "
                              f"model's counters {be.pairs}")
-    return profile, cfg, time.process_time() - t0
+    return profile, cfg, time.process_time() - t0, be.other_pairs
 
 
 def rows_of(scene_name, profile, cfg):
@@ -134,6 +141,17 @@ def rows_of(scene_name, profile, cfg):
     return out
 
 
+def write(path, sizes, meta, rows, wall):
+    """The JSON (after every scene: a long run leaves its finished scenes)."""
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    doc = {"image": {k: f"{v[0]}x{v[1]}" for k, v in sizes.items()},
+           "bundles": f"{ROWS}x{COLS} primary, {ROWS}x{COLS} shadow", "mode": "paper",
+           "model": "raplas_hdl.model.throughput (runs back to back, host never the limit)",
+           "cpus": os.cpu_count(), "wall_s": round(wall, 1), "scenes": meta, "rows": rows}
+    out.write_text(json.dumps(doc, indent=1) + "\n")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--size", default="128x128", help="procedural scenes' image size")
@@ -148,29 +166,23 @@ def main(argv=None):
     for name in args.scenes.split(","):
         t0 = time.perf_counter()
         size = sizes["procedural" if name in PROCEDURAL else "mesh"]
-        profile, cfg, cpu = measure(name, size)
+        profile, cfg, cpu, other = measure(name, size)
         t1 = time.perf_counter()
         rows.extend(rows_of(name, profile, cfg))
-        meta.append({"scene": name, "size": f"{size[0]}x{size[1]}", "render_wall_s": round(t1 - t0, 2),
-                     "render_cpu_s": round(cpu, 2),
+        meta.append({"scene": name, "size": f"{size[0]}x{size[1]}",
+                     "render_wall_s": round(t1 - t0, 2), "render_cpu_s": round(cpu, 2), "other_bundle_pairs": other,
                      "model_wall_s": round(time.perf_counter() - t1, 2)})
         print(f"{name}: {profile.n_runs} runs, {profile.spheres} spheres, {profile.pairs} "
               f"pairs; render {t1 - t0:.1f} s wall / {cpu:.1f} s CPU, cycle model "
               f"{time.perf_counter() - t1:.1f} s", flush=True)
+        write(args.out, sizes, meta, rows, time.perf_counter() - t_all)
     print(f"\n{'scene':16s} {'testers':>7s} {'lanes':>5s} {'pairs':>10s} {'cycles':>10s} "
           f"{'pairs/cycle':>11s} {'lane results':>12s}")
     for r in rows:
         print(f"{r['scene']:16s} {r['testers']:7d} {r['lanes']:5d} {r['pairs']:10d} "
               f"{r['cycles']:10d} {r['pairs_per_cycle']:11.3f} "
               f"{r['pairs_per_cycle_lane_results']:12.3f}")
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    doc = {"image": {k: f"{v[0]}x{v[1]}" for k, v in sizes.items()}, "bundles": "4x4 primary, 4x4 shadow", "mode": "paper",
-           "model": "raplas_hdl.model.throughput (runs back to back, host never the limit)",
-           "cpus": os.cpu_count(), "wall_s": round(time.perf_counter() - t_all, 1),
-           "scenes": meta, "rows": rows}
-    out.write_text(json.dumps(doc, indent=1) + "\n")
-    print(f"saved {out}")
+    print(f"saved {args.out}")
     return 0
 
 
