@@ -328,7 +328,7 @@ class ModelBackend(Backend):
     name = "model"
 
     def __init__(self, fmt: FPFormat = FP24, mode: str = "conservative", testers=None,
-                 margin_scale: int = 1):
+                 margin_scale: int = 1, reduce: bool = False):
         super().__init__()
         check_format(fmt)
         check_mode(mode)
@@ -336,7 +336,14 @@ class ModelBackend(Backend):
             from ..model.certified import check_certified_format
 
             check_certified_format(fmt)
+        if reduce:
+            _check_reduce(fmt, mode)
         self.fmt, self.mode, self.testers, self.margin_scale = fmt, mode, testers, margin_scale
+        self.reduce = bool(reduce)
+        #: the unit's output traffic of the passes traced so far: ``result`` the beats of the
+        #: unreduced result stream (one per issued pair, one for a run without any), and
+        #: with ``reduce`` ``answer`` the ANSWER beats that left the unit instead
+        self.beats = {"result": 0, "answer": 0}
         self._configs = {}
         #: certified mode's work: the unit's certified hits and uncertain pairs, pairs
         #: through the float64 filter, pairs it left pending, pairs evaluated exactly and
@@ -345,7 +352,7 @@ class ModelBackend(Backend):
                                         "exact", "exact_s"), 0)
 
     def describe(self):
-        return f"{self.name} {self.fmt} {self.mode}"
+        return f"{self.name} {self.fmt} {self.mode}" + (" reduce" if self.reduce else "")
 
     def config(self, rows, cols):
         """The unit configuration for a ``rows`` x ``cols`` bundle (one per size)."""
@@ -362,7 +369,7 @@ class ModelBackend(Backend):
                 tris_per_sphere=self.tree.tris_per_sphere,
                 max_triangles=depth(len(self.tris), 256),
                 max_spheres=depth(self.tree.n_leaves, 64),
-                mode=self.mode, margin_scale=self.margin_scale)
+                mode=self.mode, margin_scale=self.margin_scale, reduce=self.reduce)
         return self._configs[key]
 
     def _arith(self):
@@ -385,9 +392,14 @@ class ModelBackend(Backend):
         (:func:`raplas_hdl.engine.certified.certified_pass`,
         :func:`raplas_hdl.host.resolve.resolve_pending`) give R's answer per ray, and
         :attr:`certified` counts the work."""
+        if self.reduce:
+            return self._trace_reduced(batch, run_b, run_start, run_sph, best_t, best_tri,
+                                       tmin, tmax, exclude, any_hit)
         if self.mode != "certified":
-            return super().trace(batch, run_b, run_start, run_sph, best_t, best_tri, tmin,
-                                 tmax, exclude, any_hit)
+            ctr = super().trace(batch, run_b, run_start, run_sph, best_t, best_tri, tmin,
+                                tmax, exclude, any_hit)
+            self.beats["result"] += _result_beats(ctr)
+            return ctr
         from ..engine.certified import CERT_COUNTERS, certified_pass
         from .resolve import resolve_pending
 
@@ -408,6 +420,76 @@ class ModelBackend(Backend):
         for k, name in enumerate(CERT_COUNTERS):
             st[name] += int(ctr[:, len(COUNTERS) + k].sum())
         return ctr[:, :len(COUNTERS)]
+
+    def window_runs(self, batch, runs, tmin=0.0, tmax=None, exclude=None, any_hit=False):
+        """The runs ``(bundle index, sphere ids)`` of a batch as ``(BundleMemory, ids)`` whose
+        bundles carry the host's window in the unit's format: ``tmin`` rounded up and each
+        ray's ``tmax`` rounded down (+infinity stays +infinity), so the unit never accepts
+        what the float64 window rejects; ``exclude`` per bundle; ``any_hit``."""
+        from dataclasses import replace
+
+        from ..fp import model as fpm
+        from ..model.reduction import inf_pattern
+
+        fmt, R = self.fmt, batch.n_rays
+        lo = int(fpm.encode(np.array([float(tmin)]), fmt, direction="up")[0])
+        hi = None
+        if tmax is not None:
+            tm = np.asarray(tmax, np.float64)
+            tm = np.broadcast_to(tm[:, None] if tm.ndim == 1 else tm, (batch.n_bundles, R))
+            fin = np.isfinite(tm)
+            hi = np.full(tm.shape, inf_pattern(fmt), np.uint32)
+            hi[fin] = fpm.encode(tm[fin], fmt, direction="down")
+        ex = None if exclude is None else np.asarray(exclude, np.int64)
+        out = []
+        for b, ids in runs:
+            mem = replace(self.memory(batch, b), tmin=lo, any_hit=bool(any_hit),
+                          tmax=None if hi is None else hi[b],
+                          exclude=-1 if ex is None else int(ex[b]))
+            out.append((mem, np.asarray(ids, np.int64)))
+        return out
+
+    def _trace_reduced(self, batch, run_b, run_start, run_sph, best_t, best_tri, tmin, tmax,
+                       exclude, any_hit):
+        """:meth:`trace` through the unit built with the on-chip reduction: the window goes
+        with each bundle (:meth:`window_runs`), one ANSWER beat per ray leaves the unit, and
+        the host folds only those (no per-pair work on the host)."""
+        from ..fp import model as fpm
+
+        runs = _runs_of(run_b, run_start, run_sph)
+        counters = np.zeros((len(runs), len(COUNTERS)), np.int64)
+        if not runs:
+            return counters
+        cfg = self.config(batch.rows, batch.cols)
+        results = self._run_runs(cfg, self.window_runs(batch, runs, tmin, tmax, exclude,
+                                                       any_hit))
+        counters[:] = [[c.get(n, 0) for n in COUNTERS] for _, c in results]
+        answers = [a for a, _ in results]
+        self.beats["result"] += _result_beats(counters)
+        self.beats["answer"] += sum(len(a) for a in answers)
+        keep = [k for k, a in enumerate(answers) if not a["empty"].any()]
+        if not keep:
+            return counters
+        ans = np.concatenate([answers[k] for k in keep])
+        b = np.repeat(np.asarray([runs[k][0] for k in keep], np.int64),
+                      [len(answers[k]) for k in keep])
+        ray, tri = ans["ray_id"].astype(np.int64), ans["tri_id"].astype(np.int64)
+        tf, df = fpm.decode(np.stack([ans["t"], ans["det"]]), self.fmt)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = tf * (1.0 / df)         # as the compiled passes compute it
+        # a bundle's rays may answer in several runs of the pass: the nearest, ties to the
+        # lower triangle ID, then against what the rays had before
+        order = np.lexsort((tri, t, b * batch.n_rays + ray))
+        key = (b * batch.n_rays + ray)[order]
+        first = np.ones(order.size, bool)
+        first[1:] = key[1:] != key[:-1]
+        sel = order[first]
+        bs, rs, ts, trs = b[sel], ray[sel], t[sel], tri[sel]
+        cur_t, cur_tri = best_t[bs, rs], best_tri[bs, rs]
+        better = (ts < cur_t) | ((ts == cur_t) & (trs < cur_tri))
+        best_t[bs[better], rs[better]] = ts[better]
+        best_tri[bs[better], rs[better]] = trs[better]
+        return counters
 
     def usable(self, tris):
         """Triangles that :func:`raplas_hdl.host.triangles.make_triangles` keeps (not
@@ -538,13 +620,13 @@ class RtlBackend(ModelBackend):
     DRIVER = "raplas_hdl.sim.unit_harness"
 
     def __init__(self, fmt: FPFormat = FP24, mode: str = "conservative", testers=None,
-                 margin_scale: int = 1, sim: str = "icarus"):
+                 margin_scale: int = 1, sim: str = "icarus", reduce: bool = False):
         if mode == "certified":
             raise ValueError("the rtl backend has no certified mode yet (the ray-triangle "
                              "unit has it, the intersection unit's result stream does not "
                              "carry the outcome): use --backend model, or --mode paper or "
                              "conservative")
-        super().__init__(fmt, mode, testers, margin_scale)
+        super().__init__(fmt, mode, testers, margin_scale, reduce)
         try:
             from raplas_hdl.sim.runner import SimulatorNotFound, require_simulator
         except ImportError as exc:
@@ -576,7 +658,8 @@ class RtlBackend(ModelBackend):
         self.record_dir = None
 
     def describe(self):
-        return f"{self.name} ({self.sim}) {self.fmt} {self.mode}"
+        return (f"{self.name} ({self.sim}) {self.fmt} {self.mode}"
+                + (" reduce" if self.reduce else ""))
 
     def load(self, tris, tree, bound):
         self.close()
@@ -635,7 +718,11 @@ class RtlBackend(ModelBackend):
     def trace(self, batch, run_b, run_start, run_sph, best_t, best_tri, tmin=0.0, tmax=None,
               exclude=None, any_hit=False):
         """The runs through the simulated unit (one round of the configuration's live
-        simulation), each run's stream folded into the nearest hits on the host."""
+        simulation), each run's stream folded into the nearest hits on the host; with
+        ``reduce`` the unit's answers (:meth:`ModelBackend._trace_reduced`)."""
+        if self.reduce:
+            return self._trace_reduced(batch, run_b, run_start, run_sph, best_t, best_tri,
+                                       tmin, tmax, exclude, any_hit)
         runs = _runs_of(run_b, run_start, run_sph)
         counters = np.zeros((len(runs), len(COUNTERS)), np.int64)
         R = batch.n_rays
@@ -650,24 +737,47 @@ class RtlBackend(ModelBackend):
                                                           & (tri < best_tri[b])))
                 best_t[b] = np.where(better, t, best_t[b])
                 best_tri[b] = np.where(better, tri, best_tri[b])
+        self.beats["result"] += _result_beats(counters)
         return counters
 
 
+def _check_reduce(fmt, mode):
+    """Raise ``ValueError`` (one line) unless a backend can render through the on-chip
+    reduction in ``fmt`` and ``mode``."""
+    from ..model.reduction import check_reduce_format
+
+    if mode == "certified":
+        raise ValueError("the on-chip reduction has no certified mode (uncertain pairs must "
+                         "reach the host): use --mode paper or conservative, or no --reduce")
+    check_reduce_format(fmt)
+
+
+def _result_beats(counters) -> int:
+    """Beats of the unreduced result stream of runs with these counters (U, 8): one per
+    issued pair, one (empty) for a run that issued none."""
+    pairs = np.asarray(counters)[:, COUNTERS.index("pairs_issued")]
+    return int(np.maximum(pairs, 1).sum())
+
+
 def make_backend(name: str, fmt: FPFormat = FP24, mode: str = "conservative",
-                 sim: str = "icarus", testers=None) -> Backend:
-    """A backend by name (``float64``, ``model``, ``rtl``).
+                 sim: str = "icarus", testers=None, reduce: bool = False) -> Backend:
+    """A backend by name (``float64``, ``model``, ``rtl``); ``reduce``: through the unit
+    built with the on-chip reduction (model and rtl).
 
     Raises
     ------
     ValueError
-        For an unknown name.
+        For an unknown name, or ``reduce`` where it does not apply.
     BackendUnavailable
         For ``rtl`` when the simulator or the unit's driver is missing.
     """
     if name == "float64":
+        if reduce:
+            raise ValueError("the float64 backend has no unit to reduce on: use --backend "
+                             "model or rtl with --reduce")
         return Float64Backend()
     if name == "model":
-        return ModelBackend(fmt, mode, testers)
+        return ModelBackend(fmt, mode, testers, reduce=reduce)
     if name == "rtl":
-        return RtlBackend(fmt, mode, testers, sim=sim)
+        return RtlBackend(fmt, mode, testers, sim=sim, reduce=reduce)
     raise ValueError(f"unknown backend {name!r}: use one of {', '.join(BACKENDS)}")
