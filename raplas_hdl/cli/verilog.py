@@ -38,6 +38,8 @@ CHOICE_OPTIONS = {
               ("plane-sphere-tester", "plane-sphere", "ray-triangle", "intersection-unit",
                "board-top")),
 }
+#: flags (given or not): option -> the units that take them.
+FLAG_OPTIONS = {"reduce": ("intersection-unit",)}
 _HELP = {
     "stages": "pipeline stages",
     "rows": "bundle rows",
@@ -48,6 +50,8 @@ _HELP = {
     "max_spheres": "Sphere Memory depth",
     "fifo_depth": "pair FIFO depth",
     "lanes": "ray-triangle lanes behind the one culling array (results in the same order)",
+    "reduce": "on-chip reduction: one ANSWER beat per ray (the nearest hit, or any hit "
+              "for shadow rays) leaves the unit, not one result beat per pair",
     "mode": "ray-triangle mode",
     "target": "multiplier target: inferred multiplies (generic) or Virtex-4 DSP48 "
               "primitives (virtex4); fp-add: its shifts and add in two DSP48",
@@ -64,7 +68,8 @@ def _units_text(units) -> str:
 def unit_takes(unit: str) -> set:
     """The unit options that ``unit`` takes."""
     return ({o for o, pu in UNIT_LIMITS.items() if unit in pu}
-            | {o for o, (_, _, t) in CHOICE_OPTIONS.items() if unit in t})
+            | {o for o, (_, _, t) in CHOICE_OPTIONS.items() if unit in t}
+            | {o for o, t in FLAG_OPTIONS.items() if unit in t})
 
 
 def add_unit_options(p, units=UNIT_NAMES, only=None):
@@ -98,6 +103,12 @@ def add_unit_options(p, units=UNIT_NAMES, only=None):
         grp.add_argument("--" + opt, dest=opt, default=None, metavar="{" + ",".join(choices) + "}",
                          type=g.choice(*choices, what=opt),
                          help=f"{_HELP[opt]} (default {default}); {_units_text(takers)}")
+    for opt, takers in FLAG_OPTIONS.items():
+        takers = [u for u in takers if u in units]
+        if (only is not None and opt not in only) or not takers:
+            continue
+        grp.add_argument("--" + opt, dest=opt, default=None, action="store_const", const=True,
+                         help=f"{_HELP[opt]}; {_units_text(takers)}")
 
 
 def int_option(opt, lo, hi):
@@ -133,6 +144,22 @@ def unit_options(args, unit: str) -> dict:
             opts[opt] = v
         elif v is not None:
             raise g.UsageError(f"--{opt} does not apply to unit {unit}" + _takes(unit))
+    for opt, takers in FLAG_OPTIONS.items():
+        v = getattr(args, opt, None)
+        if unit in takers:
+            opts[opt] = v
+        elif v is not None:
+            raise g.UsageError(f"--{opt} does not apply to unit {unit}" + _takes(unit))
+    if opts.get("reduce") and opts.get("mode") == "certified":
+        raise g.UsageError("--reduce has no certified mode (uncertain pairs must reach the "
+                           "host): use --mode paper or conservative")
+    if opts.get("reduce") and getattr(args, "fmt", None) is not None:
+        from ..model.reduction import check_reduce_format
+
+        try:
+            check_reduce_format(args.fmt)
+        except ValueError as exc:
+            raise g.UsageError(f"--reduce: {exc}") from None
     if opts.get("testers") is not None:
         rows = opts.get("rows") or UNIT_LIMITS["rows"][unit][2]
         cols = opts.get("cols") or UNIT_LIMITS["cols"][unit][2]
@@ -151,6 +178,7 @@ def unit_options(args, unit: str) -> dict:
 def _takes(unit: str) -> str:
     own = [o for o, pu in UNIT_LIMITS.items() if unit in pu]
     own += [o for o, (_, _, t) in CHOICE_OPTIONS.items() if unit in t]
+    own += [o for o, t in FLAG_OPTIONS.items() if unit in t]
     if not own:
         return " (it takes no unit options)"
     return " (its options: " + ", ".join("--" + o.replace("_", "-") for o in own) + ")"
