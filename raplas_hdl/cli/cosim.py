@@ -4,7 +4,9 @@ Units: fp-add, fp-mul, plane-sphere-tester, plane-sphere, ray-triangle, intersec
 Each runs at full clock rate in a generated Verilog harness (no Python per clock) with
 random gaps in valid (held until taken) and random stalls; every output bit is compared
 with the golden model. The unit options (--stages, --rows, --cols, --testers,
---tris-per-sphere, --mode, --target, --adder) are those of raplas-hdl verilog.
+--tris-per-sphere, --lanes, --mode, --target, --adder, --reduce) are those of raplas-hdl
+verilog; intersection-unit --reduce puts a random window on every run and compares every
+ANSWER beat (--random only).
 
 Cases: --random N draws N seeded cases and takes the expected results from the model (an
 intersection-unit case is one run: a bundle against a list of spheres of a random scene);
@@ -81,7 +83,7 @@ def add_parser(subparsers):
                           f"{MAX_CASES:,} (intersection-unit: runs, at most {MAX_RUNS:,}); "
                           "default " + ", ".join(f"{u} {n:,}" for u, n in DEFAULT_CASES.items()))
     add_unit_options(p, UNITS, only=("stages", "rows", "cols", "testers", "tris_per_sphere",
-                                     "lanes", "target", "adder"))
+                                     "lanes", "target", "adder", "reduce"))
     p.add_argument("--mode", type=_mode_or_driver, default=None,
                    metavar="{" + ",".join(MODES) + "}",
                    help="ray-triangle mode (default paper); ray-triangle, intersection-unit. "
@@ -205,6 +207,9 @@ def check(args) -> None:
         g.reject(args, ("valid_density",), "to intersection-unit (its harness presents each "
                                            "command until taken; --stall-density sets the "
                                            "result back-pressure)")
+    if args.options.get("reduce"):
+        g.reject(args, ("vectors", "write_vectors"), "with --reduce (vectors files hold "
+                                                      "unreduced result beats; use --random)")
     args.valid_density = 0.9 if args.valid_density is None else args.valid_density
     args.stall_density = 0.1 if args.stall_density is None else args.stall_density
     if args.write_vectors:
