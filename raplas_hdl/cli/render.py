@@ -268,6 +268,10 @@ def add_parser(subparsers):
     p.add_argument("--sim", type=g.choice("icarus", "verilator", what="simulator"),
                    default=None, metavar="{icarus,verilator}",
                    help="simulator of the rtl backend (default icarus; --backend rtl only)")
+    p.add_argument("--reduce", action="store_true",
+                   help="through the unit built with the on-chip reduction: one answer per "
+                        "ray leaves the unit, not one beat per pair (model and rtl; not "
+                        "certified; docs/intersection-unit.md)")
     add_render_options(p)
     add_secondary_options(p)
     add_view_options(p)
@@ -292,6 +296,19 @@ def check(args) -> None:
         g.reject(args, ("compare", "diff"), "to --backend float64 (it is the reference)")
     if args.backend != "rtl":
         g.reject(args, ("sim",), f"to --backend {args.backend} (only to rtl)")
+    if args.reduce and args.backend == "float64":
+        raise g.UsageError("--reduce does not apply to --backend float64 (it has no unit; "
+                           "use model or rtl)")
+    if args.reduce and args.mode == "certified":
+        raise g.UsageError("--reduce has no certified mode (uncertain pairs must reach the "
+                           "host): use --mode paper or conservative")
+    if args.reduce:
+        from ..model.reduction import check_reduce_format
+
+        try:
+            check_reduce_format(args.fmt)
+        except ValueError as exc:
+            raise g.UsageError(f"--reduce: {exc}") from None
     check_scene(args.scene, _overrides(args))
     g.check_output_file(args.output, (".png",), "-o")
     if args.diff:
@@ -319,7 +336,8 @@ def run(args) -> int:
     settings = settings_from_args(args, size, scene.render_defaults)
     fmt = args.fmt
     scene = scene.normalised(settings.bound)
-    backend = make_backend(args.backend, fmt, mode=args.mode, sim=args.sim)
+    backend = make_backend(args.backend, fmt, mode=args.mode, sim=args.sim,
+                           reduce=args.reduce)
     with g.waves(args):
         result = render(scene, backend, settings)
     save_png(result.image, args.output)
