@@ -218,7 +218,10 @@ class DaskExecutor(Executor):
         if self.scheduler is None:
             self._cluster = LocalCluster(n_workers=self.n_workers, threads_per_worker=1,
                                          processes=True, host="127.0.0.1",
-                                         dashboard_address=None,
+                                         # no dashboard; the scheduler's HTTP routes on a
+                                         # free port (not 8787, which may be taken)
+                                         dashboard_address=":0",
+                                         scheduler_kwargs={"dashboard": False},
                                          silence_logs=logging.WARNING)
             self.client = Client(self._cluster)
         else:
