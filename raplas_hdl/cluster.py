@@ -261,6 +261,9 @@ class DaskExecutor(Executor):
     def run(self, fn, items):
         from distributed import as_completed
 
+        items = list(items)
+        if not items:           # nothing to run: no cluster to start
+            return
         client = self.connect()
         futures = {}
         for item in items:
