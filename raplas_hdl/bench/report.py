@@ -236,6 +236,19 @@ def _table(head, rows):
     return "\n".join(lines)
 
 
+#: How the sweep runs on a Dask cluster (a fixed text: the report is regenerated whole).
+_CLUSTER_SECTION = [
+    "## On a Dask cluster", "",
+    "`raplas-hdl bench --dask-workers N` (a local Dask cluster) or `--scheduler ADDRESS` (a "
+    "running one) with the `cluster` extra (`pip install 'raplas-hdl[cluster]'`) runs the "
+    "sweep's tasks on Dask. Each task is the R metrics of a format and rounding, or a group: "
+    "a float64 reference and the model points that share its scene, bundle size and bound. "
+    "The client puts the rows back in plan order. Every result equals the in-process sweep's "
+    "and only the timings differ: each point's are those of the worker that rendered it "
+    "(`raplas_hdl.bench.sweep.results_of`, `tests/test_cluster.py`). The `--rtl` point and "
+    "the Yosys costs stay on the client ([docs/cluster.md](cluster.md)).", ""]
+
+
 def _stress_campaign_section(path=STRESS_CAMPAIGN_JSON) -> list[str]:
     lines = ["## Stress campaign", ""]
     if not Path(path).exists():
@@ -621,6 +634,7 @@ def render_markdown(results: dict, plots: list, md_path, *, command: str,
                   f"{r['model_seconds']:.2f} s ({r['pairs_issued']} pairs); equal to the model "
                   f"bit for bit: **{r['equal_to_model']}**.", ""]
     L += _stress_campaign_section()
+    L += _CLUSTER_SECTION
     L += ["## Files", ""] + [f"- `{_rel(f)}`" for f in files] + [""]
     return "\n".join(L)
 
