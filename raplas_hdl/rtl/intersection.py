@@ -28,6 +28,12 @@ The unit is its stages, components of :mod:`raplas_hdl.rtl.unit` joined by strea
    early-out);
 8. :class:`~raplas_hdl.rtl.unit.framing.EventCounters`: the counters.
 
+With ``UnitConfig.lanes = K > 1``, stages 4-6 after the selector are K lanes (job FIFO,
+record fetch, pair FIFO, ray-triangle unit) between a
+:class:`~raplas_hdl.rtl.unit.lanes.JobDistributor` (job n to lane n mod K) and a
+:class:`~raplas_hdl.rtl.unit.lanes.ResultMerger` (results back in job order): the result
+stream is the K=1 stream beat for beat.
+
 Every boundary is a stall pipeline or a FIFO; no ready signal reaches further back than the
 nearest FIFO's level. The stages' streams and the drain rule (when the host may write which
 memory) are in ``docs/intersection-unit.md``.
