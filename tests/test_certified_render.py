@@ -73,10 +73,13 @@ def test_certified_render_equals_exact_reference(name, fmt):
 
 
 def test_reference_sees_the_errors_of_the_other_modes():
-    """Negative control: the comparison fails for a render that is not R's (conservative
-    mode picks widened neighbours on the soup), so the equality above can fail."""
+    """Negative control: the comparison fails for a render that is not R's (the conservative
+    unit's hits folded unchecked pick widened neighbours on the soup), so the equality above
+    can fail."""
+    from test_conservative_render import RawConservative
+
     scene = get_scene("soup")
-    result = render(scene, ModelBackend(FP24, mode="conservative"), SMALL)
+    result = render(scene, RawConservative(FP24, mode="conservative"), SMALL)
     ref = exact_reference(result, scene.triangles, "exact")
     assert compare_reference(result, ref)["tri_id_differ"] > 0
 

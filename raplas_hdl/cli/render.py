@@ -299,9 +299,9 @@ def check(args) -> None:
     if args.reduce and args.backend == "float64":
         raise g.UsageError("--reduce does not apply to --backend float64 (it has no unit; "
                            "use model or rtl)")
-    if args.reduce and args.mode == "certified":
-        raise g.UsageError("--reduce has no certified mode (uncertain pairs must reach the "
-                           "host): use --mode paper or conservative")
+    if args.reduce and args.mode in ("certified", "conservative"):
+        raise g.UsageError(f"--reduce has no {args.mode} mode (its uncertain hits must reach "
+                           f"the host to be resolved): use --mode paper")
     if args.reduce:
         from ..model.reduction import check_reduce_format
 

@@ -28,6 +28,12 @@ outcome and counts, and :func:`_tails` filters, folds and lists them pending in 
 ``certified_pass(..., block=False)`` runs the unit one pair at a time instead
 (:func:`raplas_hdl.model.certified.pairs_one`); the results (counters, pending list and its
 order, folded hits) are the same.
+
+The conservative mode's render uses the same pass (``certified_pass(..., unit=
+conservative_pairs)``): its unit never misses a hit of R inside the domain but also
+reports false hits in a band around each triangle (docs/conservative-mode.md), so its
+misses are final and each of its hits is an *uncertain* pair for the filter and the exact
+resolution, which gives R's answer per ray.
 Counters per run: the unit's eight (``hits`` counts the unit's certified hits), then
 ``uncertain`` (the unit's uncertain pairs), ``filtered`` (pairs through the float64
 filter) and ``pending``.
@@ -42,10 +48,12 @@ from ..fp.numba_cache import drop_stale_cache
 from .exact_filter import HIT, MISS, filter_pair
 from .kernels import N_COUNTERS, plane_masks
 from ..model.certified import block_pairs, pairs_one
+from ..model.ray_triangle import _loop as pairs_loop
 
 drop_stale_cache(__file__)
 
-__all__ = ["certified_pass", "trace_certified", "N_CERT_COUNTERS", "CERT_COUNTERS"]
+__all__ = ["certified_pass", "trace_certified", "conservative_pairs", "N_CERT_COUNTERS",
+           "CERT_COUNTERS"]
 
 #: Extra counter columns after the unit's eight.
 CERT_COUNTERS = ("uncertain", "filtered", "pending")
@@ -169,8 +177,22 @@ def _tails(lanes, n, outc, cnt, o64, d64, tri64, tmin, tmax, excl, any_hit, best
     return npend
 
 
+def conservative_pairs(o, d, v0, e1, e2, nn, mc, lane_o, lane_d, lane_t, lo, hi, outc, t_o,
+                       u_o, v_o, det_o, cnt_o, e, m, r):
+    """:func:`~raplas_hdl.model.certified.block_pairs` for the conservative unit (margin
+    table ``mc``): outcome 2 (uncertain) where it hits, 0 (a miss of R) elsewhere."""
+    sel = slice(lo, hi)
+    t = lane_t[sel]
+    hit = np.empty(hi - lo, np.bool_)
+    pairs_loop(o[lane_o[sel]], d[lane_d[sel]], v0[t], e1[t], e2[t], nn[t], mc, 0, hi - lo,
+               hit, t_o[sel], u_o[sel], v_o[sel], det_o[sel], cnt_o[sel], e, m, r,
+               np.bool_(True))
+    outc[sel] = np.where(hit, 2, 0)
+
+
 def certified_pass(arith, scene, batch, run_b, run_start, run_sph, tri64, best_lo, best_hi,
-                   best_tri, tmin=0.0, tmax=None, exclude=None, any_hit=False, block=True):
+                   best_tri, tmin=0.0, tmax=None, exclude=None, any_hit=False, block=True,
+                   unit=None):
     """Runs of a pass in certified mode (module docstring).
 
     ``arith`` is the model's :class:`~raplas_hdl.engine.passes.Arithmetic` (its ``extra``
@@ -178,7 +200,9 @@ def certified_pass(arith, scene, batch, run_b, run_start, run_sph, tri64, best_l
     the original triangles (F, 3, 3); other arguments as
     :func:`~raplas_hdl.engine.passes.trace_pass`, with ``best_lo, best_hi`` the interval of
     each ray's folded ``t``; ``block`` False runs the unit's pairs one at a time (the
-    reference of the block path: the same results).
+    reference of the block path: the same results); ``unit`` another pair kernel of
+    :func:`~raplas_hdl.model.certified.block_pairs`' signature (:func:`conservative_pairs`,
+    with the conservative margin table as ``arith.extra``).
 
     Returns
     -------
@@ -197,7 +221,8 @@ def certified_pass(arith, scene, batch, run_b, run_start, run_sph, tri64, best_l
     fold = (o64, d64, np.ascontiguousarray(tri64, np.float64), *tail, bool(any_hit))
     listing = (*head[:2], *head[4:8], run_b, *head[9:15])
     mem = [np.ascontiguousarray(x, np.uint32) for x in (*head[2:4], *head[15:19])]
-    unit = block_pairs if block else pairs_one
+    if unit is None:
+        unit = block_pairs if block else pairs_one
 
     def units(lo, hi, pend):
         """Runs ``lo .. hi-1``: list, unit, fold; returns the pending count."""

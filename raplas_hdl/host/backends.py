@@ -391,11 +391,14 @@ class ModelBackend(Backend):
         filter and the exact resolution of what it leaves
         (:func:`raplas_hdl.engine.certified.certified_pass`,
         :func:`raplas_hdl.host.resolve.resolve_pending`) give R's answer per ray, and
-        :attr:`certified` counts the work."""
+        :attr:`certified` counts the work. In ``conservative`` mode the unit's hits are a
+        superset of R's (false hits in a band around each triangle,
+        docs/conservative-mode.md): each goes through the same filter and resolution as an
+        uncertain pair (its misses are final), so the render is R's too."""
         if self.reduce:
             return self._trace_reduced(batch, run_b, run_start, run_sph, best_t, best_tri,
                                        tmin, tmax, exclude, any_hit)
-        if self.mode != "certified":
+        if self.mode not in ("certified", "conservative"):
             ctr = super().trace(batch, run_b, run_start, run_sph, best_t, best_tri, tmin,
                                 tmax, exclude, any_hit)
             self.beats["result"] += _result_beats(ctr)
@@ -407,9 +410,12 @@ class ModelBackend(Backend):
             raise ValueError("a certified nearest-hit pass starts from rays without a hit")
         lo = np.where(best_tri >= 0, best_t, np.inf)
         hi = lo.copy()
+        cons = self.mode == "conservative"
+        if cons:
+            from ..engine.certified import conservative_pairs
         ctr, pending = certified_pass(self._arith(), self.scene, batch, run_b, run_start,
                                       run_sph, self.tris, lo, hi, best_tri, tmin, tmax,
-                                      exclude, any_hit)
+                                      exclude, any_hit, unit=conservative_pairs if cons else None)
         t0 = time.perf_counter()
         exact = resolve_pending(pending, batch.origin, batch.directions, self.tris, lo, hi,
                                 best_tri, best_t, tmin, tmax, exclude, any_hit)
@@ -419,6 +425,9 @@ class ModelBackend(Backend):
         st["certified_hits"] += int(ctr[:, COUNTERS.index("hits")].sum())
         for k, name in enumerate(CERT_COUNTERS):
             st[name] += int(ctr[:, len(COUNTERS) + k].sum())
+        if cons:            # every hit of the conservative unit is an "uncertain" pair
+            ctr[:, COUNTERS.index("hits")] = ctr[:, len(COUNTERS)]
+            self.beats["result"] += _result_beats(ctr[:, :len(COUNTERS)])
         return ctr[:, :len(COUNTERS)]
 
     def window_runs(self, batch, runs, tmin=0.0, tmax=None, exclude=None, any_hit=False):
@@ -726,7 +735,20 @@ class RtlBackend(ModelBackend):
         runs = _runs_of(run_b, run_start, run_sph)
         counters = np.zeros((len(runs), len(COUNTERS)), np.int64)
         R = batch.n_rays
-        if runs:
+        if runs and self.mode == "conservative":
+            # the unit's hits are a superset of R's (ModelBackend.trace): resolve them exactly
+            from .resolve import resolve_pending
+
+            pending = []
+            for k, ((b, _), res) in enumerate(zip(runs, self.stream(batch, runs))):
+                counters[k] = [res.counters.get(n, 0) for n in COUNTERS]
+                pending.append(np.stack([np.full(int(res.hit.sum()), b), res.ray_id[res.hit],
+                                         res.tri_id[res.hit]], 1))
+            lo = np.where(best_tri >= 0, best_t, np.inf)
+            resolve_pending(np.concatenate(pending), batch.origin, batch.directions,
+                            self.tris, lo, lo.copy(), best_tri, best_t, tmin, tmax, exclude,
+                            any_hit)
+        elif runs:
             for k, ((b, _), res) in enumerate(zip(runs, self.stream(batch, runs))):
                 counters[k] = [res.counters.get(n, 0) for n in COUNTERS]
                 hi = np.inf if tmax is None else np.asarray(tmax)[b]
@@ -746,9 +768,9 @@ def _check_reduce(fmt, mode):
     reduction in ``fmt`` and ``mode``."""
     from ..model.reduction import check_reduce_format
 
-    if mode == "certified":
-        raise ValueError("the on-chip reduction has no certified mode (uncertain pairs must "
-                         "reach the host): use --mode paper or conservative, or no --reduce")
+    if mode in ("certified", "conservative"):
+        raise ValueError(f"the on-chip reduction has no {mode} mode (its hits must reach the "
+                         f"host to be resolved): use --mode paper, or no --reduce")
     check_reduce_format(fmt)
 
 
