@@ -8,9 +8,10 @@ per bundle, pairs issued against brute force (every ray against every triangle),
 per ray (host hierarchy and unit), pairs per ray, early-out savings and hits. Per render:
 wall and CPU time (``time.process_time``: every thread of the process) and the load average.
 The model against float64: PSNR of the whole image, the fraction of pixels whose primary
-nearest triangle differs, and, per first-bounce layer, the fraction of pixels (where both
-renders have the ray) whose reflection / refraction triangle differs and the mean absolute
-difference of the glossy hit fraction and of the ambient-occlusion factor.
+nearest triangle differs, and, per first-bounce layer (:func:`raplas_hdl.host.render.compare`),
+the fraction of pixels (where either render has the ray) whose reflection / refraction
+triangle differs and the mean absolute difference of the glossy hit fraction and of the
+ambient-occlusion factor (where both have it).
 
 ``--picture WxH`` renders the showcase alone at that size with the scene's own render
 settings (those of ``raplas-hdl render --scene showcase``: the command's defaults under the
@@ -177,6 +178,9 @@ def main(argv=None) -> int:
                     help="where the PNGs go (default: beside --out)")
     ap.add_argument("--out", type=Path, default=DEFAULT_OUT)
     args = ap.parse_args(argv)
+    unknown = [n for n in args.scenes.split(",") if n not in SCENES]
+    if unknown:
+        ap.error(f"unknown scene {unknown[0]!r}: use {', '.join(SCENES)}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     images = args.images or args.out.parent
     report = {"machine": platform.platform(), "cpus": os.cpu_count(), "format": str(FP24),
