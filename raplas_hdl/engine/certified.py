@@ -52,8 +52,8 @@ from ..model.ray_triangle import _loop as pairs_loop
 
 drop_stale_cache(__file__)
 
-__all__ = ["certified_pass", "trace_certified", "conservative_pairs", "N_CERT_COUNTERS",
-           "CERT_COUNTERS"]
+__all__ = ["certified_pass", "trace_certified", "conservative_pairs", "fold_outcomes",
+           "N_CERT_COUNTERS", "CERT_COUNTERS"]
 
 #: Extra counter columns after the unit's eight.
 CERT_COUNTERS = ("uncertain", "filtered", "pending")
@@ -188,6 +188,37 @@ def conservative_pairs(o, d, v0, e1, e2, nn, mc, lane_o, lane_d, lane_t, lo, hi,
                hit, t_o[sel], u_o[sel], v_o[sel], det_o[sel], cnt_o[sel], e, m, r,
                np.bool_(True))
     outc[sel] = np.where(hit, 2, 0)
+
+
+def fold_outcomes(lanes, outcome, batch, tri64, best_lo, best_hi, best_tri, tmin=0.0,
+                  tmax=None, exclude=None, any_hit=False):
+    """Step 2-4 of the pass (module docstring) for pairs whose outcomes are already known
+    (the RTL's conservative stream: 2 where the unit hit): ``lanes (5, n)`` as
+    :func:`trace_certified` lists them, in stream order; ``outcome (n,)``. Folds into
+    ``best_lo, best_hi, best_tri`` as :func:`certified_pass` does and returns the pending
+    list."""
+    B, R = batch.n_bundles, batch.n_rays
+    tmax = np.full((B, R), np.inf) if tmax is None else np.ascontiguousarray(tmax, np.float64)
+    excl = (np.full(B, -1, np.int64) if exclude is None
+            else np.ascontiguousarray(exclude, np.int64))
+    n = lanes.shape[1]
+    lanes = np.ascontiguousarray(lanes, np.int64).copy()
+    lanes[4] = 0                                    # counters: one scratch row
+    counters = np.zeros((1, N_CERT_COUNTERS), np.int64)
+    o64 = np.ascontiguousarray(batch.origin, np.float64)
+    d64 = np.ascontiguousarray(batch.directions, np.float64).reshape(-1, 3)
+    tri64 = np.ascontiguousarray(tri64, np.float64)
+    cap = 1024
+    while True:
+        pend = np.empty((cap, 3), np.int64)
+        lo, hi, tri = best_lo.copy(), best_hi.copy(), best_tri.copy()
+        npend = _tails(lanes, n, np.ascontiguousarray(outcome, np.uint8),
+                       np.zeros((n, 3), np.uint8), o64, d64, tri64, float(tmin), tmax, excl,
+                       bool(any_hit), lo, hi, tri, counters, pend, 0)
+        if npend <= cap:
+            best_lo[:], best_hi[:], best_tri[:] = lo, hi, tri
+            return pend[:npend]
+        cap = npend
 
 
 def certified_pass(arith, scene, batch, run_b, run_start, run_sph, tri64, best_lo, best_hi,

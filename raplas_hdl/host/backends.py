@@ -736,18 +736,24 @@ class RtlBackend(ModelBackend):
         counters = np.zeros((len(runs), len(COUNTERS)), np.int64)
         R = batch.n_rays
         if runs and self.mode == "conservative":
-            # the unit's hits are a superset of R's (ModelBackend.trace): resolve them exactly
+            # the unit's hits are a superset of R's: the model's filter and exact resolution
+            # (ModelBackend.trace) on the stream, in stream order
+            from ..engine.certified import fold_outcomes
             from .resolve import resolve_pending
 
-            pending = []
+            lanes = []
             for k, ((b, _), res) in enumerate(zip(runs, self.stream(batch, runs))):
                 counters[k] = [res.counters.get(n, 0) for n in COUNTERS]
-                pending.append(np.stack([np.full(int(res.hit.sum()), b), res.ray_id[res.hit],
-                                         res.tri_id[res.hit]], 1))
+                lanes.append(np.stack([np.full(res.hit.size, b), res.ray_id,
+                                       b * R + res.ray_id, res.tri_id,
+                                       np.where(res.hit, 2, 0)]))
+            lanes = np.concatenate(lanes, axis=1).astype(np.int64)
             lo = np.where(best_tri >= 0, best_t, np.inf)
-            resolve_pending(np.concatenate(pending), batch.origin, batch.directions,
-                            self.tris, lo, lo.copy(), best_tri, best_t, tmin, tmax, exclude,
-                            any_hit)
+            hi = lo.copy()
+            pending = fold_outcomes(lanes, lanes[4], batch, self.tris, lo, hi, best_tri, tmin,
+                                    tmax, exclude, any_hit)
+            resolve_pending(pending, batch.origin, batch.directions, self.tris, lo, hi,
+                            best_tri, best_t, tmin, tmax, exclude, any_hit)
         elif runs:
             for k, ((b, _), res) in enumerate(zip(runs, self.stream(batch, runs))):
                 counters[k] = [res.counters.get(n, 0) for n in COUNTERS]
