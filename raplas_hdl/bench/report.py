@@ -521,10 +521,11 @@ def render_markdown(results: dict, plots: list, md_path, *, command: str,
           "them with two caveats: the model's *run time* hardly depends on the format (it "
           "is software emulation; differences of a few percent are noise and pair counts), "
           "so the hardware-cost fronts are the ones that rank formats; and the t error "
-          "counts only pairs that both the model and float64 hit, so the conservative "
-          "mode's extra hits (no false misses, many false hits: nearest triangles move to "
-          "coplanar neighbours and shadow rays are blocked more often) show in the pixel "
-          "error and PSNR, not in the t error.", ""]
+          "counts only pairs that both the model and float64 hit. The conservative "
+          "unit's hits are a superset of R's (no false misses, many false hits); the "
+          "render resolves them on the host like the certified mode's uncertain pairs "
+          "(docs/conservative-mode.md), so its pixels are R's and the host's share is in "
+          "its run time.", ""]
     for (err, cost), idx in fr.items():
         L.append(f"**{ERRORS[err]}** against **{COSTS[cost]}**:")
         L.append("")
