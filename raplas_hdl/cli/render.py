@@ -270,8 +270,8 @@ def add_parser(subparsers):
                    help="simulator of the rtl backend (default icarus; --backend rtl only)")
     p.add_argument("--reduce", action="store_true",
                    help="through the unit built with the on-chip reduction: one answer per "
-                        "ray leaves the unit, not one beat per pair (model and rtl; not "
-                        "certified; docs/intersection-unit.md)")
+                        "ray leaves the unit, not one beat per pair (model and rtl; --mode "
+                        "paper only; docs/intersection-unit.md)")
     add_render_options(p)
     add_secondary_options(p)
     add_view_options(p)
