@@ -141,6 +141,7 @@ class Backend:
         disk cache) before the real passes; returns the seconds it took."""
         t0 = time.perf_counter()
         saved = dict(getattr(self, "certified", {}))     # a throw-away pass counts nothing
+        beats = dict(getattr(self, "beats", {}))
         batch = self.batch(origins, centres, col_axes, row_axes, rows, cols)
         cr = self.cull(batch)
         best_t = np.full((batch.n_bundles, batch.n_rays), np.inf)
@@ -149,6 +150,8 @@ class Backend:
                    np.full(best_t.shape, np.inf), np.full(batch.n_bundles, -1, np.int64))
         if saved:
             self.certified.update(saved)
+        if beats:
+            self.beats.update(beats)
         return time.perf_counter() - t0
 
     def batch(self, origins, centres, col_axes, row_axes, rows: int, cols: int,
