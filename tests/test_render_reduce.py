@@ -19,7 +19,7 @@ import pytest
 
 from raplas_hdl.fp import FP24
 from raplas_hdl.host.backends import ModelBackend, make_backend
-from raplas_hdl.host.render import RenderSettings, render
+from raplas_hdl.host.render import RenderSettings, format_summary, render
 from raplas_hdl.host.scenes import get_scene
 
 PIXELS = ("image", "tri_id", "t", "visibility")
@@ -54,6 +54,8 @@ def test_model_reduce_equals_unreduced(scene, size):
     assert rb.beats["result"] == pb.beats["result"] >= plain.stats["unit"]["pairs_issued"]
     assert 0 < rb.beats["answer"] < rb.beats["result"] // 4
     assert pb.beats["answer"] == 0
+    assert red.stats["output_beats"] == rb.beats and "output_beats" not in plain.stats
+    assert f"{rb.beats['answer']:,} answer beats" in format_summary(red)
     # the warm-up pass counts nothing: every issued pair is one beat, plus runs without pairs
     assert rb.beats["result"] - plain.stats["unit"]["pairs_issued"] < plain.stats["unit"][
         "spheres"]

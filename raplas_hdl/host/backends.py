@@ -343,9 +343,10 @@ class ModelBackend(Backend):
             _check_reduce(fmt, mode)
         self.fmt, self.mode, self.testers, self.margin_scale = fmt, mode, testers, margin_scale
         self.reduce = bool(reduce)
-        #: the unit's output traffic of the passes traced so far: ``result`` the beats of the
-        #: unreduced result stream (one per issued pair, one for a run without any), and
-        #: with ``reduce`` ``answer`` the ANSWER beats that left the unit instead
+        #: the unit's output traffic of the passes traced since :meth:`load`: ``result``
+        #: the beats of the unreduced result stream (one per issued pair, one for a run
+        #: without any), and with ``reduce`` ``answer`` the ANSWER beats that left the
+        #: unit instead
         self.beats = {"result": 0, "answer": 0}
         self._configs = {}
         #: certified mode's work: the unit's certified hits and uncertain pairs, pairs
@@ -529,6 +530,7 @@ class ModelBackend(Backend):
 
         rep = super().load(tris, tree, bound)
         self.certified = dict.fromkeys(self.certified, 0)
+        self.beats = dict.fromkeys(self.beats, 0)
         cached = getattr(self, "_records", None)
         if cached is None or cached[0] is not tris and not np.array_equal(cached[0], tris):
             self.usable(tris)

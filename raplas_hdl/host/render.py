@@ -435,6 +435,8 @@ def _render(scene: Scene, backend: Backend, settings: RenderSettings):
         cert["uncertain_fraction"] = (cert.get("uncertain", 0) / stats["pairs_issued"]
                                       if stats["pairs_issued"] else 0.0)
         stats["certified"] = cert
+    if getattr(backend, "reduce", False):       # the unit's on-chip reduction
+        stats["output_beats"] = dict(backend.beats)
     rays = None
     if s.record_rays:
         rays = {k: np.concatenate(v) if v else np.zeros((0,)) for k, v in rec.items()}
@@ -550,6 +552,11 @@ def format_summary(result: RenderResult, comparison: dict | None = None) -> str:
                      f"({100.0 * c['uncertain_fraction']:.3f} % of issued), certified hits "
                      f"{c['certified_hits']:,}; float64 filter {c['filtered']:,} pairs, "
                      f"exact {c['exact']:,} pairs in {c['exact_s']:.3f}s")
+    if "output_beats" in st:
+        b = st["output_beats"]
+        lines.append(f"  reduction {b['answer']:,} answer beats left the unit instead of "
+                     f"{b['result']:,} result beats "
+                     f"({100.0 * (1 - b['answer'] / max(b['result'], 1)):.1f} % saved)")
     if "points_behind_light" in st:
         lines.append(f"  shading points without a shadow bundle: behind the light "
                      f"{st['points_behind_light']:,}, facing away {st['points_facing_away']:,}")
