@@ -46,7 +46,7 @@ from numba import njit
 
 from ..fp.numba_cache import drop_stale_cache
 from .exact_filter import HIT, MISS, filter_pair
-from .kernels import N_COUNTERS, plane_masks
+from .kernels import N_COUNTERS, plane_masks, run_counts, sphere_rays
 from ..model.certified import block_pairs, pairs_one
 from ..model.ray_triangle import _loop as pairs_loop
 
@@ -125,6 +125,7 @@ def trace_certified(pn, pp, enable, keep_all, rows, cols, run_b, run_start, run_
     n_rays = rows * cols
     rm = np.empty(rows, np.bool_)
     cm = np.empty(cols, np.bool_)
+    rays = np.empty(n_rays, np.int64)
     cap = lanes.shape[1]
     n = 0
     for u in range(lo, hi):
@@ -132,36 +133,25 @@ def trace_certified(pn, pp, enable, keep_all, rows, cols, run_b, run_start, run_
             return n * (hi + 1) + u
         b = run_b[u]
         base = b * n_planes
-        issued = 0
         skipped = 0
+        n0 = n
         for c in range(4, N_COUNTERS + 3):
             counters[u, c] = 0
         for q in range(run_start[u], run_start[u + 1]):
             s = run_sph[q]
             plane_masks(pn, pp, base, rows, n_planes, keep_all[b], sc, sr, s, rm, cm, e, m, r)
             nt = tcount[s]
-            for i in range(rows):
-                if not rm[i]:
-                    continue
-                for j in range(cols):
-                    if not cm[j]:
-                        continue
-                    ray = i * cols + j
-                    if not enable[b, ray]:
-                        skipped += nt
-                        continue
-                    if n + nt > cap:
-                        return -1
-                    for k in range(nt):
-                        lanes[0, n], lanes[1, n], lanes[2, n] = b, ray, b * n_rays + ray
-                        lanes[3, n], lanes[4, n] = tlist[s, k], u
-                        n += 1
-                    issued += nt
-        n_sph = run_start[u + 1] - run_start[u]
-        counters[u, 0] = n_sph
-        counters[u, 1] = n_sph * n_planes
-        counters[u, 2] = issued
-        counters[u, 3] = skipped
+            nr, sk = sphere_rays(rm, cm, enable, b, cols, nt, rays)
+            skipped += sk
+            if n + nr * nt > cap:
+                return -1
+            for x in range(nr):
+                ray = rays[x]
+                for k in range(nt):
+                    lanes[0, n], lanes[1, n], lanes[2, n] = b, ray, b * n_rays + ray
+                    lanes[3, n], lanes[4, n] = tlist[s, k], u
+                    n += 1
+        run_counts(counters, u, run_start[u + 1] - run_start[u], n_planes, n - n0, skipped)
     return n * (hi + 1) + hi
 
 

@@ -26,7 +26,11 @@ Pass layout (``B`` bundles of ``rows`` x ``cols`` rays, ``P = rows + cols`` plan
 - runs: run ``u`` tests spheres ``run_sph[run_start[u]:run_start[u+1]]`` (in order)
   against bundle ``run_b[u]``; a pass names each bundle at most once;
 - the unit's stream order inside a run is the RTL's: spheres in run order, rows
-  ascending, columns ascending, triangles in list order.
+  ascending, columns ascending, triangles in list order. :func:`sphere_rays` is its one
+  definition (a sphere's masks and the enable bits to the rays it reaches); the three trace
+  kernels (:func:`trace_f64`, :func:`trace_model` and
+  :func:`raplas_hdl.engine.certified.trace_certified`) differ only in the masks'
+  arithmetic and in what they do with each pair.
 
 The trace kernels reduce the stream as the renderer needs it: per ray the nearest hit
 accepted by ``tmin <= t <= tmax[b, r]`` and ``tri != exclude[b]`` (ties to the lower
@@ -63,6 +67,39 @@ def _accept(t, tid, b, ray, tmin, tmax, excl, best_t, best_tri):
         if t < bt or (t == bt and tid < best_tri[b, ray]):
             best_t[b, ray] = t
             best_tri[b, ray] = tid
+
+
+@njit(cache=True)
+def sphere_rays(rm, cm, enable, b, cols, nt, rays):
+    """The rays of bundle ``b`` a leaf sphere of ``nt`` triangles reaches under its row and
+    column masks ``rm, cm``, in the unit's order (rows ascending, then columns ascending),
+    into ``rays``; returns ``(n, skipped)``: the rays listed and the pairs of the rays whose
+    enable bit is clear. The one definition of the unit's pair enumeration: each trace
+    kernel gives each listed ray the sphere's triangles in list order."""
+    n = 0
+    skipped = 0
+    for i in range(rm.size):
+        if not rm[i]:
+            continue
+        for j in range(cols):
+            if not cm[j]:
+                continue
+            ray = i * cols + j
+            if enable[b, ray]:
+                rays[n] = ray
+                n += 1
+            else:
+                skipped += nt
+    return n, skipped
+
+
+@njit(cache=True)
+def run_counts(counters, u, n_sph, n_planes, issued, skipped):
+    """Run ``u``'s counters 0-3 (spheres, plane tests, pairs issued, pairs skipped)."""
+    counters[u, 0] = n_sph
+    counters[u, 1] = n_sph * n_planes
+    counters[u, 2] = issued
+    counters[u, 3] = skipped
 
 
 # -- float64 ------------------------------------------------------------------------------
@@ -131,6 +168,7 @@ def trace_f64(pn, pp, ro, rd, enable, keep_all, rows, cols, run_b, run_start, ru
     n_rays = rows * cols
     rm = np.empty(rows, np.bool_)
     cm = np.empty(cols, np.bool_)
+    rays = np.empty(n_rays, np.int64)
     for u in range(lo, hi):
         b = run_b[u]
         base = b * n_planes
@@ -144,33 +182,22 @@ def trace_f64(pn, pp, ro, rd, enable, keep_all, rows, cols, run_b, run_start, ru
             for j in range(cols):
                 cm[j] = keep_all[b] or _keep_f64(pn, base + rows + j, pp, sc, s, sr)
             nt = tcount[s]
-            for i in range(rows):
-                if not rm[i]:
-                    continue
-                for j in range(cols):
-                    if not cm[j]:
-                        continue
-                    ray = i * cols + j
-                    if not enable[b, ray]:
-                        skipped += nt
-                        continue
-                    for k in range(nt):
-                        tid = tlist[s, k]
-                        h, t = _pair_f64(ro, b, rd, b * n_rays + ray, v0, e1, e2, nn, tid)
-                        issued += 1
-                        if h:
-                            hits += 1
-                            _accept(t, tid, b, ray, tmin, tmax, excl, best_t, best_tri)
-        n_sph = run_start[u + 1] - run_start[u]
-        counters[u, 0] = n_sph
-        counters[u, 1] = n_sph * n_planes
-        counters[u, 2] = issued
-        counters[u, 3] = skipped
+            nr, sk = sphere_rays(rm, cm, enable, b, cols, nt, rays)
+            skipped += sk
+            issued += nr * nt
+            for x in range(nr):
+                ray = rays[x]
+                for k in range(nt):
+                    tid = tlist[s, k]
+                    h, t = _pair_f64(ro, b, rd, b * n_rays + ray, v0, e1, e2, nn, tid)
+                    if h:
+                        hits += 1
+                        _accept(t, tid, b, ray, tmin, tmax, excl, best_t, best_tri)
+        run_counts(counters, u, run_start[u + 1] - run_start[u], n_planes, issued, skipped)
         counters[u, 4] = hits
         counters[u, 5] = 0
         counters[u, 6] = 0
         counters[u, 7] = 0
-
 
 
 @njit(nogil=True, cache=True, error_model="numpy")
@@ -272,56 +299,46 @@ def trace_model(pn, pp, ro, rd, enable, keep_all, rows, cols, run_b, run_start, 
     lane_di = np.empty(BLOCK, np.int64)
     lane_tid = np.empty(BLOCK, np.int64)
     lane_u = np.empty(BLOCK, np.int64)
+    rays = np.empty(n_rays, np.int64)
     n = np.int64(0)
     for u in range(lo, hi):
         b = run_b[u]
         base = b * n_planes
         issued = 0
         skipped = 0
-        for c in range(5, 8):
+        for c in range(4, 8):
             counters[u, c] = 0
-        counters[u, 4] = 0
         for q in range(run_start[u], run_start[u + 1]):
             s = run_sph[q]
             plane_masks(pn, pp, base, rows, n_planes, keep_all[b], sc, sr, s, rm, cm, e, m, r)
             nt = tcount[s]
-            for i in range(rows):
-                if not rm[i]:
-                    continue
-                for j in range(cols):
-                    if not cm[j]:
-                        continue
-                    ray = i * cols + j
-                    if not enable[b, ray]:
-                        skipped += nt
-                        continue
-                    di = b * n_rays + ray
-                    for k in range(nt):
-                        tid = tlist[s, k]
-                        for c in range(3):
-                            g[c, n] = ro[b, c]
-                            g[3 + c, n] = rd[di, c]
-                            g[6 + c, n] = v0[tid, c]
-                            g[9 + c, n] = e1[tid, c]
-                            g[12 + c, n] = e2[tid, c]
-                            g[15 + c, n] = nn[tid, c]
-                        lane_b[n] = b
-                        lane_ray[n] = ray
-                        lane_di[n] = di
-                        lane_tid[n] = tid
-                        lane_u[n] = u
-                        n += 1
-                        issued += 1
-                        if n == BLOCK:
-                            _flush(g, w, lane_b, lane_ray, lane_di, lane_tid, lane_u, n,
-                                   ro, rd, v0, e1, e2, nn, mc, tmin, tmax, excl, best_t,
-                                   best_tri, counters, e, m, r, cons)
-                            n = np.int64(0)
-        n_sph = run_start[u + 1] - run_start[u]
-        counters[u, 0] = n_sph
-        counters[u, 1] = n_sph * n_planes
-        counters[u, 2] = issued
-        counters[u, 3] = skipped
+            nr, sk = sphere_rays(rm, cm, enable, b, cols, nt, rays)
+            skipped += sk
+            issued += nr * nt
+            for x in range(nr):
+                ray = rays[x]
+                di = b * n_rays + ray
+                for k in range(nt):
+                    tid = tlist[s, k]
+                    for c in range(3):
+                        g[c, n] = ro[b, c]
+                        g[3 + c, n] = rd[di, c]
+                        g[6 + c, n] = v0[tid, c]
+                        g[9 + c, n] = e1[tid, c]
+                        g[12 + c, n] = e2[tid, c]
+                        g[15 + c, n] = nn[tid, c]
+                    lane_b[n] = b
+                    lane_ray[n] = ray
+                    lane_di[n] = di
+                    lane_tid[n] = tid
+                    lane_u[n] = u
+                    n += 1
+                    if n == BLOCK:
+                        _flush(g, w, lane_b, lane_ray, lane_di, lane_tid, lane_u, n, ro, rd,
+                               v0, e1, e2, nn, mc, tmin, tmax, excl, best_t, best_tri,
+                               counters, e, m, r, cons)
+                        n = np.int64(0)
+        run_counts(counters, u, run_start[u + 1] - run_start[u], n_planes, issued, skipped)
     if n:
         _flush(g, w, lane_b, lane_ray, lane_di, lane_tid, lane_u, n, ro, rd, v0, e1, e2,
                nn, mc, tmin, tmax, excl, best_t, best_tri, counters, e, m, r, cons)
