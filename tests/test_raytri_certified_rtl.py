@@ -94,8 +94,10 @@ def test_certified_bad_parameters(fmt, kwargs, word):
         RayTriangleUnit(fmt, mode="certified", **kwargs)
 
 
-def test_intersection_unit_refuses_certified():
+def test_intersection_unit_certified_carries_outcome():
+    """The certified intersection unit (tests/test_certified_unit.py) puts the outcome on
+    its result stream."""
     from raplas_hdl.rtl.intersection import IntersectionUnit
 
-    with pytest.raises(ValueError, match="certified"):
-        IntersectionUnit(mode="certified")
+    unit = IntersectionUnit(mode="certified")
+    assert dict(unit.result_layout.members)["outcome"] == 2

@@ -106,8 +106,8 @@ def test_rtl_reduce_render_verilator():
 def test_reduce_refused():
     with pytest.raises(ValueError, match="float64 backend"):
         make_backend("float64", reduce=True)
-    with pytest.raises(ValueError, match="certified"):
-        ModelBackend(FP24, "certified", reduce=True)
+    with pytest.raises(ValueError, match="conservative"):
+        ModelBackend(FP24, "conservative", reduce=True)
 
 
 # -- the command line ---------------------------------------------------------------------
@@ -121,11 +121,9 @@ def _cli(*argv):
 @pytest.mark.parametrize("argv, needle", [
     (["render", "--reduce", "--backend", "float64"], "--reduce does not apply to --backend "
                                                      "float64"),
-    (["render", "--reduce", "--mode", "certified"], "--reduce has no certified mode"),
+    (["render", "--reduce", "--mode", "conservative"], "--reduce has no conservative mode"),
     (["render", "--reduce", "--exp-bits", "6", "--man-bits", "25"], "man_bits <= 24"),
     (["verilog", "fp-add", "--reduce"], "--reduce does not apply to unit fp-add"),
-    (["verilog", "intersection-unit", "--reduce", "--mode", "certified"],
-     "--reduce has no certified mode"),
     (["cosim", "intersection-unit", "--reduce", "--sim", "icarus", "--vectors", "x.vec"],
      "--vectors does not apply with --reduce"),
     (["cosim", "ray-triangle", "--reduce", "--sim", "icarus"],

@@ -6,7 +6,8 @@ random gaps in valid (held until taken) and random stalls; every output bit is c
 with the golden model. The unit options (--stages, --rows, --cols, --testers,
 --tris-per-sphere, --lanes, --mode, --target, --adder, --reduce) are those of raplas-hdl
 verilog; intersection-unit --reduce puts a random window on every run and compares every
-ANSWER beat (--random only).
+ANSWER beat (--random only); intersection-unit --mode certified compares each beat's
+outcome too (with --reduce: the runs' uncertain pairs, then their answers).
 
 Cases: --random N draws N seeded cases and takes the expected results from the model (an
 intersection-unit case is one run: a bundle against a list of spheres of a random scene);

@@ -271,7 +271,8 @@ def add_parser(subparsers):
     p.add_argument("--reduce", action="store_true",
                    help="through the unit built with the on-chip reduction: one answer per "
                         "ray leaves the unit, not one beat per pair (model and rtl; --mode "
-                        "paper only; docs/intersection-unit.md)")
+                        "paper, or certified: the unit's uncertain pairs leave it too; "
+                        "docs/intersection-unit.md)")
     add_render_options(p)
     add_secondary_options(p)
     add_view_options(p)
@@ -299,9 +300,16 @@ def check(args) -> None:
     if args.reduce and args.backend == "float64":
         raise g.UsageError("--reduce does not apply to --backend float64 (it has no unit; "
                            "use model or rtl)")
-    if args.reduce and args.mode in ("certified", "conservative"):
-        raise g.UsageError(f"--reduce has no {args.mode} mode (its uncertain hits must reach "
-                           f"the host to be resolved): use --mode paper")
+    if args.reduce and args.mode == "conservative":
+        raise g.UsageError("--reduce has no conservative mode (its hits must reach the host "
+                           "to be resolved): use --mode paper or certified")
+    if args.mode == "certified" and args.backend != "float64":
+        from ..model.certified import check_certified_format
+
+        try:
+            check_certified_format(args.fmt)
+        except ValueError as exc:
+            raise g.UsageError(f"--mode certified: {exc}") from None
     if args.reduce:
         from ..model.reduction import check_reduce_format
 

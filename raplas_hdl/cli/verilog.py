@@ -150,9 +150,13 @@ def unit_options(args, unit: str) -> dict:
             opts[opt] = v
         elif v is not None:
             raise g.UsageError(f"--{opt} does not apply to unit {unit}" + _takes(unit))
-    if opts.get("reduce") and opts.get("mode") == "certified":
-        raise g.UsageError("--reduce has no certified mode (uncertain pairs must reach the "
-                           "host): use --mode paper or conservative")
+    if opts.get("mode") == "certified" and getattr(args, "fmt", None) is not None:
+        from ..model.certified import check_certified_format
+
+        try:
+            check_certified_format(args.fmt)
+        except ValueError as exc:
+            raise g.UsageError(f"--mode certified: {exc}") from None
     if opts.get("reduce") and getattr(args, "fmt", None) is not None:
         from ..model.reduction import check_reduce_format
 

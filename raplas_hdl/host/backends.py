@@ -80,6 +80,7 @@ class RunResult:
     """The pairs one run issued, in stream order, with their outcome.
 
     ``t, u, v`` are ``t'/det, u'/det, v'/det`` in float64 (NaN where not a hit).
+    ``outcome``: a certified unit's per pair (0 miss, 1 certain hit, 2 uncertain), else None.
     """
 
     ray_id: np.ndarray
@@ -90,6 +91,7 @@ class RunResult:
     v: np.ndarray
     flags: np.ndarray
     counters: dict = field(default_factory=dict)
+    outcome: np.ndarray | None = None
 
     @classmethod
     def empty(cls, counters=None) -> RunResult:
@@ -346,8 +348,8 @@ class ModelBackend(Backend):
         #: the unit's output traffic of the passes traced since :meth:`load`: ``result``
         #: the beats of the unreduced result stream (one per issued pair, one for a run
         #: without any), and with ``reduce`` ``answer`` the ANSWER beats that left the
-        #: unit instead
-        self.beats = {"result": 0, "answer": 0}
+        #: unit instead (in ``certified`` mode ``uncertain`` of them were uncertain pairs)
+        self.beats = {"result": 0, "answer": 0, "uncertain": 0}
         self._configs = {}
         #: certified mode's work: the unit's certified hits and uncertain pairs, pairs
         #: through the float64 filter, pairs it left pending, pairs evaluated exactly and
@@ -398,7 +400,8 @@ class ModelBackend(Backend):
         :attr:`certified` counts the work. In ``conservative`` mode the unit's hits are a
         superset of R's (false hits in a band around each triangle,
         docs/conservative-mode.md): each goes through the same filter and resolution as an
-        uncertain pair (its misses are final), so the render is R's too."""
+        uncertain pair (its misses are final), so the render is R's too. With ``reduce``
+        (paper or certified) the unit's answers (:meth:`_trace_reduced`)."""
         if self.reduce:
             return self._trace_reduced(batch, run_b, run_start, run_sph, best_t, best_tri,
                                        tmin, tmax, exclude, any_hit)
@@ -408,7 +411,6 @@ class ModelBackend(Backend):
             self.beats["result"] += _result_beats(ctr)
             return ctr
         from ..engine.certified import CERT_COUNTERS, certified_pass
-        from .resolve import resolve_pending
 
         if not any_hit and (best_tri[np.asarray(run_b, np.int64)] >= 0).any():
             raise ValueError("a certified nearest-hit pass starts from rays without a hit")
@@ -420,19 +422,28 @@ class ModelBackend(Backend):
         ctr, pending = certified_pass(self._arith(), self.scene, batch, run_b, run_start,
                                       run_sph, self.tris, lo, hi, best_tri, tmin, tmax,
                                       exclude, any_hit, unit=conservative_pairs if cons else None)
-        t0 = time.perf_counter()
-        exact = resolve_pending(pending, batch.origin, batch.directions, self.tris, lo, hi,
-                                best_tri, best_t, tmin, tmax, exclude, any_hit)
+        self._resolve_pending(batch, pending, lo, hi, best_t, best_tri, tmin, tmax, exclude,
+                              any_hit)
         st = self.certified
-        st["exact_s"] += time.perf_counter() - t0
-        st["exact"] += exact
         st["certified_hits"] += int(ctr[:, COUNTERS.index("hits")].sum())
         for k, name in enumerate(CERT_COUNTERS):
             st[name] += int(ctr[:, len(COUNTERS) + k].sum())
         if cons:            # every hit of the conservative unit is an "uncertain" pair
             ctr[:, COUNTERS.index("hits")] = ctr[:, len(COUNTERS)]
-            self.beats["result"] += _result_beats(ctr[:, :len(COUNTERS)])
+        self.beats["result"] += _result_beats(ctr[:, :len(COUNTERS)])
         return ctr[:, :len(COUNTERS)]
+
+    def _resolve_pending(self, batch, pending, lo, hi, best_t, best_tri, tmin, tmax, exclude,
+                         any_hit):
+        """The exact resolution of the pending pairs (:func:`raplas_hdl.host.resolve.
+        resolve_pending`), counted in :attr:`certified` (``exact``, ``exact_s``)."""
+        from .resolve import resolve_pending
+
+        t0 = time.perf_counter()
+        exact = resolve_pending(pending, batch.origin, batch.directions, self.tris, lo, hi,
+                                best_tri, best_t, tmin, tmax, exclude, any_hit)
+        self.certified["exact_s"] += time.perf_counter() - t0
+        self.certified["exact"] += exact
 
     def window_runs(self, batch, runs, tmin=0.0, tmax=None, exclude=None, any_hit=False):
         """The runs ``(bundle index, sphere ids)`` of a batch as ``(BundleMemory, ids)`` whose
@@ -466,7 +477,10 @@ class ModelBackend(Backend):
                        exclude, any_hit):
         """:meth:`trace` through the unit built with the on-chip reduction: the window goes
         with each bundle (:meth:`window_runs`), one ANSWER beat per ray leaves the unit, and
-        the host folds only those (no per-pair work on the host)."""
+        the host folds only those (no per-pair work on the host). A certified unit also
+        sends its uncertain pairs: the host resolves its answers and those pairs as the
+        certified render resolves the unit's hits and uncertain pairs
+        (:meth:`_resolve_outcomes`)."""
         from ..fp import model as fpm
 
         runs = _runs_of(run_b, run_start, run_sph)
@@ -480,7 +494,15 @@ class ModelBackend(Backend):
         answers = [a for a, _ in results]
         self.beats["result"] += _result_beats(counters)
         self.beats["answer"] += sum(len(a) for a in answers)
-        keep = [k for k, a in enumerate(answers) if not a["empty"].any()]
+        keep = [k for k, a in enumerate(answers) if not a["empty"].all()]
+        if self.mode == "certified":
+            beats = [answers[k][~answers[k]["empty"].astype(bool)] for k in keep]
+            self.beats["uncertain"] += sum(int((a["outcome"] == 2).sum()) for a in beats)
+            self.certified["certified_hits"] += int(counters[:, COUNTERS.index("hits")].sum())
+            self._resolve_outcomes(batch, [(runs[k][0], a["ray_id"], a["tri_id"], a["outcome"])
+                                           for k, a in zip(keep, beats)],
+                                   best_t, best_tri, tmin, tmax, exclude, any_hit)
+            return counters
         if not keep:
             return counters
         ans = np.concatenate([answers[k] for k in keep])
@@ -503,6 +525,34 @@ class ModelBackend(Backend):
         best_t[bs[better], rs[better]] = ts[better]
         best_tri[bs[better], rs[better]] = trs[better]
         return counters
+
+    def _resolve_outcomes(self, batch, pairs, best_t, best_tri, tmin, tmax, exclude, any_hit):
+        """R's answer per ray from pairs of known outcome, in stream order: ``pairs`` is a
+        list of ``(bundle, ray_ids, tri_ids, outcomes)`` (0 miss, 1 certain hit, 2
+        uncertain). Misses are final; the others go through R's float64 filter, the fold
+        and the exact resolution of what it leaves
+        (:func:`raplas_hdl.engine.certified.fold_outcomes`,
+        :func:`raplas_hdl.host.resolve.resolve_pending`), as in the certified pass."""
+        from ..engine.certified import fold_outcomes
+
+        if not pairs:
+            return
+        R = batch.n_rays
+        lanes = np.concatenate([np.stack([np.full(len(ray), b), ray, b * R + ray, tri, out])
+                                for b, ray, tri, out in
+                                ((b, np.asarray(r, np.int64), np.asarray(t, np.int64),
+                                  np.asarray(o, np.int64)) for b, r, t, o in pairs)],
+                               axis=1).astype(np.int64)
+        lo = np.where(best_tri >= 0, best_t, np.inf)
+        hi = lo.copy()
+        pending = fold_outcomes(lanes, lanes[4], batch, self.tris, lo, hi, best_tri, tmin,
+                                tmax, exclude, any_hit)
+        self._resolve_pending(batch, pending, lo, hi, best_t, best_tri, tmin, tmax, exclude,
+                              any_hit)
+        st = self.certified
+        st["pending"] += len(pending)
+        st["uncertain"] += int((lanes[4] == 2).sum())
+        st["filtered"] += int((lanes[4] != 0).sum())
 
     def usable(self, tris):
         """Triangles that :func:`raplas_hdl.host.triangles.make_triangles` keeps (not
@@ -590,12 +640,13 @@ class ModelBackend(Backend):
         if out.size == 1 and out["empty"][0]:
             return RunResult.empty(counters)
         hit = out["hit"].astype(bool)
+        outcome = out["outcome"].astype(np.int64) if "outcome" in out.dtype.names else None
         tuvd = fpm.decode(np.stack([out["t"], out["u"], out["v"], out["det"]]), self.fmt)
         with np.errstate(divide="ignore", invalid="ignore"):
             inv = np.where(hit, 1.0 / np.where(hit, tuvd[3], 1.0), np.nan)
             t, u, v = tuvd[0] * inv, tuvd[1] * inv, tuvd[2] * inv
         return RunResult(out["ray_id"].astype(np.int64), out["tri_id"].astype(np.int64), hit,
-                         t, u, v, out["flags"].astype(np.uint8), counters)
+                         t, u, v, out["flags"].astype(np.uint8), counters, outcome)
 
     def _run_runs(self, config, runs):
         from ..model.intersection import run_runs
@@ -635,11 +686,6 @@ class RtlBackend(ModelBackend):
 
     def __init__(self, fmt: FPFormat = FP24, mode: str = "conservative", testers=None,
                  margin_scale: int = 1, sim: str = "icarus", reduce: bool = False):
-        if mode == "certified":
-            raise ValueError("the rtl backend has no certified mode yet (the ray-triangle "
-                             "unit has it, the intersection unit's result stream does not "
-                             "carry the outcome): use --backend model, or --mode paper or "
-                             "conservative")
         super().__init__(fmt, mode, testers, margin_scale, reduce)
         try:
             from raplas_hdl.sim.runner import SimulatorNotFound, require_simulator
@@ -740,25 +786,23 @@ class RtlBackend(ModelBackend):
         runs = _runs_of(run_b, run_start, run_sph)
         counters = np.zeros((len(runs), len(COUNTERS)), np.int64)
         R = batch.n_rays
-        if runs and self.mode == "conservative":
-            # the unit's hits are a superset of R's: the model's filter and exact resolution
+        if runs and self.mode in ("conservative", "certified"):
+            # conservative: the unit's hits are a superset of R's; certified: its hits and
+            # uncertain pairs. Either way the model's filter and exact resolution
             # (ModelBackend.trace) on the stream, in stream order
-            from ..engine.certified import fold_outcomes
-            from .resolve import resolve_pending
-
-            lanes = []
+            pairs = []
             for k, ((b, _), res) in enumerate(zip(runs, self.stream(batch, runs))):
                 counters[k] = [res.counters.get(n, 0) for n in COUNTERS]
-                lanes.append(np.stack([np.full(res.hit.size, b), res.ray_id,
-                                       b * R + res.ray_id, res.tri_id,
-                                       np.where(res.hit, 2, 0)]))
-            lanes = np.concatenate(lanes, axis=1).astype(np.int64)
-            lo = np.where(best_tri >= 0, best_t, np.inf)
-            hi = lo.copy()
-            pending = fold_outcomes(lanes, lanes[4], batch, self.tris, lo, hi, best_tri, tmin,
-                                    tmax, exclude, any_hit)
-            resolve_pending(pending, batch.origin, batch.directions, self.tris, lo, hi,
-                            best_tri, best_t, tmin, tmax, exclude, any_hit)
+                out = (np.where(res.hit, 2, 0) if res.outcome is None else res.outcome)
+                pairs.append((b, res.ray_id, res.tri_id, out))
+            saved = dict(self.certified)
+            self._resolve_outcomes(batch, pairs, best_t, best_tri, tmin, tmax, exclude,
+                                   any_hit)
+            if self.mode == "certified":
+                self.certified["certified_hits"] += int(
+                    counters[:, COUNTERS.index("hits")].sum())
+            else:
+                self.certified = saved
         elif runs:
             for k, ((b, _), res) in enumerate(zip(runs, self.stream(batch, runs))):
                 counters[k] = [res.counters.get(n, 0) for n in COUNTERS]
@@ -776,12 +820,13 @@ class RtlBackend(ModelBackend):
 
 def _check_reduce(fmt, mode):
     """Raise ``ValueError`` (one line) unless a backend can render through the on-chip
-    reduction in ``fmt`` and ``mode``."""
+    reduction in ``fmt`` and ``mode`` (paper or certified)."""
     from ..model.reduction import check_reduce_format
 
-    if mode in ("certified", "conservative"):
+    if mode == "conservative":
         raise ValueError(f"the on-chip reduction has no {mode} mode (its hits must reach the "
-                         f"host to be resolved): use --mode paper, or no --reduce")
+                         f"host to be resolved): use --mode paper or certified, or no "
+                         f"--reduce")
     check_reduce_format(fmt)
 
 

@@ -6,6 +6,9 @@ acceptance window in the unit's format (``tmin`` rounded up, ``tmax`` rounded do
 unit never accepts what the float64 window rejects). :func:`host_choice` is the host's
 choice on a run's unreduced stream (:func:`raplas_hdl.host.shading.nearest_hits`, the
 window decoded from the patterns the unit holds): what the reduced answers must equal.
+:func:`resolve_streams` is the certified host's answer for a pass from a certified unit's
+streams, reduced (answers and uncertain pairs) or not (every pair's outcome): the two must
+agree.
 """
 
 from __future__ import annotations
@@ -14,7 +17,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-__all__ = ["RecordedPass", "recorded_runs", "pass_runs", "host_choice"]
+__all__ = ["RecordedPass", "recorded_runs", "pass_runs", "host_choice", "resolve_streams"]
 
 
 @dataclass
@@ -101,3 +104,34 @@ def host_choice(config, beats, bundle):
     tri, _, idx = nearest_hits(R, beats["ray_id"], beats["tri_id"], hit, t, lo, hi,
                                None if bundle.exclude < 0 else bundle.exclude)
     return tri, idx
+
+
+def resolve_streams(backend, rec: RecordedPass, streams):
+    """R's answer per ray of a recorded pass from a certified unit's output, as the reduced
+    certified render resolves it (:meth:`~raplas_hdl.host.backends.ModelBackend._resolve_outcomes`:
+    misses final, the rest through the float64 filter and exact arithmetic), starting from
+    rays without a hit.
+
+    Parameters
+    ----------
+    backend : ModelBackend
+        The recording backend (its triangles).
+    rec : RecordedPass
+    streams : list of structured arrays
+        Per run of ``rec``, the unit's beats with ``outcome``: unreduced (``RESULT_CERTIFIED``)
+        or reduced (``ANSWER_CERTIFIED``); ``empty`` beats are skipped.
+
+    Returns
+    -------
+    best_tri, best_t : (bundles, rays) arrays
+    """
+    B, R = rec.batch.n_bundles, rec.batch.n_rays
+    best_t = np.full((B, R), np.inf)
+    best_tri = np.full((B, R), -1, np.int64)
+    pairs = []
+    for (b, _), beats in zip(rec.runs, streams):
+        beats = beats[~beats["empty"].astype(bool)]
+        pairs.append((b, beats["ray_id"], beats["tri_id"], beats["outcome"]))
+    backend._resolve_outcomes(rec.batch, pairs, best_t, best_tri, rec.tmin, rec.tmax,
+                              rec.exclude, rec.any_hit)
+    return best_tri, best_t

@@ -18,6 +18,12 @@ Order of the result stream (the unit's, by construction):
 Every pair issued gives one result beat. The last beat of the run has ``last`` set; a run
 that issues no pair gives exactly one beat with ``last`` and ``empty`` set and every other
 field zero.
+
+In ``certified`` mode (``UnitConfig(mode="certified")``) each beat also carries the pair's
+``outcome`` (:data:`~raplas_hdl.model.records.RESULT_CERTIFIED`: 0 miss, 1 certain hit, 2
+uncertain, from :func:`raplas_hdl.model.certified.intersect_certified` with the bound
+variant the RTL builds, :data:`UNIT_BOUND_VARIANT`); ``hit`` (and the ``hits`` counter) is
+``outcome == 1``.
 """
 
 from __future__ import annotations
@@ -25,14 +31,26 @@ from __future__ import annotations
 import numpy as np
 
 from .memory_image import COUNTER_NAMES, BundleMemory, Run, SceneMemory, UnitConfig, as_run
-from .records import RESULT
+from .records import RESULT, result_record
 
-__all__ = ["RESULT_DTYPE", "run_bundle", "run_runs", "enumerate_pairs", "empty_counters",
+__all__ = ["RESULT_DTYPE", "UNIT_BOUND_VARIANT", "result_dtype", "run_bundle", "run_runs", "enumerate_pairs", "empty_counters",
            "event_counters"]
 
 #: One beat of the unit's result stream: the dtype of the record
 #: :data:`raplas_hdl.model.records.RESULT` (``RESULT.bind(config)`` packs and unpacks beats).
 RESULT_DTYPE = RESULT.dtype()
+
+
+#: The certified bound variant of the unit's ray-triangle units (the one the RTL builds,
+#: ``raplas_hdl.rtl.certified_bound.RTL_VARIANTS``; a key of
+#: :data:`raplas_hdl.model.certified.VARIANTS`).
+UNIT_BOUND_VARIANT = "exp"
+
+
+def result_dtype(config) -> np.dtype:
+    """The dtype of ``config``'s result stream: :data:`RESULT_DTYPE`, with ``outcome`` in
+    ``certified`` mode (:func:`~raplas_hdl.model.records.result_record`)."""
+    return result_record(config).dtype()
 
 
 def empty_counters() -> dict:
@@ -125,8 +143,8 @@ def run_bundle(config: UnitConfig, scene: SceneMemory, bundle: BundleMemory,
 
     Returns
     -------
-    results : numpy structured array of :data:`RESULT_DTYPE`
-        The result stream, one element per beat.
+    results : numpy structured array of :func:`result_dtype`
+        The result stream, one element per beat (with ``outcome`` in ``certified`` mode).
     counters : dict
         ``spheres``, ``plane_tests`` (``rows + cols`` per sphere), ``pairs_issued``,
         ``pairs_skipped`` (pairs of disabled rays), ``hits``, and ``overflow``,
@@ -159,8 +177,9 @@ def run_runs(config: UnitConfig, scene: SceneMemory, runs) -> list:
     list of (results, counters)
         Per run, as :func:`run_bundle` describes them. The pairs of all runs go through one
         call of the ray-triangle model (a pair's arithmetic does not depend on the others).
-        With ``config.reduce`` the results are the run's answers (``ANSWER_DTYPE`` of
-        :mod:`raplas_hdl.model.reduction`: one beat per ray with an answer) and the counters
+        With ``config.reduce`` the results are the run's answers (``answer_dtype`` of
+        :mod:`raplas_hdl.model.reduction`: one beat per ray with an answer; in ``certified``
+        mode the run's uncertain pairs first) and the counters
         are those of the unreduced run (no early-out: the unit's ``pairs_issued``, ``hits``
         and event counters of an any-hit run are at most these).
 
@@ -173,6 +192,7 @@ def run_runs(config: UnitConfig, scene: SceneMemory, runs) -> list:
     from .ray_triangle import intersect
 
     scene.check(config)
+    certified = config.mode == "certified"
     parts = []
     for run in runs:
         bundle, ids, keep_all = as_run(run)
@@ -202,20 +222,24 @@ def run_runs(config: UnitConfig, scene: SceneMemory, runs) -> list:
         tri_all = np.concatenate([t for _, _, t, _ in parts])
         res = intersect(o, d, scene.v0[tri_all], scene.e1[tri_all], scene.e2[tri_all],
                         scene.n[tri_all], config.fmt, mode=config.mode,
-                        margin_scale=config.margin_scale)
+                        margin_scale=config.margin_scale,
+                        bound_variant=UNIT_BOUND_VARIANT if certified else None)
     out, pos = [], 0
+    dtype = result_dtype(config)
     for _, ray, tri, c in parts:
         n = ray.size
         if n == 0:
-            beats = np.zeros(1, RESULT_DTYPE)
+            beats = np.zeros(1, dtype)
             beats["last"] = 1
             beats["empty"] = 1
             out.append((beats, c))
             continue
         sl = slice(pos, pos + n)
-        beats = np.zeros(n, RESULT_DTYPE)
+        beats = np.zeros(n, dtype)
         beats["ray_id"], beats["tri_id"] = ray, tri
         beats["hit"] = res["hit"][sl]
+        if certified:
+            beats["outcome"] = res["outcome"][sl]
         for key in ("t", "u", "v", "det"):
             beats[key] = res[key][sl]
         beats["flags"] = res["flags"][sl]

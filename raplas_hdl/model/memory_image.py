@@ -113,7 +113,9 @@ class UnitConfig:
     max_triangles, max_spheres : int
         Depths of Triangle Memory and Sphere Memory (1 to 2**20).
     mode : str
-        Ray-triangle mode, ``"paper"`` or ``"conservative"``.
+        Ray-triangle mode, ``"paper"``, ``"conservative"`` or ``"certified"`` (the result
+        records carry the pair's ``outcome``, :data:`raplas_hdl.model.records.OUTCOME`;
+        ``exp_bits <= 9``, ``margin_scale`` 1).
     margin_scale : int
         Scale of the conservative margin (the ray-triangle unit's parameter).
     fifo_depth : int
@@ -158,6 +160,13 @@ class UnitConfig:
         _check_int("max_spheres", self.max_spheres, 1, 1 << 20)
         check_mode(self.mode)
         _check_int("margin_scale", self.margin_scale, 1)
+        if self.mode == "certified":
+            from .certified import check_certified_format
+
+            check_certified_format(self.fmt)
+            if self.margin_scale != 1:
+                raise ValueError(f"the certified unit takes margin_scale 1 only, not "
+                                 f"{self.margin_scale}")
         _check_int("fifo_depth", self.fifo_depth, 2, 1024)
         _check_int("lanes", self.lanes, 1, 8)
         if not isinstance(self.reduce, (bool, np.bool_)):

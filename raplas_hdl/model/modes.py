@@ -14,8 +14,8 @@ from __future__ import annotations
 __all__ = ["MODES", "RTL_MODES", "check_mode", "check_rtl_mode"]
 
 MODES = ("paper", "conservative", "certified")
-#: The modes the RTL implements (the ray-triangle unit; the intersection unit's result
-#: stream has no outcome field, so it refuses the certified mode).
+#: The modes the RTL implements (the ray-triangle unit, and the intersection unit: in
+#: certified mode its result records carry the pair's ``outcome``).
 RTL_MODES = ("paper", "conservative", "certified")
 
 

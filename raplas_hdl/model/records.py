@@ -28,6 +28,10 @@ for a unit build):
   ``tri_id_bits``, ``W``);
 - :data:`ANSWER`: one beat of the result stream of a unit built with the on-chip reduction
   (``UnitConfig.reduce``): one answer per ray (``ray_id_bits``, ``tri_id_bits``, ``W``);
+- in ``certified`` mode each of ``RT_RESULT``, ``RESULT`` and ``ANSWER`` carries one more
+  field on top, :data:`OUTCOME` (2 bits): :data:`RT_RESULT_CERTIFIED`,
+  :data:`RESULT_CERTIFIED`, :data:`ANSWER_CERTIFIED`; :func:`rt_result_record`,
+  :func:`result_record`, :func:`answer_record` and :func:`output_record` pick a build's;
 - :data:`COUNTERS`: the intersection unit's ``counters`` port (32 bits each);
 - :data:`PAIR`: the ray-triangle unit's input, a :data:`RAY` and a :data:`TRIANGLE` with
   their IDs (``ray_id_bits``, ``tri_id_bits``, ``W``); :data:`RT_RESULT`: its output;
@@ -50,7 +54,9 @@ from .memory_image import COUNTER_NAMES
 
 __all__ = ["Field", "Record", "Layout", "Slot", "unit_params", "words_to_ints",
            "ints_to_words", "PARAMETERS", "EVENT_COUNT_BITS", "RAY", "TRIANGLE", "PAIR",
-           "RT_RESULT", "RESULT", "ANSWER", "output_record", "CMD", "COUNTERS", "PLANE",
+           "RT_RESULT", "RESULT", "ANSWER", "OUTCOME", "OUTCOME_MISS", "OUTCOME_HIT",
+           "OUTCOME_UNCERTAIN", "RT_RESULT_CERTIFIED", "RESULT_CERTIFIED", "ANSWER_CERTIFIED",
+           "rt_result_record", "result_record", "answer_record", "output_record", "CMD", "COUNTERS", "PLANE",
            "SPHERE", "PS_RESULT", "RECORDS"]
 
 #: Width parameters a field may name, and what they are.
@@ -539,10 +545,60 @@ ANSWER = Record("answer", (
     Field("empty", 1, "no ray of the run has an answer: the only beat, every other field 0"),
 ), "intersection unit result stream (o) with the on-chip reduction")
 
+#: The certified mode's outcome of a pair (:mod:`raplas_hdl.model.certified`).
+OUTCOME_MISS, OUTCOME_HIT, OUTCOME_UNCERTAIN = 0, 1, 2
+
+#: The field a ``certified`` unit adds on top of its result records (``hit`` is then
+#: ``outcome == 1``). In ``RT_RESULT`` and ``RESULT``: the pair's outcome; in ``ANSWER``:
+#: what the beat is (1 a ray's answer, a certain hit; 2 an uncertain pair sent on to the host;
+#: 0 the ``empty`` beat).
+OUTCOME = Field("outcome", 2, "certified mode: 0 miss, 1 certain hit, 2 uncertain "
+                              "(hit = outcome == 1)")
+
+
+def _with_outcome(record: Record, name: str, meaning: str) -> Record:
+    return Record(name, record.fields + (OUTCOME.with_(meaning=meaning),),
+                  record.doc + ", certified mode")
+
+
+#: The certified ray-triangle unit's output (``RayTriangleUnit(mode="certified")``).
+RT_RESULT_CERTIFIED = _with_outcome(RT_RESULT, "rt_result_certified", OUTCOME.meaning)
+#: One beat of a certified intersection unit's result stream.
+RESULT_CERTIFIED = _with_outcome(RESULT, "result_certified", OUTCOME.meaning)
+#: One beat of a certified unit's reduced stream: a run's uncertain pairs (``outcome`` 2, in
+#: stream order), then its answers (``outcome`` 1, ascending rays), or, when it has no
+#: answer, one ``empty`` beat (``outcome`` 0) after its uncertain pairs
+#: (:mod:`raplas_hdl.model.reduction`).
+ANSWER_CERTIFIED = _with_outcome(ANSWER, "answer_certified",
+                                 "1: the ray's answer (a certain hit); 2: an uncertain pair "
+                                 "for the host (before the run's answers); 0: empty beat")
+
+
+def _certified(config) -> bool:
+    return getattr(config, "mode", "paper") == "certified"
+
+
+def rt_result_record(config) -> Record:
+    """The ray-triangle unit's output record in ``config``'s mode."""
+    return RT_RESULT_CERTIFIED if _certified(config) else RT_RESULT
+
+
+def result_record(config) -> Record:
+    """The unreduced result stream's record in ``config``'s mode."""
+    return RESULT_CERTIFIED if _certified(config) else RESULT
+
+
+def answer_record(config) -> Record:
+    """The reduced stream's record in ``config``'s mode."""
+    return ANSWER_CERTIFIED if _certified(config) else ANSWER
+
+
 def output_record(config) -> Record:
-    """The record of the intersection unit's ``o`` stream: :data:`ANSWER` for a unit built
-    with the on-chip reduction (``config.reduce``), else :data:`RESULT`."""
-    return ANSWER if getattr(config, "reduce", False) else RESULT
+    """The record of the intersection unit's ``o`` stream: :func:`answer_record` for a unit
+    built with the on-chip reduction (``config.reduce``), else :func:`result_record` (each
+    with :data:`OUTCOME` in ``certified`` mode)."""
+    return answer_record(config) if getattr(config, "reduce", False) else \
+        result_record(config)
 
 
 #: The intersection unit's run command.
@@ -599,5 +655,6 @@ PS_RESULT = Record("ps_result", [
 ], "plane-sphere array output stream (o)")
 
 #: Every record, by name.
-RECORDS = {r.name: r for r in (CMD, RESULT, ANSWER, COUNTERS, PAIR, RT_RESULT, RAY, TRIANGLE, PLANE,
-                               SPHERE, PS_RESULT)}
+RECORDS = {r.name: r for r in (CMD, RESULT, ANSWER, COUNTERS, PAIR, RT_RESULT, RAY, TRIANGLE,
+                               PLANE, SPHERE, PS_RESULT, RT_RESULT_CERTIFIED, RESULT_CERTIFIED,
+                               ANSWER_CERTIFIED)}

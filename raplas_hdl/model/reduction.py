@@ -16,6 +16,17 @@ the reduction) into the answers of its rays (:data:`~raplas_hdl.model.records.AN
 - the answers leave in ascending ray order, one beat per ray that has one, the last marked
   ``last``; a run without any gives one ``empty`` beat (``last`` set, all else 0).
 
+A ``certified`` unit (:data:`~raplas_hdl.model.records.ANSWER_CERTIFIED`, ``outcome`` on
+every beat): only a certain hit (``outcome`` 1) is a candidate; an *uncertain* pair
+(``outcome`` 2) is not folded but leaves the unit for the host as its own beat
+(:func:`uncertain_pairs`): every uncertain pair of the run except those of the excluded
+triangle (no window test: its ``t'/det`` is not trusted; NaN, say, when the pair is
+uncertain because an operation overflowed) and, in an any-hit bundle, except those after
+their ray's first candidate (the ray is blocked; only a certain candidate blocks). A run's
+beats: its uncertain pairs in stream order (``outcome`` 2), then its answers (``outcome``
+1) as above, or, when it has no answer, the ``empty`` beat (``outcome`` 0). The host
+re-checks both kinds (``docs/intersection-unit.md``).
+
 Every comparison is exact: ``t'/det`` against ``t2'/det2`` is ``t'*|det2|`` against
 ``t2'*|det|`` with the signs of ``det`` moved onto the numerators (the RTL multiplies the
 significands), and ``tmin <= t'/det`` is ``tmin*|det| <= t'*sign(det)``. Here the products
@@ -34,13 +45,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from .records import ANSWER
+from .records import ANSWER, OUTCOME_HIT, OUTCOME_UNCERTAIN, answer_record
 
-__all__ = ["ANSWER_DTYPE", "check_reduce_format", "check_window", "candidates", "reduce_run",
+__all__ = ["ANSWER_DTYPE", "answer_dtype", "uncertain_pairs", "check_reduce_format", "check_window", "candidates", "reduce_run",
            "first_answers", "early_out_saving", "inf_pattern"]
 
 #: One beat of the reduced stream (the dtype of :data:`~raplas_hdl.model.records.ANSWER`).
 ANSWER_DTYPE = ANSWER.dtype()
+
+
+def answer_dtype(config) -> np.dtype:
+    """The dtype of ``config``'s reduced stream (:func:`~raplas_hdl.model.records.answer_record`:
+    :data:`ANSWER_DTYPE`, with ``outcome`` in ``certified`` mode)."""
+    return answer_record(config).dtype()
 
 
 def inf_pattern(fmt) -> int:
@@ -134,13 +151,34 @@ def first_answers(n_rays: int, ray_id, ok, key=None, tri_id=None) -> np.ndarray:
     return best
 
 
+def uncertain_pairs(config, beats, bundle, ok=None) -> np.ndarray:
+    """Which beats of a certified run's unreduced stream leave the reduced unit as uncertain
+    pairs (bool array; all False in another mode): ``outcome`` 2, not the excluded triangle,
+    and in an any-hit bundle before their ray's first candidate (``ok``: :func:`candidates`,
+    computed when not given)."""
+    out = np.zeros(beats.size, bool)
+    if config.mode != "certified" or beats.size == 0 or beats["empty"].any():
+        return out
+    out = beats["outcome"] == OUTCOME_UNCERTAIN
+    if bundle.exclude >= 0:
+        out &= beats["tri_id"].astype(np.int64) != bundle.exclude
+    if bundle.any_hit:
+        if ok is None:
+            ok = candidates(config.fmt, beats, bundle.tmin, bundle.window_tmax(config),
+                            bundle.exclude)
+        ray = beats["ray_id"].astype(np.int64)
+        first = first_answers(config.n_rays, ray, ok)[ray]
+        out &= (first < 0) | (np.arange(beats.size) < first)
+    return out
+
+
 def reduce_run(config, beats, bundle):
     """The reduced stream of one run from its unreduced ``beats``.
 
     Parameters
     ----------
     config : UnitConfig
-    beats : numpy structured array of ``RESULT_DTYPE``
+    beats : numpy structured array of ``result_dtype(config)``
         The run's result stream (:func:`raplas_hdl.model.intersection.run_runs` without
         the reduction).
     bundle : BundleMemory
@@ -148,10 +186,13 @@ def reduce_run(config, beats, bundle):
 
     Returns
     -------
-    numpy structured array of :data:`ANSWER_DTYPE`
+    numpy structured array of :func:`answer_dtype`
+        In ``certified`` mode the run's uncertain pairs (:func:`uncertain_pairs`) first.
     """
     fmt = config.fmt
     check_window(config, bundle)
+    dtype = answer_dtype(config)
+    certified = config.mode == "certified"
     ok = candidates(fmt, beats, bundle.tmin, bundle.window_tmax(config), bundle.exclude)
     ray = beats["ray_id"].astype(np.int64)
     if bundle.any_hit:
@@ -159,14 +200,21 @@ def reduce_run(config, beats, bundle):
     else:
         best = first_answers(config.n_rays, ray, ok, _ratio(fmt, beats), beats["tri_id"])
     rays = np.flatnonzero(best >= 0)
+    unc = beats[uncertain_pairs(config, beats, bundle, ok)]
+    out = np.zeros(unc.size + max(1, rays.size), dtype)
+    keys = ("ray_id", "tri_id", "t", "u", "v", "det", "flags")
     if rays.size == 0:
-        out = np.zeros(1, ANSWER_DTYPE)
-        out["last"] = out["empty"] = 1
-        return out
-    win = beats[best[rays]]
-    out = np.zeros(rays.size, ANSWER_DTYPE)
-    for key in ("ray_id", "tri_id", "t", "u", "v", "det", "flags"):
-        out[key] = win[key]
+        out["empty"][-1] = 1
+    else:
+        win = beats[best[rays]]
+        for key in keys:
+            out[key][unc.size:] = win[key]
+        if certified:
+            out["outcome"][unc.size:] = OUTCOME_HIT
+    for key in keys:
+        out[key][:unc.size] = unc[key]
+    if certified:
+        out["outcome"][:unc.size] = OUTCOME_UNCERTAIN
     out["last"][-1] = 1
     return out
 

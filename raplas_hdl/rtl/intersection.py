@@ -54,7 +54,7 @@ from amaranth.lib.fifo import SyncFIFOBuffered
 from amaranth.lib.wiring import In, Out
 
 from ..model.memory_image import UnitConfig
-from ..model.records import CMD, COUNTERS, RESULT
+from ..model.records import CMD, COUNTERS, result_record
 from .ram import SyncRAM
 from .records import struct_layout
 from .unit.feeder import SphereFeeder
@@ -82,10 +82,12 @@ def port_layouts(cfg: UnitConfig) -> dict:
     """The struct layouts of the ``cmd``, ``o`` (``result``) and ``counters`` ports.
 
     They are the records :data:`~raplas_hdl.model.records.CMD`,
-    :data:`~raplas_hdl.model.records.RESULT` (``ANSWER`` with ``cfg.reduce``) and
+    :data:`~raplas_hdl.model.records.RESULT` (``ANSWER`` with ``cfg.reduce``; each with
+    ``outcome`` in ``certified`` mode, :func:`~raplas_hdl.model.records.output_record`) and
     :data:`~raplas_hdl.model.records.COUNTERS` bound to ``cfg``."""
     return {"cmd": struct_layout(CMD, cfg),
-            "result": answer_layout(cfg) if cfg.reduce else struct_layout(RESULT, cfg),
+            "result": answer_layout(cfg) if cfg.reduce else struct_layout(result_record(cfg),
+                                                                          cfg),
             "counters": struct_layout(COUNTERS, cfg)}
 
 
@@ -122,8 +124,10 @@ class IntersectionUnit(wiring.Component):
         (cull nothing: the masks of every sphere of the run are all ones).
     o : Out(stream.Signature(result_layout))
         Results: ``ray_id``, ``tri_id``, ``hit``, ``t``, ``u``, ``v``, ``det``, ``flags``,
-        ``last``, ``empty``; with ``config.reduce`` the answers (``ANSWER``: one per ray
-        with an answer, :mod:`raplas_hdl.model.reduction`).
+        ``last``, ``empty`` (and ``outcome`` in ``certified`` mode: 0 miss, 1 certain hit,
+        2 uncertain); with ``config.reduce`` the answers (``ANSWER``: one per ray with an
+        answer, :mod:`raplas_hdl.model.reduction`; in ``certified`` mode a run's uncertain
+        pairs first, ``outcome`` 2, then its answers, ``outcome`` 1).
     counters : Out(counter_layout)
         ``cycles`` and the counters of
         :data:`~raplas_hdl.model.memory_image.COUNTER_NAMES`, 32 bits each.
@@ -161,9 +165,10 @@ class IntersectionUnit(wiring.Component):
         if not isinstance(config, UnitConfig):
             raise ValueError(f"config must be a UnitConfig, not {config!r}")
         self._cfg = cfg = config
-        if cfg.mode == "certified":
-            raise ValueError("the intersection unit has no certified mode (its result stream "
-                             "carries a hit bit, no outcome); RayTriangleUnit has it")
+        if cfg.mode == "certified" and cfg.reduce:
+            from ..model.reduction import check_reduce_format
+
+            check_reduce_format(cfg.fmt)
         layouts = port_layouts(cfg)
         self.cmd_layout = layouts["cmd"]
         self.result_layout = layouts["result"]
@@ -224,8 +229,13 @@ class IntersectionUnit(wiring.Component):
         from .ray_triangle import RayTriangleUnit
 
         cfg = self._cfg
+        extra = {}
+        if cfg.mode == "certified":
+            from ..model.intersection import UNIT_BOUND_VARIANT
+
+            extra["bound_variant"] = UNIT_BOUND_VARIANT
         return RayTriangleUnit(cfg.fmt, mode=cfg.mode, margin_scale=cfg.margin_scale,
-                               ray_id_bits=cfg.ray_id_bits + tag_bits,
+                               **extra, ray_id_bits=cfg.ray_id_bits + tag_bits,
                                tri_id_bits=cfg.tri_id_bits,
                                multiplier=self._multiplier, adder=self._adder)
 

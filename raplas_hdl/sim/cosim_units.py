@@ -667,7 +667,9 @@ class IntersectionCosim(UnitCosim):
     alternate; compared: every field of every ANSWER beat, and the counters, except that in
     an any-hit run the unit's early-out may issue fewer pairs than the model (which has none):
     ``pairs_issued``, ``hits`` and the event counters there are checked to be at most the
-    model's (``docs/intersection-unit.md``)."""
+    model's (``docs/intersection-unit.md``). With ``mode="certified"`` the beats carry the
+    pair's ``outcome`` (reduced: the runs' uncertain pairs, then their answers), compared
+    like every other field."""
 
     name = "intersection-unit"
     outputs = ("stream", "counters")
@@ -750,11 +752,11 @@ class IntersectionCosim(UnitCosim):
     def _kinds(self):
         """T, S (the scene), B, PL, RAY (a bundle), RUN, SPH (a run and its sphere list),
         BEAT, CTR (its expected result stream and counters)."""
-        from raplas_hdl.model.records import COUNTERS, RESULT
+        from raplas_hdl.model.records import COUNTERS, result_record
 
         cfg, w = self.config, self.config.fmt.width
         xyz = lambda v: tuple((f"{v}{c}", w) for c in "xyz")
-        res = RESULT.bind(cfg)
+        res = result_record(cfg).bind(cfg)
         return {
             "T": LineKind("T", xyz("v0") + xyz("e1") + xyz("e2") + xyz("n")),
             "S": LineKind("S", xyz("c") + (("r", w), ("count", cfg.count_bits))
@@ -775,7 +777,7 @@ class IntersectionCosim(UnitCosim):
 
     def from_items(self, path, items):
         from raplas_hdl.model.memory_image import BundleMemory, SceneMemory
-        from raplas_hdl.model.records import RESULT
+        from raplas_hdl.model.records import result_record
 
         cfg, k = self.config, self._kinds()
         by = {t: [] for t in k}
@@ -800,7 +802,7 @@ class IntersectionCosim(UnitCosim):
             b, keep, ids, beats, ctr = cur_run
             if ctr is None:
                 raise ValueError(f"{path}:{lineno}: run {len(runs)} has no CTR line")
-            stream = np.zeros(len(beats), RESULT.dtype())
+            stream = np.zeros(len(beats), result_record(cfg).dtype())
             for j, (name, _) in enumerate(k["BEAT"].fields):
                 stream[name] = [v[j] for v in beats]
             runs.append((bundles[b], ids, keep))

@@ -17,7 +17,7 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from ..model.memory_image import REGIONS, UnitConfig, bundle_writes
-from ..model.records import ANSWER, RESULT
+from ..model.records import answer_record, result_record
 from ..model.reduction import reduce_run
 
 __all__ = ["ReducerTop", "stimulus", "expected", "cosim_reducer"]
@@ -26,7 +26,7 @@ KIND_BEAT, KIND_WRITE, KIND_RUN = range(3)
 
 
 def _word_layout(cfg: UnitConfig) -> data.StructLayout:
-    return data.StructLayout({"kind": 2, "body": max(RESULT.bind(cfg).size, 64)})
+    return data.StructLayout({"kind": 2, "body": max(result_record(cfg).bind(cfg).size, 64)})
 
 
 class ReducerTop(wiring.Component):
@@ -72,7 +72,7 @@ def _window_writes(cfg, bundle, bank):
 
 def stimulus(cfg: UnitConfig, runs) -> np.ndarray:
     """Input words (Python ints) for ``runs``: a list of ``(beats, bundle)``."""
-    res = RESULT.bind(cfg)
+    res = result_record(cfg).bind(cfg)
     words = []
     for k, (beats, bundle) in enumerate(runs):
         bank = k % 2
@@ -92,7 +92,8 @@ def cosim_reducer(simulator: str, cfg: UnitConfig, runs, *, seed: int = 1,
                   valid_density: float = 0.8, stall_density: float = 0.3,
                   build_key: str = "reducer"):
     """Run ``runs`` through the reducer's Verilog; return ``(got, want, info)``: the answers
-    (structured arrays of ``ANSWER``) of the RTL and of the model."""
+    (structured arrays of ``ANSWER``, ``ANSWER_CERTIFIED`` in certified mode) of the RTL and
+    of the model."""
     from ..rtl.emit import emit_verilog
     from .cosim_units import _words64
     from .harness import HarnessSpec
@@ -100,7 +101,7 @@ def cosim_reducer(simulator: str, cfg: UnitConfig, runs, *, seed: int = 1,
     top = ReducerTop(cfg)
     text, _ = emit_verilog(top, "reducer_top", cfg.params())
     width = _word_layout(cfg).size
-    ans = ANSWER.bind(cfg)
+    ans = answer_record(cfg).bind(cfg)
     spec = HarnessSpec(dut="reducer_top", inputs=[("i__payload", width)],
                        outputs=[("o__payload", ans.size)], i_valid="i__valid",
                        o_valid="o__valid", i_ready="i__ready", o_ready="o__ready")

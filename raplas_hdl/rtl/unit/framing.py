@@ -1,7 +1,8 @@
 """Stage 8, the result framing, and the unit's event counters.
 
 One result is held back, so that the run's marker can mark the run's last result ``last``,
-or, when the run issued no pair, send the ``empty`` beat instead.
+or, when the run issued no pair, send the ``empty`` beat instead. In ``certified`` mode the
+beats carry the pair's ``outcome`` too (``hits`` counts ``outcome == 1``).
 """
 
 from __future__ import annotations
@@ -64,6 +65,8 @@ class ResultFraming(wiring.Component):
         m.d.comb += [fresh.ray_id.eq(r.ray_id[:ray_bits]), fresh.tri_id.eq(r.tri_id),
                      fresh.hit.eq(r.hit), fresh.t.eq(r.t), fresh.u.eq(r.u), fresh.v.eq(r.v),
                      fresh.det.eq(r.det), fresh.flags.eq(r.flags)]
+        if cfg.mode == "certified":
+            m.d.comb += fresh.outcome.eq(r.outcome)
         marker = r.ray_id[ray_bits]
         m.d.comb += self.i.ready.eq(self.o.ready)
         with m.If(self.i.valid):

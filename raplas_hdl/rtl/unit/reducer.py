@@ -33,6 +33,16 @@ its number (runs finished since reset, modulo ``2**seq_bits``); the pair selecto
 jobs of blocked rays of the run with that number. Pairs a blocked ray would have issued
 later cannot change its answer (the first candidate of the stream), so the answers do not
 depend on when the bit arrives; only ``pairs_issued`` does.
+
+Certified mode (``config.mode == "certified"``, :data:`~raplas_hdl.model.records.ANSWER_CERTIFIED`):
+only a certain hit (``outcome`` 1) can be a candidate. An uncertain pair (``outcome`` 2) of
+another triangle than the excluded one is qualified as *passed on* in stage 2 and, in stage
+3, unless its ray is blocked (an any-hit bundle whose ray already has an answer), loaded
+into the output register as its own beat (``outcome`` 2, the fields of the pair, not
+``last``) instead of being folded; while the output register holds a beat not yet taken,
+a passed-on pair waits in stage 3 and the pipeline stalls (``en``). So a run's uncertain
+pairs leave in stream order before its answers (``outcome`` 1); a run without answers ends
+with the ``empty`` beat (``outcome`` 0) after them.
 """
 
 from __future__ import annotations
@@ -43,7 +53,7 @@ from amaranth.lib.fifo import SyncFIFOBuffered
 from amaranth.lib.wiring import In, Out
 
 from ...model.memory_image import REGIONS, UnitConfig
-from ...model.records import ANSWER
+from ...model.records import OUTCOME_HIT, OUTCOME_UNCERTAIN, answer_record
 from ..ram import SyncRAM
 from ..records import struct_layout
 from .selector import lowest_set
@@ -60,7 +70,7 @@ SEQ_BITS = 8
 
 
 def answer_layout(cfg: UnitConfig) -> data.StructLayout:
-    return struct_layout(ANSWER, cfg)
+    return struct_layout(answer_record(cfg), cfg)
 
 
 def product_key(m: Module, x, y, sign, fmt, name: str):
@@ -194,11 +204,14 @@ class Reducer(wiring.Component):
 
         ans_fields = {"tri_id": tb, "t": W, "u": W, "v": W, "det": W, "flags": 3}
         ans = data.StructLayout(ans_fields)
+        certified = cfg.mode == "certified"
         beat_l = data.StructLayout({**ans_fields, "ray": cfg.ray_id_bits, "hit": 1,
-                                    "last": 1, "empty": 1, "bank": 1})
+                                    "last": 1, "empty": 1, "bank": 1,
+                                    **({"uncertain": 1} if certified else {})})
         en = Signal()            # the take / qualify / fold pipeline moves
         scanning = Signal()
-        m.d.comb += en.eq(~scanning)
+        if not certified:
+            m.d.comb += en.eq(~scanning)
 
         # -- 1. take
         a_v = Signal()
@@ -212,6 +225,8 @@ class Reducer(wiring.Component):
             m.d.sync += a_v.eq(self.i.valid & self.i.ready)
             m.d.sync += [a.ray.eq(r.ray_id), a.hit.eq(r.hit), a.last.eq(r.last),
                          a.empty.eq(r.empty), a.bank.eq(runs.r_stream.payload)]
+            if certified:
+                m.d.sync += a.uncertain.eq(r.outcome == OUTCOME_UNCERTAIN)
             m.d.sync += [a[k].eq(r[k]) for k in ans_fields]
 
         # -- 2. qualify
@@ -242,6 +257,11 @@ class Reducer(wiring.Component):
         b_any = Signal()
         with m.If(en):
             m.d.sync += [b_v.eq(a_v), b.eq(a), b_ok.eq(ok), b_any.eq(anyh.bit_select(a.bank, 1))]
+        if certified:
+            # an uncertain pair of another triangle than the excluded one is passed on
+            b_pass = Signal()
+            with m.If(en):
+                m.d.sync += b_pass.eq(a.uncertain & ~a.empty & (excl[a.bank] != a.tri_id + 1))
 
         # -- 3. fold
         valid = Signal(R)
@@ -277,6 +297,19 @@ class Reducer(wiring.Component):
         o_last = Signal()
         o_empty = Signal()
         o_ray = Signal(cfg.ray_id_bits)
+        if certified:
+            # passed-on uncertain pairs leave from stage 3 through the output register
+            o_unc = Signal()
+            u_word = Signal(ans)
+            emit = Signal()
+            m.d.comb += [emit.eq(b_v & b_pass & ~(b_any & has)),
+                         en.eq(~scanning & ~(emit & o_v))]
+            with m.If(~scanning):
+                with m.If(o_v & self.o.ready):
+                    m.d.sync += o_v.eq(0)
+                with m.If(en & emit):
+                    m.d.sync += [o_v.eq(1), o_unc.eq(1), o_last.eq(0), o_empty.eq(0),
+                                 o_ray.eq(b.ray), u_word.eq(new)]
         idx, only = lowest_set_tree(m, valid, R, "next")
         step = scanning & (~o_v | self.o.ready)
         m.d.comb += [ar.addr.eq(Mux(scanning, idx, a.ray)),
@@ -290,9 +323,16 @@ class Reducer(wiring.Component):
                              valid.bit_select(idx, 1).eq(0)]
             with m.Else():
                 m.d.sync += [o_v.eq(1), o_empty.eq(1), o_last.eq(1)]
+            if certified:
+                m.d.sync += o_unc.eq(0)
         out = self.o.payload
         word = Signal(ans)
-        m.d.comb += word.eq(ar.data)
+        if certified:
+            m.d.comb += [word.eq(Mux(o_unc, u_word, ar.data)),
+                         out.outcome.eq(Mux(o_empty, 0, Mux(o_unc, OUTCOME_UNCERTAIN,
+                                                             OUTCOME_HIT)))]
+        else:
+            m.d.comb += word.eq(ar.data)
         m.d.comb += [self.o.valid.eq(o_v), out.last.eq(o_last), out.empty.eq(o_empty)]
         with m.If(~o_empty):
             m.d.comb += [out.ray_id.eq(o_ray)] + [out[k].eq(word[k]) for k in ans_fields]

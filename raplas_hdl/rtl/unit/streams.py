@@ -12,6 +12,9 @@ RT unit -> framing  :func:`rt_result_layout`    ``RT_RESULT`` (the same marker b
 framing -> o        :func:`result_layout`       ``RESULT``
 ==================  ==========================  =========================================
 
+In ``certified`` mode the last two are ``RT_RESULT_CERTIFIED`` and ``RESULT_CERTIFIED``
+(the pair's ``outcome`` on top; :func:`~raplas_hdl.model.records.result_record`).
+
 A run's spheres are followed through every stage by one *marker* (a sphere, a job, a pair,
 a result with the marker bit set) that the result framing turns into the run's ``last``
 beat.
@@ -22,7 +25,8 @@ from __future__ import annotations
 from amaranth.lib import data
 
 from ...model.memory_image import UnitConfig
-from ...model.records import CMD, COUNTERS, PAIR, PS_RESULT, RESULT, RT_RESULT, SPHERE
+from ...model.records import (CMD, COUNTERS, PAIR, PS_RESULT, SPHERE, result_record,
+                              rt_result_record)
 from ..records import struct_layout
 
 __all__ = ["tag_layout", "cmd_layout", "sphere_layout", "mask_layout", "job_layout",
@@ -61,11 +65,11 @@ def pair_layout(cfg: UnitConfig, tag_bits: int = 1) -> data.StructLayout:
 
 
 def rt_result_layout(cfg: UnitConfig, tag_bits: int = 1) -> data.StructLayout:
-    return struct_layout(RT_RESULT, cfg, ray_id_bits=cfg.ray_id_bits + tag_bits)
+    return struct_layout(rt_result_record(cfg), cfg, ray_id_bits=cfg.ray_id_bits + tag_bits)
 
 
 def result_layout(cfg: UnitConfig) -> data.StructLayout:
-    return struct_layout(RESULT, cfg)
+    return struct_layout(result_record(cfg), cfg)
 
 
 def counter_layout(cfg: UnitConfig) -> data.StructLayout:
