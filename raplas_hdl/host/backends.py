@@ -37,6 +37,7 @@ Nothing here imports Amaranth.
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import time
 from dataclasses import dataclass, field
@@ -766,8 +767,6 @@ class RtlBackend(ModelBackend):
             s.close()
 
     def __del__(self):
-        import contextlib
-
         with contextlib.suppress(Exception):   # interpreter shutdown
             self.close()
 

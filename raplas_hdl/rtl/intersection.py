@@ -28,6 +28,11 @@ The unit is its stages, components of :mod:`raplas_hdl.rtl.unit` joined by strea
    early-out);
 8. :class:`~raplas_hdl.rtl.unit.framing.EventCounters`: the counters.
 
+With ``UnitConfig.mode == "certified"`` the ray-triangle units are certified
+(``RayTriangleUnit(mode="certified")``) and the result records carry each pair's
+``outcome`` (``RESULT_CERTIFIED``; reduced, ``ANSWER_CERTIFIED``: a run's uncertain pairs,
+then its answers); the paper and conservative units are built as before.
+
 With ``UnitConfig.lanes = K > 1``, stages 4-6 after the selector are K lanes (job FIFO,
 record fetch, pair FIFO, ray-triangle unit) between a
 :class:`~raplas_hdl.rtl.unit.lanes.JobDistributor` (job n to lane n mod K) and a
