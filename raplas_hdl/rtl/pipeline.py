@@ -22,7 +22,9 @@ Every register holds its value while the clock enable ``en`` is 0 (a stall). The
 that is reset, so data registers cost no reset logic.
 
 :func:`delay` and :class:`Delay` are shift registers with the same enable, for units that
-need to hold an operand back until a parallel pipeline catches up. :func:`wire` names a
+need to hold an operand back until a parallel pipeline catches up. With ``srl`` a long
+reset-less delay becomes Virtex-4 ``SRL16E`` primitives (one LUT site per bit per 16 stages)
+in front of flip-flops, with the same behaviour under the clock enable. :func:`wire` names a
 combinational value that several expressions read.
 """
 
@@ -31,12 +33,16 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
-from amaranth.hdl import Cat, Module, Shape, ShapeCastable, Signal, Value
+from amaranth.hdl import (Cat, ClockSignal, Const, Instance, Module, Shape, ShapeCastable,
+                          Signal, Value)
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
 __all__ = ["Step", "place_registers", "group_steps", "build_pipeline", "wire", "delay",
-           "Delay"]
+           "Delay", "srl_split", "SRL_STAGES"]
+
+#: Stages of one ``SRL16E`` (its address is the number of stages minus 1).
+SRL_STAGES = 16
 
 
 @dataclass(frozen=True)
@@ -209,8 +215,69 @@ def build_pipeline(m: Module, steps: Sequence[Step], inputs: dict, registered: I
     return values, valid
 
 
+def _check_cycles(cycles):
+    if not isinstance(cycles, int) or isinstance(cycles, bool) or cycles < 0:
+        raise ValueError(f"cycles must be a non-negative integer, not {cycles!r}")
+
+
+def _check_srl(srl):
+    if not isinstance(srl, int) or isinstance(srl, bool) or not 0 <= srl <= SRL_STAGES:
+        raise ValueError(f"srl must be an integer from 0 to {SRL_STAGES}, not {srl!r}")
+
+
+def srl_split(cycles: int, srl: int) -> tuple[tuple[int, ...], int]:
+    """How :func:`delay` builds a reset-less delay of ``cycles`` stages with ``srl``.
+
+    The last stage is always a flip-flop (an ``SRL16E``'s clock-to-out is slower than a
+    flip-flop's, so its output is registered before any logic reads it). The ``cycles - 1``
+    stages in front of it go into ``SRL16E`` pieces of 16 stages, and the remainder into
+    one more piece when it has at least ``srl`` stages; what is left stays flip-flops.
+
+    Parameters
+    ----------
+    cycles : int
+        Stages of the delay.
+    srl : int
+        Fewest stages worth an ``SRL16E`` (1 to 16; 0: flip-flops only).
+
+    Returns
+    -------
+    (tuple of int, int)
+        The stages of each ``SRL16E`` piece, in order from the input, and the number of
+        flip-flop stages behind them (their sum is ``cycles``).
+
+    Raises
+    ------
+    ValueError
+        If ``cycles`` is not a non-negative integer or ``srl`` not an integer from 0 to 16.
+    """
+    _check_cycles(cycles)
+    _check_srl(srl)
+    if not srl or cycles < 2:
+        return (), cycles
+    full, rest = divmod(cycles - 1, SRL_STAGES)
+    pieces = (SRL_STAGES,) * full + ((rest,) if rest and rest >= srl else ())
+    return pieces, cycles - sum(pieces)
+
+
+def _srl16(m: Module, value: Value, stages: int, en, domain: str, name: str) -> Value:
+    """``value`` through ``stages`` (1 to 16) stages of ``SRL16E``, one per bit."""
+    addr = stages - 1
+    bits = []
+    for b in range(len(value)):
+        q = Signal(name=f"{name}_q{b}")
+        m.submodules[f"{name}_b{b}"] = Instance(
+            "SRL16E", p_INIT=Const(0, 16), i_CLK=ClockSignal(domain),
+            i_CE=Const(1, 1) if en is None else en, i_D=value[b],
+            **{f"i_A{k}": Const((addr >> k) & 1, 1) for k in range(4)}, o_Q=q)
+        bits.append(q)
+    out = Signal(value.shape(), name=name)
+    m.d.comb += out.eq(Cat(*bits))
+    return out
+
+
 def delay(m: Module, value, cycles: int, *, en=None, domain: str = "sync",
-          name: str = "delay", reset_less: bool = True) -> Value:
+          name: str = "delay", reset_less: bool = True, srl: int = 0) -> Value:
     """Delay a value by ``cycles`` enabled clock edges.
 
     Parameters
@@ -226,9 +293,16 @@ def delay(m: Module, value, cycles: int, *, en=None, domain: str = "sync",
     domain : str
         Clock domain.
     name : str
-        Prefix of the register names (``name_1``, ``name_2``, ...).
+        Prefix of the register names (``name_1``, ``name_2``, ...; ``SRL16E`` pieces:
+        ``name_srl1``, ...).
     reset_less : bool
         Data registers need no reset; pass ``False`` for control bits such as a valid.
+    srl : int
+        0 (the default): flip-flops only. 1 to 16: a reset-less delay puts its stages into
+        Virtex-4 ``SRL16E`` primitives (``CE`` = ``en``, so a stall holds them exactly as
+        it holds flip-flops; power-up contents 0 like the flip-flops'), each piece of at
+        least ``srl`` stages, as :func:`srl_split` says; the last stage stays a
+        flip-flop. A delay with a reset is never put into ``SRL16E``.
 
     Returns
     -------
@@ -238,12 +312,15 @@ def delay(m: Module, value, cycles: int, *, en=None, domain: str = "sync",
     Raises
     ------
     ValueError
-        If ``cycles`` is not a non-negative integer.
+        If ``cycles`` is not a non-negative integer, or ``srl`` not an integer from 0 to 16.
     """
-    if not isinstance(cycles, int) or isinstance(cycles, bool) or cycles < 0:
-        raise ValueError(f"cycles must be a non-negative integer, not {cycles!r}")
+    _check_cycles(cycles)
+    _check_srl(srl)
     value = Value.cast(value)
-    for i in range(cycles):
+    pieces, ff = srl_split(cycles, srl if reset_less else 0)
+    for k, stages in enumerate(pieces):
+        value = _srl16(m, value, stages, en, domain, f"{name}_srl{k + 1}")
+    for i in range(cycles - ff, cycles):
         reg = Signal(value.shape(), name=f"{name}_{i + 1}", reset_less=reset_less)
         if en is None:
             m.d[domain] += reg.eq(value)
@@ -263,6 +340,10 @@ class Delay(wiring.Component):
         Shape of the delayed value.
     cycles : int
         Delay in enabled clock edges (0 is a wire).
+    srl : int
+        As in :func:`delay`: 0 for flip-flops only, 1 to 16 to put the stages into
+        ``SRL16E`` primitives (Virtex-4; simulate with
+        :func:`raplas_hdl.rtl.dsp48.dsp48_sim_model`).
 
     Attributes
     ----------
@@ -278,16 +359,18 @@ class Delay(wiring.Component):
     Raises
     ------
     ValueError
-        If ``cycles`` is not a non-negative integer or ``shape`` is not a shape.
+        If ``cycles`` is not a non-negative integer, ``shape`` is not a shape or ``srl``
+        not an integer from 0 to 16.
     """
 
-    def __init__(self, shape, cycles: int):
-        if not isinstance(cycles, int) or isinstance(cycles, bool) or cycles < 0:
-            raise ValueError(f"cycles must be a non-negative integer, not {cycles!r}")
+    def __init__(self, shape, cycles: int, *, srl: int = 0):
+        _check_cycles(cycles)
+        _check_srl(srl)
         if not isinstance(shape, (int, Shape, ShapeCastable)) or isinstance(shape, bool):
             raise ValueError(f"shape must be a width or a shape, not {shape!r}")
         self._shape = shape
         self._cycles = cycles
+        self._srl = srl
         super().__init__({"i": In(shape), "en": In(1), "o": Out(shape)})
 
     @property
@@ -296,5 +379,6 @@ class Delay(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        m.d.comb += self.o.eq(delay(m, self.i, self._cycles, en=self.en, name="stage"))
+        m.d.comb += self.o.eq(delay(m, self.i, self._cycles, en=self.en, name="stage",
+                                      srl=self._srl))
         return m

@@ -34,6 +34,17 @@ FIFO depth, so the FIFO can never overflow. ``i.ready`` is a function of that co
 register only: there is no combinational path from ``o.ready`` into the pipeline or to
 ``i.ready``. With ``o.ready`` held high the unit takes one pair per clock indefinitely.
 Results leave in the order the pairs came in.
+
+**Delay lines in SRL16E.** With ``adder="virtex4"`` the schedule is 45 cycles deep and the
+operand, ID and count delay lines hold most of the unit's flip-flops (about 7,200 of 11,200
+in Yosys's xc4v count), so the unit is bound by its flip-flops. There (``srl``, by default
+16 with the DSP48 adders, else 0) every reset-less delay line of at least 17 stages puts
+each run of 16 stages into one Virtex-4 ``SRL16E`` per bit
+(:func:`~raplas_hdl.rtl.pipeline.delay`): 16 flip-flops become one LUT site, the last stage
+stays a flip-flop. Shorter pieces stay flip-flops: each further ``SRL16E`` trades fewer
+flip-flops for one more LUT in a unit whose whole-unit count is already balanced between
+the two. The valid bit (reset) always stays in flip-flops. ``srl=0`` gives the
+flip-flop-only Verilog of the generic target.
 """
 
 from __future__ import annotations
@@ -51,7 +62,7 @@ from ..model.records import EVENT_COUNT_BITS, PAIR, RT_RESULT
 from .certified_bound import RTL_VARIANTS, BoundOps
 from .fp_add import FPAdd, check_adder, fp_add_latency
 from .fp_mul import FPMul, check_multiplier, fp_mul_latency
-from .pipeline import delay
+from .pipeline import SRL_STAGES, delay
 from .records import struct_layout
 
 __all__ = ["RayTriangleUnit", "vec3_layout", "input_layout", "output_layout", "MODES",
@@ -127,6 +138,10 @@ class RayTriangleUnit(wiring.Component):
     adder : {"generic", "virtex4"}
         Target of the 15 (16) :class:`~.fp_add.FPAdd` (``virtex4``: two DSP48 each,
         latency 7 whatever ``add_stages``; the schedule follows, see the module docstring).
+    srl : int or None
+        Fewest stages of a delay-line piece put into an ``SRL16E`` (0: flip-flops only; 1 to
+        16, see :func:`~raplas_hdl.rtl.pipeline.srl_split`); ``None`` (the default): 16
+        with ``adder="virtex4"``, else 0 (see the module docstring).
 
     Attributes
     ----------
@@ -142,13 +157,13 @@ class RayTriangleUnit(wiring.Component):
     Raises
     ------
     ValueError
-        For a bad format, mode, scale, ID width, multiplier or adder.
+        For a bad format, mode, scale, ID width, multiplier, adder or ``srl``.
     """
 
     def __init__(self, fmt, *, mode: str = "paper", margin_scale: float = 1,
                  ray_id_bits: int = 16, tri_id_bits: int = 16, add_stages: int = 4,
                  mul_stages: int = 3, multiplier: str = "generic",
-                 adder: str = "generic", bound_variant: str = "exp"):
+                 adder: str = "generic", bound_variant: str = "exp", srl=None):
         check_format(fmt)
         check_rtl_mode(mode)
         self._bound_k = None
@@ -179,6 +194,11 @@ class RayTriangleUnit(wiring.Component):
         self._mul_stages = mul_stages
         self._multiplier = check_multiplier(multiplier)
         self._adder = check_adder(adder)
+        if srl is None:
+            srl = SRL_STAGES if self._adder == "virtex4" else 0
+        if not isinstance(srl, int) or isinstance(srl, bool) or not 0 <= srl <= SRL_STAGES:
+            raise ValueError(f"srl must be an integer from 0 to {SRL_STAGES}, not {srl!r}")
+        self._srl = srl
         # the FP units' latencies (checked against the built units in elaborate)
         self._la = fp_add_latency(fmt, add_stages, adder)
         self._lm = fp_mul_latency(fmt, mul_stages, multiplier)
@@ -207,6 +227,11 @@ class RayTriangleUnit(wiring.Component):
     @property
     def adder(self) -> str:
         return self._adder
+
+    @property
+    def srl(self) -> int:
+        """Fewest stages of a delay-line piece in an ``SRL16E`` (0: flip-flops only)."""
+        return self._srl
 
     @property
     def bound_variant(self):
@@ -242,7 +267,7 @@ class RayTriangleUnit(wiring.Component):
         if time not in tv._delayed:
             self._n_delay += 1
             tv._delayed[time] = delay(m, tv.value, time - tv.time,
-                                      name=f"dl{self._n_delay}")
+                                      name=f"dl{self._n_delay}", srl=self._srl)
         return tv._delayed[time]
 
     def _op(self, m, kind, a: _Timed, b: _Timed, sub=False):
@@ -503,14 +528,15 @@ class RayTriangleUnit(wiring.Component):
             new_counts = []
             for b, ev in enumerate(EVENTS):
                 prev = (Const(0, 1) if counts is None
-                        else delay(m, counts[b], time - acc_t, name=f"n{ev[:3]}{time}"))
+                        else delay(m, counts[b], time - acc_t, name=f"n{ev[:3]}{time}",
+                                   srl=self._srl))
                 c = Signal(range(done + 1), name=f"n_{ev}_at_{time}")
                 m.d.comb += c.eq(sum((fl[b] for fl in here), prev))
                 new_counts.append(c)
             counts, acc_t = new_counts, time
         if done > EVENT_COUNT_MAX:
             raise AssertionError(f"{done} operations do not fit the event counts")
-        counts = [delay(m, c, dec - acc_t, name=f"n{ev[:3]}dec")
+        counts = [delay(m, c, dec - acc_t, name=f"n{ev[:3]}dec", srl=self._srl)
                   for c, ev in zip(counts, EVENTS)]
         flags = Signal(3, name="flags")
         m.d.comb += flags.eq(Cat(*(c != 0 for c in counts)))
@@ -546,7 +572,7 @@ class RayTriangleUnit(wiring.Component):
             m.d.comb += hit.eq((self._lt(m, zero, det_d) & pos) | (self._lt(m, det_d, zero) & neg))
         else:
             mg = self._margin_fields(m, p)
-            mg = {k: delay(m, v, dec, name=f"mg_{k}") for k, v in mg.items()}
+            mg = {k: delay(m, v, dec, name=f"mg_{k}", srl=self._srl) for k, v in mg.items()}
             w_d = self._at(m, res["w"], dec)
             sign = f.sign_bit
             bad = (self._nan(det_d) | self._nan(tp_d) | self._nan(up_d) | self._nan(vp_d)
@@ -559,8 +585,8 @@ class RayTriangleUnit(wiring.Component):
                                | (self._le(m, det_d, mg["det"]) & neg))
 
         valid_d = delay(m, accept, dec, name="valid", reset_less=False)
-        ids_d = delay(m, p.ray_id, dec, name="ray_id")
-        tid_d = delay(m, p.tri_id, dec, name="tri_id")
+        ids_d = delay(m, p.ray_id, dec, name="ray_id", srl=self._srl)
+        tid_d = delay(m, p.tri_id, dec, name="tri_id", srl=self._srl)
 
         # output register (cycle dec + 1), then the FIFO
         out = Signal(output_layout(f, self._ray_id_bits, self._tri_id_bits,

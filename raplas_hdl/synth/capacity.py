@@ -459,8 +459,8 @@ def build_capacity(fmt, found: dict, throughput_rows, n_triangles: dict) -> dict
 
 
 def _brief(row: dict) -> dict:
-    return {k: row[k] for k in ("dsp48", "slices_est", "luts", "ffs", "bram", "path_cells",
-                                "path_levels", "latency", "seconds") if k in row}
+    return {k: row[k] for k in ("dsp48", "slices_est", "luts", "lutram", "ffs", "bram",
+                                "path_cells", "path_levels", "latency", "seconds") if k in row}
 
 
 # -- markdown ---------------------------------------------------------------------------
@@ -568,26 +568,26 @@ def _render_method(cap: dict) -> list[str]:
     out = ["", "### Parts, composition and its validation", "",
            "The parts (Yosys, FP24 rtz; the array is 4x4; `seconds`: Yosys's wall time on "
            "the shared machine):", "",
-           "| family / target | part | latency | DSP48 | LUT | FF | slices~ | path cells | "
-           "Yosys s |", "|---|---|---|---|---|---|---|---|---|"]
+           "| family / target | part | latency | DSP48 | LUT | LUT-RAM and SRL16E sites | FF | "
+           "slices~ | path cells | Yosys s |", "|---|---|---|---|---|---|---|---|---|---|"]
     for name, p in cap["inputs"].items():
         parts = [(f"array, {n} testers", a) for n, a in sorted(p["array"].items(),
                                                              key=lambda x: -int(x[0]))]
         parts.append(("ray-triangle", p["rtu"]))
         for label, r in parts:
             out.append(f"| {name} | {label} | {r.get('latency', '-')} | {r['dsp48']} | "
-                       f"{r['luts']} | {r['ffs']} | {r['slices_est']} | {r['path_cells']} | "
-                       f"{r.get('seconds', '-')} |")
+                       f"{r['luts']} | {r.get('lutram', '-')} | {r['ffs']} | "
+                       f"{r['slices_est']} | {r['path_cells']} | {r.get('seconds', '-')} |")
         rest = p["rest"]
         basis = ", ".join(f"{k}={v}" for k, v in rest["basis"].items()
                           if k not in ("rows", "cols"))
         out.append(f"| {name} | rest (whole unit {basis} minus its parts) | - | "
-                   f"{rest['dsp48']} | {rest['luts']} | {rest['ffs']} | {rest['slices_est']} "
-                   f"| ({rest['path_cells']}: whole unit) | - |")
+                   f"{rest['dsp48']} | {rest['luts']} | - | {rest['ffs']} | "
+                   f"{rest['slices_est']} | ({rest['path_cells']}: whole unit) | - |")
     for fam, rc in cap.get("reduce_cost", {}).items():
         basis = ", ".join(f"{k}={v}" for k, v in rc["basis"].items() if k not in ("rows", "cols"))
         out.append(f"| {fam} | the reduction (whole unit {basis} minus the same unit without "
-                   f"it; BRAM {rc['bram']:+d}) | - | {rc['dsp48']} | {rc['luts']} | "
+                   f"it; BRAM {rc['bram']:+d}) | - | {rc['dsp48']} | {rc['luts']} | - | "
                    f"{rc['ffs']} | {rc['slices_est']} | ({rc['path_cells']}: whole unit) | - |")
     cal = ", ".join(f"{fam} {n:+d}" for fam, n in cap["bram_calibration"].items())
     out += ["", "Block RAM: the per-lane model plus the difference to Yosys's count at the "
