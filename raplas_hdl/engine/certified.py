@@ -46,7 +46,7 @@ from numba import njit
 
 from ..fp.numba_cache import drop_stale_cache
 from .exact_filter import HIT, MISS, filter_pair
-from .kernels import N_COUNTERS, plane_masks, run_counts, sphere_rays
+from .kernels import N_COUNTERS, plane_masks, sphere_rays
 from ..model.certified import block_pairs, pairs_one
 from ..model.ray_triangle import _loop as pairs_loop
 
@@ -151,7 +151,9 @@ def trace_certified(pn, pp, enable, keep_all, rows, cols, run_b, run_start, run_
                     lanes[0, n], lanes[1, n], lanes[2, n] = b, ray, b * n_rays + ray
                     lanes[3, n], lanes[4, n] = tlist[s, k], u
                     n += 1
-        run_counts(counters, u, run_start[u + 1] - run_start[u], n_planes, n - n0, skipped)
+        n_sph = run_start[u + 1] - run_start[u]
+        counters[u, 0], counters[u, 1] = n_sph, n_sph * n_planes
+        counters[u, 2], counters[u, 3] = n - n0, skipped
     return n * (hi + 1) + hi
 
 

@@ -93,15 +93,6 @@ def sphere_rays(rm, cm, enable, b, cols, nt, rays):
     return n, skipped
 
 
-@njit(cache=True)
-def run_counts(counters, u, n_sph, n_planes, issued, skipped):
-    """Run ``u``'s counters 0-3 (spheres, plane tests, pairs issued, pairs skipped)."""
-    counters[u, 0] = n_sph
-    counters[u, 1] = n_sph * n_planes
-    counters[u, 2] = issued
-    counters[u, 3] = skipped
-
-
 # -- float64 ------------------------------------------------------------------------------
 @njit(cache=True)
 def _keep_f64(pn, pk, pp, c, s, r):
@@ -193,7 +184,9 @@ def trace_f64(pn, pp, ro, rd, enable, keep_all, rows, cols, run_b, run_start, ru
                     if h:
                         hits += 1
                         _accept(t, tid, b, ray, tmin, tmax, excl, best_t, best_tri)
-        run_counts(counters, u, run_start[u + 1] - run_start[u], n_planes, issued, skipped)
+        n_sph = run_start[u + 1] - run_start[u]
+        counters[u, 0], counters[u, 1] = n_sph, n_sph * n_planes
+        counters[u, 2], counters[u, 3] = issued, skipped
         counters[u, 4] = hits
         counters[u, 5] = 0
         counters[u, 6] = 0
@@ -338,7 +331,9 @@ def trace_model(pn, pp, ro, rd, enable, keep_all, rows, cols, run_b, run_start, 
                                v0, e1, e2, nn, mc, tmin, tmax, excl, best_t, best_tri,
                                counters, e, m, r, cons)
                         n = np.int64(0)
-        run_counts(counters, u, run_start[u + 1] - run_start[u], n_planes, issued, skipped)
+        n_sph = run_start[u + 1] - run_start[u]
+        counters[u, 0], counters[u, 1] = n_sph, n_sph * n_planes
+        counters[u, 2], counters[u, 3] = issued, skipped
     if n:
         _flush(g, w, lane_b, lane_ray, lane_di, lane_tid, lane_u, n, ro, rd, v0, e1, e2,
                nn, mc, tmin, tmax, excl, best_t, best_tri, counters, e, m, r, cons)
