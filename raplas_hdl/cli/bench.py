@@ -10,10 +10,10 @@ a point estimated (by a low-resolution pre-pass) to issue more is reported as ca
 Writes results.csv, results.json and PNG plots under --out (default build/bench, with
 --quick build/bench-quick) and a markdown report at --report (default <out>/bench.md).
 Nothing goes to docs/ unless asked: to regenerate the committed report give
---out docs/results/bench --report docs/bench.md. The default campaign takes about 35-40
-minutes of CPU (one thread per render; estimated from measured points, most of it the
-conservative mode at FP16/FP20 on terrain and the meshes at 256x256), about an hour on 2
-shared cores; --max-pairs 100000000 makes it about 25 minutes of CPU (more points capped).
+--out docs/results/bench --report docs/bench.md. With --max-pairs 100000000 and --meshes
+none (the procedural and bundle grids, 200 points) it took 25 minutes of CPU (one thread per
+render; 36 minutes of wall time on 2 shared cores); the meshes add well over an hour, most of
+it the conservative and certified modes, whose hits the host re-checks.
 --quick takes 10-20 s with warm caches. The points run in this process, one after the
 other (the timings are per core); with --scheduler ADDRESS or --dask-workers N they run on a
 Dask cluster (pip install 'raplas-hdl[cluster]'), grouped by scene, bundle size and bound:
