@@ -11,9 +11,12 @@ Checked here:
 * the option reaches every adder (DSP48 instances in the emitted Verilog);
 * co-simulation against the golden model, every output field of every case: the ray-triangle
   unit with DSP48 adders under Icarus (and with both targets, its long delay lines in
-  ``SRL16E``: 300 pairs under Icarus, more under both simulators as ``full`` tests), a time-shared plane-sphere array with DSP48 adders and
-  multipliers under Verilator (make test); the conservative and certified ray-triangle unit
-  and the whole intersection unit under Verilator as ``full`` tests.
+  ``SRL16E`` and its output FIFO in block RAM: 300 pairs under Icarus, more under both
+  simulators as ``full`` tests), a time-shared plane-sphere array with DSP48 adders and
+  multipliers under Verilator, a small whole intersection unit with both targets under Icarus
+  (results and counters against the model, and its ``cycles`` against the cycle model)
+  (make test); the conservative and certified ray-triangle unit and the whole intersection
+  unit under Verilator as ``full`` tests.
 """
 
 import gc
@@ -41,8 +44,9 @@ def test_adder_latency_is_seven_for_virtex4():
 @pytest.mark.parametrize("mul, add, tester, array, paper, conservative", [
     ("generic", "generic", 12, 14, 28, 32),
     (V4, "generic", 13, 15, 30, 34),
-    ("generic", V4, 18, 20, 43, 50),      # La = 7: tester Lm + 2 La + 1, unit 5 La + 2 Lm + 2
-    (V4, V4, 19, 21, 45, 52),
+    # La = 7: tester Lm + 2 La + 1, unit 5 La + 2 Lm + 3 (+ 1: the output FIFO in block RAM)
+    ("generic", V4, 18, 20, 44, 51),
+    (V4, V4, 19, 21, 46, 53),
 ])
 def test_units_follow_the_adder_latency(mul, add, tester, array, paper, conservative):
     t = PlaneSphereTester(FP24, multiplier=mul, adder=add)
@@ -92,7 +96,7 @@ def test_every_adder_is_two_dsp48():
     psa, rtu = unit._subunits()
     psa._MustUse__silence = rtu._MustUse__silence = True    # built only to be inspected
     assert (unit.adder, psa.adder, rtu.adder, unit.multiplier) == (V4, V4, V4, "generic")
-    assert (psa.tester_latency, rtu.latency) == (18, 43)
+    assert (psa.tester_latency, rtu.latency) == (18, 44)
     built = build_intersection_unit(FP24, adder=V4, rows=2)
     built._MustUse__silence = True
     assert built.adder == V4
@@ -154,7 +158,7 @@ def test_ray_triangle_dsp48_adders_under_icarus(capsys):
     text = _cosim(capsys, "ray-triangle", "--sim", "icarus", "--adder", V4,
                   "--format", "FP24/rne", "--random", "300", "--seed", "5",
                   "--valid-density", "0.8", "--stall-density", "0.2")
-    assert "latency 43" in text and "cases: 300" in text
+    assert "latency 44" in text and "cases: 300" in text
 
 
 def test_plane_sphere_array_dsp48_adders_under_verilator(capsys):
@@ -174,7 +178,7 @@ def test_ray_triangle_srl16_under_icarus(capsys):
     text = _cosim(capsys, "ray-triangle", "--sim", "icarus", "--target", V4, "--adder", V4,
                   "--format", "FP24/rtz", "--random", "300", "--seed", "11",
                   "--valid-density", "0.7", "--stall-density", "0.3")
-    assert "latency 45" in text and "cases: 300" in text
+    assert "latency 46" in text and "cases: 300" in text
 
 
 @pytest.mark.full
@@ -204,3 +208,35 @@ def test_intersection_unit_dsp48_adders_under_verilator(capsys):
     text = _cosim(capsys, "intersection-unit", "--sim", "verilator", "--adder", V4,
                   "--target", V4, "--random", "40")
     assert "cases: 40" in text
+
+
+def test_intersection_unit_cycles_equal_model_with_bram_fifo():
+    """The whole unit with DSP48 adders and multipliers (so the ray-triangle unit's output
+    FIFO in block RAM, one cycle more): under Icarus with back-pressure every result bit and
+    counter against the golden model; without it, every run's ``cycles`` counter equals the
+    cycle model's (:mod:`raplas_hdl.model.throughput`, the unit's own ``cycle_timing``)."""
+    import dataclasses
+
+    from unit_scenes import check_against_model, scene_and_runs
+
+    from raplas_hdl.model.memory_image import UnitConfig
+    from raplas_hdl.model.throughput import profile_runs, simulate
+    from raplas_hdl.rtl.intersection import IntersectionUnit
+    from raplas_hdl.sim.unit_harness import UnitSession
+
+    require_simulator("icarus")
+    cfg = UnitConfig(fmt=FP24, rows=2, cols=2, testers=2, tris_per_sphere=4,
+                     max_triangles=256, max_spheres=128, fifo_depth=8)
+    unit = IntersectionUnit(dataclasses.replace(cfg), adder=V4, multiplier=V4)
+    unit._MustUse__silence = True                     # built only to be inspected
+    tm = unit.cycle_timing()
+    assert tm.rt_latency == 46 and tm.rt_fifo_depth == 47
+    scene, runs = scene_and_runs(cfg, 40, seed=6)
+    kw = dict(build_key="bram-fifo-test", adder=V4, multiplier=V4)
+    with UnitSession("icarus", cfg, scene, seed=2, ready_density=0.6, **kw) as s:
+        check_against_model(cfg, scene, runs, s.run(runs))
+    with UnitSession("icarus", cfg, scene, ready_density=1.0, **kw) as s:
+        res = s.run(runs)
+    check_against_model(cfg, scene, runs, res)
+    t_cmd, t_last = simulate(profile_runs(cfg, scene, runs), cfg, tm, overlap=False)
+    assert [ctr["cycles"] for _, ctr in res] == [int(x) for x in t_last - t_cmd]

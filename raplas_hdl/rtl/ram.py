@@ -18,10 +18,11 @@ clock return the old word) and two implementations:
 
 from __future__ import annotations
 
-from amaranth.hdl import Cat, ClockSignal, Instance, Module, Signal
+from amaranth.hdl import Cat, ClockSignal, Elaboratable, Instance, Module, Mux, Signal
 from amaranth.lib.memory import Memory
 
-__all__ = ["SyncRAM", "RAM_IMPLS", "RAM_MODULE", "ram_verilog"]
+__all__ = ["SyncRAM", "RAM_IMPLS", "RAM_MODULE", "ram_verilog", "BlockRAMFIFO",
+           "BLOCK_RAM_ATTRS"]
 
 #: Implementations of :class:`SyncRAM`.
 RAM_IMPLS = ("memory", "verilog")
@@ -137,3 +138,77 @@ class SyncRAM:
             i_ren=Cat(*[rp.en for rp in self._rps]), o_rdata=rdata)
         for k, rp in enumerate(self._rps):
             m.d.comb += rp.data.eq(rdata[k * self.width:(k + 1) * self.width])
+
+
+#: Attributes that make Yosys (``memory_libmap``) and vendor tools map a memory to block RAM.
+BLOCK_RAM_ATTRS = {"ram_style": "block"}
+
+
+class BlockRAMFIFO(Elaboratable):
+    """A first-word-fall-through FIFO of ``depth`` words whose storage is block RAM.
+
+    The ports of :class:`amaranth.lib.fifo.SyncFIFO` (``w_data``, ``w_en``, ``w_rdy``,
+    ``r_data``, ``r_en``, ``r_rdy``, ``level``) and the structure of
+    :class:`~amaranth.lib.fifo.SyncFIFOBuffered`: a memory of ``depth - 1`` words with a
+    synchronous, non-transparent read port (marked :data:`BLOCK_RAM_ATTRS`) whose data
+    register is the head word. A word written into an empty FIFO shows on ``r_data`` one
+    clock later than in ``SyncFIFO`` (two edges after its write). No read ever meets a
+    write of the same address.
+
+    Parameters
+    ----------
+    width : int
+    depth : int
+        At least 2.
+
+    Raises
+    ------
+    ValueError
+        On a width or depth out of range.
+    """
+
+    def __init__(self, *, width: int, depth: int):
+        if width < 1 or depth < 2:
+            raise ValueError(f"a block-RAM FIFO needs width >= 1 and depth >= 2, "
+                             f"not {width} x {depth}")
+        self.width, self.depth = int(width), int(depth)
+        self.w_data = Signal(self.width)
+        self.w_en = Signal()
+        self.w_rdy = Signal()
+        self.r_data = Signal(self.width)
+        self.r_en = Signal()
+        self.r_rdy = Signal()
+        self.level = Signal(range(self.depth + 1))
+
+    def elaborate(self, platform):
+        m = Module()
+        inner = self.depth - 1
+        inner_level = Signal(range(inner + 1))
+        produce = Signal(range(inner))
+        consume = Signal(range(inner))
+        do_write = Signal()
+        do_read = Signal()          # memory -> head register
+        m.d.comb += [
+            self.w_rdy.eq(inner_level != inner),
+            do_write.eq(self.w_rdy & self.w_en),
+            do_read.eq((inner_level != 0) & (~self.r_rdy | self.r_en)),
+            self.level.eq(inner_level + self.r_rdy),
+        ]
+        mem = m.submodules.storage = Memory(shape=self.width, depth=inner, init=[],
+                                            attrs=BLOCK_RAM_ATTRS)
+        wp = mem.write_port()
+        rp = mem.read_port(domain="sync")
+        m.d.comb += [wp.addr.eq(produce), wp.data.eq(self.w_data), wp.en.eq(do_write),
+                     rp.addr.eq(consume), rp.en.eq(do_read), self.r_data.eq(rp.data)]
+
+        def incr(p):
+            return Mux(p == inner - 1, 0, p + 1)
+
+        with m.If(do_write):
+            m.d.sync += produce.eq(incr(produce))
+        with m.If(do_read):
+            m.d.sync += [consume.eq(incr(consume)), self.r_rdy.eq(1)]
+        with m.Elif(self.r_en):
+            m.d.sync += self.r_rdy.eq(0)
+        m.d.sync += inner_level.eq(inner_level + do_write - do_read)
+        return m

@@ -24,11 +24,12 @@ mode, which adds ``w = det - s``. With adder latency ``La`` and multiplier laten
 ``latency`` (``D + 2``: 28 for the defaults in paper mode, 32 in conservative mode; the
 paper's unit has 29 stages; with ``multiplier="virtex4"`` ``Lm`` is 4 at FP24, so 30 and
 34; with ``adder="virtex4"`` ``La`` is 7, so 43 and 50 with generic multipliers, 45 and 52
-with both targets ``virtex4``) is the number of clock edges from the one that accepts a pair
-on ``i`` to the one that can take its result from ``o``, with an empty FIFO.
+with both targets ``virtex4``; one more with the output FIFO in block RAM, below: 44, 51,
+46, 53 with ``adder="virtex4"``) is the number of clock edges from the one that accepts a
+pair on ``i`` to the one that can take its result from ``o``, with an empty FIFO.
 
 Back-pressure: the pipeline never stalls (its clock enable is tied high). Every accepted
-pair will land in the output FIFO, whose depth is ``D + 3``; a credit counter counts the
+pair will land in the output FIFO, whose depth is ``latency + 1``; a credit counter counts the
 pairs accepted and not yet taken from ``o``, and ``i.ready`` is high while it is below the
 FIFO depth, so the FIFO can never overflow. ``i.ready`` is a function of that counter
 register only: there is no combinational path from ``o.ready`` into the pipeline or to
@@ -45,6 +46,15 @@ stays a flip-flop. Shorter pieces stay flip-flops: each further ``SRL16E`` trade
 flip-flops for one more LUT in a unit whose whole-unit count is already balanced between
 the two. The valid bit (reset) always stays in flip-flops. ``srl=0`` gives the
 flip-flop-only Verilog of the generic target.
+
+**Output FIFO in block RAM.** The output FIFO of ``D + 3`` words of about 140 bits is, as
+Amaranth's ``SyncFIFO``, distributed RAM with an asynchronous read: about 450 ``RAM16X1D``
+(900 LUT sites) on Virtex-4. With ``bram_fifo`` (by default with ``adder="virtex4"``) it is a
+:class:`~.ram.BlockRAMFIFO` instead: a synchronous-read memory marked for block RAM (four
+``RAMB16`` at FP24) whose read register holds the head word. A result then reaches ``o``
+one clock later, so ``latency`` is ``D + 3`` and the FIFO ``D + 4`` words deep (the credit
+scheme is unchanged: it still can never overflow, and one pair a clock still never runs out
+of credits). The generic target's Verilog is unchanged.
 """
 
 from __future__ import annotations
@@ -63,6 +73,7 @@ from .certified_bound import RTL_VARIANTS, BoundOps
 from .fp_add import FPAdd, check_adder, fp_add_latency
 from .fp_mul import FPMul, check_multiplier, fp_mul_latency
 from .pipeline import SRL_STAGES, delay
+from .ram import BlockRAMFIFO
 from .records import struct_layout
 
 __all__ = ["RayTriangleUnit", "vec3_layout", "input_layout", "output_layout", "MODES",
@@ -142,6 +153,10 @@ class RayTriangleUnit(wiring.Component):
         Fewest stages of a delay-line piece put into an ``SRL16E`` (0: flip-flops only; 1 to
         16, see :func:`~raplas_hdl.rtl.pipeline.srl_split`); ``None`` (the default): 16
         with ``adder="virtex4"``, else 0 (see the module docstring).
+    bram_fifo : bool or None
+        Build the output FIFO in block RAM (:class:`~.ram.BlockRAMFIFO`: a synchronous read,
+        so ``latency`` and ``fifo_depth`` grow by 1) instead of LUT RAM; ``None`` (the
+        default): with ``adder="virtex4"`` (see the module docstring).
 
     Attributes
     ----------
@@ -163,7 +178,8 @@ class RayTriangleUnit(wiring.Component):
     def __init__(self, fmt, *, mode: str = "paper", margin_scale: float = 1,
                  ray_id_bits: int = 16, tri_id_bits: int = 16, add_stages: int = 4,
                  mul_stages: int = 3, multiplier: str = "generic",
-                 adder: str = "generic", bound_variant: str = "exp", srl=None):
+                 adder: str = "generic", bound_variant: str = "exp", srl=None,
+                 bram_fifo=None):
         check_format(fmt)
         check_rtl_mode(mode)
         self._bound_k = None
@@ -199,6 +215,11 @@ class RayTriangleUnit(wiring.Component):
         if not isinstance(srl, int) or isinstance(srl, bool) or not 0 <= srl <= SRL_STAGES:
             raise ValueError(f"srl must be an integer from 0 to {SRL_STAGES}, not {srl!r}")
         self._srl = srl
+        if bram_fifo is None:
+            bram_fifo = self._adder == "virtex4"
+        if not isinstance(bram_fifo, bool):
+            raise ValueError(f"bram_fifo must be True, False or None, not {bram_fifo!r}")
+        self._bram_fifo = bram_fifo
         # the FP units' latencies (checked against the built units in elaborate)
         self._la = fp_add_latency(fmt, add_stages, adder)
         self._lm = fp_mul_latency(fmt, mul_stages, multiplier)
@@ -234,6 +255,11 @@ class RayTriangleUnit(wiring.Component):
         return self._srl
 
     @property
+    def bram_fifo(self) -> bool:
+        """The output FIFO is in block RAM (one more cycle of latency and depth)."""
+        return self._bram_fifo
+
+    @property
     def bound_variant(self):
         return self._bound_variant
 
@@ -250,13 +276,15 @@ class RayTriangleUnit(wiring.Component):
 
     @property
     def fifo_depth(self) -> int:
-        return self.decision_cycle + 3
+        """Words of the output FIFO: ``latency + 1``, so that one pair a clock never runs
+        out of credits."""
+        return self.latency + 1
 
     @property
     def latency(self) -> int:
         """Clock edges from accepting a pair on ``i`` to taking its result from ``o``
         (FIFO empty, ``o.ready`` high)."""
-        return self.decision_cycle + 2
+        return self.decision_cycle + 2 + self._bram_fifo
 
     # -- helpers -------------------------------------------------------------------------
     def _at(self, m, tv: _Timed, time: int):
@@ -506,7 +534,8 @@ class RayTriangleUnit(wiring.Component):
         det, tp, up, vp, s = (res[k] for k in ("det", "t", "u", "v", "s"))
         assert max(tv.time for tv in res.values()) <= dec
 
-        fifo = m.submodules.fifo = SyncFIFO(width=len(self.o.payload.as_value()),
+        fifo_cls = BlockRAMFIFO if self._bram_fifo else SyncFIFO
+        fifo = m.submodules.fifo = fifo_cls(width=len(self.o.payload.as_value()),
                                             depth=self.fifo_depth)
         credits = Signal(range(self.fifo_depth + 1))
         accept = Signal()
