@@ -9,7 +9,8 @@ adders (``bram_fifo``). Checked here:
   (a word written into an empty FIFO shows two edges after its write), ``level`` and
   ``w_rdy``, with random writes and reads, full and empty stretches;
 * which units use it, the errors for a bad option, the generic target's Verilog without it;
-* Yosys maps it (the unit's FIFO shape: 140 bits, 45 words) to ``RAMB16`` and no LUT RAM.
+* Yosys maps it (the FIFO shape in the whole unit: 133 bits, 47 words) to ``RAMB16`` and no
+  LUT RAM.
 
 (The unit with it against the golden model, with input gaps and output back-pressure:
 ``tests/test_dsp48_adder_units.py``.)
@@ -126,9 +127,9 @@ def test_bad_bram_fifo_names_the_option(bad):
 def test_yosys_maps_it_to_block_ram(tmp_path):
     from raplas_hdl.synth.yosys import synthesize
 
-    f = BlockRAMFIFO(width=140, depth=46)
+    f = BlockRAMFIFO(width=133, depth=47)
     ports = [f.w_data, f.w_en, f.w_rdy, f.r_data, f.r_en, f.r_rdy, f.level]
     text = verilog.convert(f, name="bf", ports=ports, emit_src=False)
     r = synthesize(text, "bf", cache_dir=tmp_path)
-    assert r.bram == 4 and r.lutram == 0           # 140 bits in four 512 x 36 RAMB16
+    assert r.bram == 4 and r.lutram == 0           # 133 bits in four 512 x 36 RAMB16
     assert "RAMB16" in r.cells_by_type

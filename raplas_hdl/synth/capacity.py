@@ -258,6 +258,9 @@ def capacity_table(parts: dict, throughput_rows, n_triangles: dict, fmt, *,
             rest = _plus(rest, extra)
             cal += extra["bram"]
         need = compose(array, rtu, rest, cfg.lanes, cfg.family)
+        # the memories' model, the calibration and the ray-triangle units' own block RAM
+        # (their output FIFOs with the DSP48 adders)
+        cal += cfg.lanes * rtu.get("bram", 0)
         bram = {label: bram_blocks(unit_config(fmt, n, cfg.testers), cfg.lanes)["total"] + cal
                 for label, n in n_triangles.items()}
         path = max(array["path_cells"], rtu["path_cells"])
@@ -422,11 +425,12 @@ def build_capacity(fmt, found: dict, throughput_rows, n_triangles: dict) -> dict
             rests[fam] = {**rest_of(r, arr, rtu, lanes), "basis": {**opts, "family": fam},
                           "path_cells": r["path_cells"]}
             model = bram_blocks(unit_config(fmt, 1024, opts["testers"]), lanes)["total"]
-            cal[fam] = r["bram"] - model
+            cal[fam] = r["bram"] - model - lanes * rtu.get("bram", 0)
             continue
         pred = compose(arr, rtu, rests[fam], lanes, fam)
         by_cells = compose(arr, rtu, rests[fam], lanes, fam, cells=True)
-        bram = bram_blocks(unit_config(fmt, 1024, opts["testers"]), lanes)["total"] + cal[fam]
+        bram = (bram_blocks(unit_config(fmt, 1024, opts["testers"]), lanes)["total"] + cal[fam]
+                + lanes * rtu.get("bram", 0))
         validation.append({"family": fam, "options": opts, **validate(pred, r),
                            "slices_of_summed_cells": by_cells["slices_est"],
                            "bram": {"predicted": bram, "actual": r["bram"]},
@@ -590,7 +594,8 @@ def _render_method(cap: dict) -> list[str]:
                    f"it; BRAM {rc['bram']:+d}) | - | {rc['dsp48']} | {rc['luts']} | - | "
                    f"{rc['ffs']} | {rc['slices_est']} | ({rc['path_cells']}: whole unit) | - |")
     cal = ", ".join(f"{fam} {n:+d}" for fam, n in cap["bram_calibration"].items())
-    out += ["", "Block RAM: the per-lane model plus the difference to Yosys's count at the "
+    out += ["", "Block RAM: the per-lane model, plus K times the ray-triangle part's own (its "
+            "output FIFO with the DSP48 adders), plus the difference to Yosys's count at the "
             f"synthesised size (1,024 triangles, 256 spheres): {cal} blocks.", ""]
     if cap["validation"]:
         out += ["The composition against whole-unit syntheses it was not built from:", "",
