@@ -33,8 +33,8 @@ import numpy as np
 from .memory_image import COUNTER_NAMES, BundleMemory, Run, SceneMemory, UnitConfig, as_run
 from .records import RESULT, result_record
 
-__all__ = ["RESULT_DTYPE", "UNIT_BOUND_VARIANT", "result_dtype", "run_bundle", "run_runs", "enumerate_pairs", "empty_counters",
-           "event_counters"]
+__all__ = ["RESULT_DTYPE", "UNIT_BOUND_VARIANT", "result_dtype", "run_bundle", "run_runs",
+           "enumerate_pairs", "empty_counters", "event_counters"]
 
 #: One beat of the unit's result stream: the dtype of the record
 #: :data:`raplas_hdl.model.records.RESULT` (``RESULT.bind(config)`` packs and unpacks beats).

@@ -56,8 +56,8 @@ __all__ = ["Field", "Record", "Layout", "Slot", "unit_params", "words_to_ints",
            "ints_to_words", "PARAMETERS", "EVENT_COUNT_BITS", "RAY", "TRIANGLE", "PAIR",
            "RT_RESULT", "RESULT", "ANSWER", "OUTCOME", "OUTCOME_MISS", "OUTCOME_HIT",
            "OUTCOME_UNCERTAIN", "RT_RESULT_CERTIFIED", "RESULT_CERTIFIED", "ANSWER_CERTIFIED",
-           "rt_result_record", "result_record", "answer_record", "output_record", "CMD", "COUNTERS", "PLANE",
-           "SPHERE", "PS_RESULT", "RECORDS"]
+           "rt_result_record", "result_record", "answer_record", "output_record", "CMD",
+           "COUNTERS", "PLANE", "SPHERE", "PS_RESULT", "RECORDS"]
 
 #: Width parameters a field may name, and what they are.
 PARAMETERS = {

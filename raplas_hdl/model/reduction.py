@@ -47,8 +47,9 @@ import numpy as np
 
 from .records import ANSWER, OUTCOME_HIT, OUTCOME_UNCERTAIN, answer_record
 
-__all__ = ["ANSWER_DTYPE", "answer_dtype", "uncertain_pairs", "check_reduce_format", "check_window", "candidates", "reduce_run",
-           "first_answers", "early_out_saving", "inf_pattern"]
+__all__ = ["ANSWER_DTYPE", "answer_dtype", "uncertain_pairs", "check_reduce_format",
+           "check_window", "candidates", "reduce_run", "first_answers", "early_out_saving",
+           "inf_pattern"]
 
 #: One beat of the reduced stream (the dtype of :data:`~raplas_hdl.model.records.ANSWER`).
 ANSWER_DTYPE = ANSWER.dtype()

@@ -39,7 +39,7 @@ from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
 __all__ = ["Step", "place_registers", "group_steps", "build_pipeline", "wire", "delay",
-           "Delay", "srl_split", "SRL_STAGES"]
+           "Delay", "srl_split", "check_srl", "SRL_STAGES"]
 
 #: Stages of one ``SRL16E`` (its address is the number of stages minus 1).
 SRL_STAGES = 16
@@ -220,9 +220,11 @@ def _check_cycles(cycles):
         raise ValueError(f"cycles must be a non-negative integer, not {cycles!r}")
 
 
-def _check_srl(srl):
+def check_srl(srl) -> int:
+    """``srl`` if it is an integer from 0 to 16 (see :func:`srl_split`), else ``ValueError``."""
     if not isinstance(srl, int) or isinstance(srl, bool) or not 0 <= srl <= SRL_STAGES:
         raise ValueError(f"srl must be an integer from 0 to {SRL_STAGES}, not {srl!r}")
+    return srl
 
 
 def srl_split(cycles: int, srl: int) -> tuple[tuple[int, ...], int]:
@@ -252,7 +254,7 @@ def srl_split(cycles: int, srl: int) -> tuple[tuple[int, ...], int]:
         If ``cycles`` is not a non-negative integer or ``srl`` not an integer from 0 to 16.
     """
     _check_cycles(cycles)
-    _check_srl(srl)
+    check_srl(srl)
     if not srl or cycles < 2:
         return (), cycles
     full, rest = divmod(cycles - 1, SRL_STAGES)
@@ -315,7 +317,7 @@ def delay(m: Module, value, cycles: int, *, en=None, domain: str = "sync",
         If ``cycles`` is not a non-negative integer, or ``srl`` not an integer from 0 to 16.
     """
     _check_cycles(cycles)
-    _check_srl(srl)
+    check_srl(srl)
     value = Value.cast(value)
     pieces, ff = srl_split(cycles, srl if reset_less else 0)
     for k, stages in enumerate(pieces):
@@ -365,7 +367,7 @@ class Delay(wiring.Component):
 
     def __init__(self, shape, cycles: int, *, srl: int = 0):
         _check_cycles(cycles)
-        _check_srl(srl)
+        check_srl(srl)
         if not isinstance(shape, (int, Shape, ShapeCastable)) or isinstance(shape, bool):
             raise ValueError(f"shape must be a width or a shape, not {shape!r}")
         self._shape = shape

@@ -72,7 +72,7 @@ from ..model.records import EVENT_COUNT_BITS, PAIR, RT_RESULT
 from .certified_bound import RTL_VARIANTS, BoundOps
 from .fp_add import FPAdd, check_adder, fp_add_latency
 from .fp_mul import FPMul, check_multiplier, fp_mul_latency
-from .pipeline import SRL_STAGES, delay
+from .pipeline import SRL_STAGES, check_srl, delay
 from .ram import BlockRAMFIFO
 from .records import struct_layout
 
@@ -212,9 +212,7 @@ class RayTriangleUnit(wiring.Component):
         self._adder = check_adder(adder)
         if srl is None:
             srl = SRL_STAGES if self._adder == "virtex4" else 0
-        if not isinstance(srl, int) or isinstance(srl, bool) or not 0 <= srl <= SRL_STAGES:
-            raise ValueError(f"srl must be an integer from 0 to {SRL_STAGES}, not {srl!r}")
-        self._srl = srl
+        self._srl = check_srl(srl)
         if bram_fifo is None:
             bram_fifo = self._adder == "virtex4"
         if not isinstance(bram_fifo, bool):

@@ -453,7 +453,8 @@ def build_capacity(fmt, found: dict, throughput_rows, n_triangles: dict) -> dict
         for (fam, target), p in parts.items()}
     from .report import _fmt_label
 
-    return {"format": f"{_fmt_label(fmt)}/{fmt.rounding}", "table": table, "validation": validation, "inputs": inputs,
+    return {"format": f"{_fmt_label(fmt)}/{fmt.rounding}", "table": table,
+            "validation": validation, "inputs": inputs,
             "bram_calibration": cal,
             "reduce_cost": {f: {k: v for k, v in rc.items() if k != "cells_by_type"}
                             for f, rc in reduce_cost.items()},
