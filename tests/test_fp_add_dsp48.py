@@ -196,7 +196,7 @@ def test_bad_target_or_format_names_the_problem():
     with pytest.raises(ValueError, match=r"at most 17 bits"):
         fp_add_latency(FP32, 4, "virtex4")
     with pytest.raises(ValueError, match="stages"):
-        FPAdd(FP24, 8, target="virtex4")
+        FPAdd(FP24, 10, target="virtex4")
     assert fp_add_latency(FP32) == 4          # the generic adder takes every format
 
 

@@ -283,7 +283,7 @@ def test_fp24_stress(op, rounding):
     assert {1, 2, 4} <= set(np.unique(flags).tolist())
 
 
-@pytest.mark.parametrize("op,stages", [("add", 1), ("add", 2), ("add", 6), ("add", 7),
+@pytest.mark.parametrize("op,stages", [("add", 1), ("add", 2), ("add", 4), ("add", 9),
                                        ("mul", 1), ("mul", 2), ("mul", 4), ("mul", 5)])
 def test_fp24_depths(op, stages):
     """Other depths give the same results, with ``latency`` equal to ``stages``."""
@@ -386,18 +386,41 @@ def test_stall_holds_outputs():
 
 # -- tests: structure, parameters, emission -----------------------------------------------
 def test_default_stage_lists():
-    assert FPAdd(FP24).stage_steps == (("unpack",), ("align", "add"), ("lzc", "normalise"),
-                                       ("round", "pack"))
+    """The stages the measured step delays give (raplas_hdl.rtl.step_delays)."""
+    assert FPAdd(FP24).stage_steps == (("classify", "order"), ("align", "shift"),
+                                       ("add", "lzc"), ("normalise", "round", "pack"))
     assert FPMul(FP24).stage_steps == (("unpack",), ("multiply",),
                                        ("normalise", "round", "pack"))
     assert FPAdd(FP24).latency == 4 and FPMul(FP24).latency == 3
-    assert FPAdd(FP24, stages=7).stage_steps == tuple((n,) for n in
-                                                      ("unpack", "align", "add", "lzc",
-                                                       "normalise", "round", "pack"))
+    rne = FP24.with_rounding("rne")
+    assert FPAdd(rne).latency == 6 and FPMul(rne).latency == 4
+    assert FPMul(rne).stage_steps == (("unpack",), ("multiply",), ("normalise", "round"),
+                                      ("pack",))
+    assert FPAdd(FP24, stages=9).stage_steps == tuple((n,) for n in
+                                                      ("classify", "order", "align", "shift",
+                                                       "add", "lzc", "normalise", "round",
+                                                       "pack"))
     assert len(FPMul(FP24, stages=1).stage_steps) == 1
 
 
-@pytest.mark.parametrize("cls,bad", [(FPAdd, 0), (FPAdd, 8), (FPMul, 0), (FPMul, 6),
+def test_default_stages_meet_the_target():
+    """Every default stage count is the fewest whose predicted slowest stage meets
+    TARGET_NS, by the measured step delays."""
+    from raplas_hdl.rtl.step_delays import (DEFAULT_STAGES, STEP_NS, TARGET_NS,
+                                            stage_delays)
+
+    for unit, cls in (("fp_add", FPAdd), ("fp_mul", FPMul)):
+        for rounding in STEP_NS[unit]:
+            fmt = FP24.with_rounding(rounding)
+            n = DEFAULT_STAGES[unit][rounding]
+            assert cls(fmt).stages == n
+            assert max(stage_delays(unit, rounding, cls(fmt).stage_steps)) <= TARGET_NS
+            if n > 1:
+                fewer = cls(fmt, stages=n - 1).stage_steps
+                assert max(stage_delays(unit, rounding, fewer)) > TARGET_NS
+
+
+@pytest.mark.parametrize("cls,bad", [(FPAdd, 0), (FPAdd, 10), (FPMul, 0), (FPMul, 6),
                                      (FPAdd, "4"), (FPMul, True), (FPMul, 2.0)])
 def test_bad_stages(cls, bad):
     with pytest.raises(ValueError, match="stages"):

@@ -9,18 +9,24 @@ its sticky bit is a correct rounding of the exact result. Those lost bits only o
 the exponents differ by 3 or more, and then the difference needs at most one bit of left
 normalisation, so two extra bits are enough for a guard bit after normalising.
 
-The seven combinational steps, in order:
+The nine combinational steps, in order:
 
-``unpack``
-    Classify both operands (``sub`` flips the sign of ``b``), order them by magnitude
-    (exponent, then significand) so that ``x`` is the larger, and work out the special
-    results (NaN operand, inf - inf, infinity) and the sign of an exact zero sum.
-    Hands on: ``x``'s sign, exponent and significand, ``y``'s significand, the exponent
-    difference ``d``, whether the operation is an effective subtraction, the specials.
+``classify``
+    Classify both operands (``sub`` flips the sign of ``b``), compare their magnitudes
+    (exponent, then significand), form both exponent differences side by side, and work out
+    the special results (NaN operand, inf - inf, infinity) and the sign of an exact zero sum.
+``order``
+    Order the operands by the comparison so that ``x`` is the larger, and pick the exponent
+    difference ``d`` = ``exp(x) - exp(y)``. Hands on: ``x``'s sign, exponent and
+    significand, ``y``'s significand, ``d``, whether the operation is an effective
+    subtraction, the specials.
 ``align``
-    Shift ``y``'s significand (with two zero bits appended) right by ``d`` and OR the bits
-    shifted out into a sticky bit. ``chop`` instead drops everything below ``y``'s own last
-    bit, as the paper's adder does, and has no sticky bit.
+    Shift ``y``'s significand (with two zero bits appended, in a double-width window that
+    loses no bit) right by ``d``'s multiple of four (``d`` clamped to the width).
+``shift``
+    The rest of the shift (``d mod 4``); the bits below the significand's window are ORed
+    into a sticky bit. ``chop`` instead drops everything below ``y``'s own last bit, as the
+    paper's adder does, and has no sticky bit.
 ``add``
     ``S = X + Y'`` or ``S = X - Y' - sticky``, ``M+4`` bits.
 ``lzc``
@@ -36,15 +42,17 @@ The seven combinational steps, in order:
     (:func:`.fp_common.pack`).
 
 Pipeline registers go behind the steps chosen by :func:`.pipeline.place_registers` from
-the step weights (3, 3, 2, 2, 3, 2, 1). The default ``stages=4`` (the paper's adder depth)
-gives:
+each step's delay as placed and routed on an ECP5 (:mod:`.step_delays`, measured by
+``benchmarks/bench_pnr.py --steps``). The default stage count is the fewest whose slowest
+stage meets the table's target: 4 in ``rtz`` and ``chop`` (the paper's adder depth), 6 in
+``rne`` (its rounding increment costs a stage). FP24 ``rtz``, 4 stages:
 
-1. ``unpack``: operands classified, ordered and the exponent difference formed;
-2. ``align`` + ``add``: the aligned sum ``S`` and its sticky bit;
-3. ``lzc`` + ``normalise``: the normalised significand, guard and sticky bits, exponent;
-4. ``round`` + ``pack``: the result and its flags, on the output registers.
+1. ``classify`` + ``order``: operands classified, ordered, the exponent difference picked;
+2. ``align`` + ``shift``: ``y`` aligned, its sticky bit;
+3. ``add`` + ``lzc``: the aligned sum ``S`` and its leading-zero count;
+4. ``normalise`` + ``round`` + ``pack``: the result and its flags, on the output registers.
 
-``stages`` can be anything from 1 (all seven steps in one clock) to 7 (one step each).
+``stages`` can be anything from 1 (all nine steps in one clock) to 9 (one step each).
 
 **Target.** ``target="generic"`` (the default) is the above, all in the fabric.
 ``target="virtex4"`` builds the adder of :mod:`.fp_add_dsp48` instead: the alignment shift,
@@ -57,22 +65,23 @@ to). :func:`fp_add_latency` gives the latency without building the unit.
 
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Const, Module, Mux
+from amaranth.hdl import Cat, Const, Module, Mux, Value
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
-from .fp_common import (check_format, leading_zeros, pack, round_significand,
-                        shift_right_sticky, unpack)
+from .fp_common import check_format, leading_zeros, pack, round_significand, unpack
 from .pipeline import Step, build_pipeline, group_steps, place_registers, wire
+from .step_delays import DEFAULT_STAGES, step_weights
 
-__all__ = ["FPAdd", "TARGETS", "check_adder", "fp_add_latency"]
+__all__ = ["FPAdd", "TARGETS", "ADD_STEPS", "check_adder", "fp_add_latency", "add_weights",
+           "default_add_stages"]
 
 #: Adder targets: all in the fabric, or shifts and add in Virtex-4 DSP48 (:mod:`.fp_add_dsp48`).
 TARGETS = ("generic", "virtex4")
 
-#: (name, weight) of each combinational step, in datapath order.
-ADD_STEPS = (("unpack", 3), ("align", 3), ("add", 2), ("lzc", 2), ("normalise", 3),
-             ("round", 2), ("pack", 1))
+#: The combinational steps, in datapath order (their weights: :mod:`.step_delays`).
+ADD_STEPS = ("classify", "order", "align", "shift", "add", "lzc", "normalise", "round",
+             "pack")
 
 _SPECIALS = ("nan", "invalid", "inf")
 
@@ -102,9 +111,21 @@ def adder_ports(width: int) -> dict:
             "o": Out(width), "flags": Out(3), "o_valid": Out(1)}
 
 
-def fp_add_latency(fmt, stages: int = 4, target: str = "generic") -> int:
-    """Latency of ``FPAdd(fmt, stages, target)``, without building it: ``stages`` for the
-    generic adder, :data:`.fp_add_dsp48.LATENCY` (7) for ``virtex4``.
+def add_weights(fmt) -> list[int]:
+    """The measured weight of each step of :data:`ADD_STEPS` in ``fmt``'s rounding."""
+    return step_weights("fp_add", check_format(fmt).rounding, ADD_STEPS)
+
+
+def default_add_stages(fmt) -> int:
+    """The default stage count of ``FPAdd(fmt)``: 4 in ``rtz`` and ``chop``, 6 in ``rne``
+    (:data:`.step_delays.DEFAULT_STAGES`)."""
+    return DEFAULT_STAGES["fp_add"][check_format(fmt).rounding]
+
+
+def fp_add_latency(fmt, stages: int | None = None, target: str = "generic") -> int:
+    """Latency of ``FPAdd(fmt, stages, target)``, without building it: ``stages`` (default
+    :func:`default_add_stages`) for the generic adder, :data:`.fp_add_dsp48.LATENCY` (7) for
+    ``virtex4``.
 
     Raises
     ------
@@ -113,7 +134,9 @@ def fp_add_latency(fmt, stages: int = 4, target: str = "generic") -> int:
     """
     from .fp_add_dsp48 import LATENCY, check_dsp48_format
 
-    place_registers([w for _, w in ADD_STEPS], stages)
+    if stages is None:
+        stages = default_add_stages(fmt)
+    place_registers(add_weights(fmt), stages)
     if _check_target(target, None) == "virtex4":
         check_dsp48_format(fmt)
         return LATENCY
@@ -165,13 +188,15 @@ class FPAdd(wiring.Component):
         unknown, or (``virtex4``) the significand is wider than 17 bits.
     """
 
-    def __init__(self, fmt, stages: int = 4, target: str = "generic", *,
+    def __init__(self, fmt, stages: int | None = None, target: str = "generic", *,
                  multiplier: str | None = None):
         self._fmt = check_format(fmt)
         self._target = _check_target(target, multiplier)
+        if stages is None:
+            stages = default_add_stages(fmt)
         self._latency = fp_add_latency(fmt, stages, self._target)
         self._steps = tuple(Step(name, getattr(self, f"_step_{name}"), weight)
-                            for name, weight in ADD_STEPS)
+                            for name, weight in zip(ADD_STEPS, add_weights(fmt)))
         self._registered = place_registers([s.weight for s in self._steps], stages)
         self._stages = stages
         super().__init__(adder_ports(fmt.width))
@@ -203,31 +228,57 @@ class FPAdd(wiring.Component):
         return group_steps(self._steps, self._registered)
 
     # -- combinational steps -----------------------------------------------------------
-    def _step_unpack(self, m, v):
+    def _step_classify(self, m, v):
         fmt = self._fmt
         ua, ub = unpack(fmt, v["a"]), unpack(fmt, v["b"])
         sign_b = ub.sign ^ v["sub"]
-        swap = wire(m, ub.mag > ua.mag, "swap")
         both_inf = ua.is_inf & ub.is_inf
         eff_sub = ua.sign ^ sign_b
         any_nan = ua.is_nan | ub.is_nan
-        exp_x = Mux(swap, ub.exp, ua.exp)
-        exp_y = Mux(swap, ua.exp, ub.exp)
         return {
-            "sign_x": Mux(swap, sign_b, ua.sign),
+            "sign_a": ua.sign, "sign_b": sign_b, "exp_a": ua.exp, "exp_b": ub.exp,
+            "sig_a": ua.sig, "sig_b": ub.sig,
+            # the magnitude order and both exponent differences side by side: ``order``
+            # picks one difference, so no subtraction waits for the comparison
+            "swap": ub.mag > ua.mag,
+            "diff_ab": (ua.exp - ub.exp)[:fmt.exp_bits],
+            "diff_ba": (ub.exp - ua.exp)[:fmt.exp_bits],
             "zero_sign": ua.sign & sign_b,
             "eff_sub": eff_sub,
-            "exp_x": exp_x,
-            "sig_x": Mux(swap, ub.sig, ua.sig),
-            "sig_y": Mux(swap, ua.sig, ub.sig),
-            "diff": (exp_x - exp_y)[:fmt.exp_bits],
             "nan": any_nan | (both_inf & eff_sub),
             "invalid": ~any_nan & both_inf & eff_sub,
             "inf": ua.is_inf | ub.is_inf,
         }
 
+    def _step_order(self, m, v):
+        swap = wire(m, v["swap"], "swap")
+        return {"sign_x": Mux(swap, v["sign_b"], v["sign_a"]),
+                **_keep(v, "zero_sign", "eff_sub"),
+                "exp_x": Mux(swap, v["exp_b"], v["exp_a"]),
+                "sig_x": Mux(swap, v["sig_b"], v["sig_a"]),
+                "sig_y": Mux(swap, v["sig_a"], v["sig_b"]),
+                "diff": Mux(swap, v["diff_ba"], v["diff_ab"]),
+                **_keep(v, *_SPECIALS)}
+
+    def _step_unpack(self, m, v):
+        """``classify`` then ``order`` in one step (the DSP48 adder's first step)."""
+        return FPAdd._step_order(self, m, FPAdd._step_classify(self, m, v))
+
     def _step_align(self, m, v):
-        shifted, sticky = shift_right_sticky(Cat(Const(0, 2), v["sig_y"]), v["diff"])
+        # the shift by the difference's multiple of 4 (clamped to the width, which shifts
+        # everything out); every bit stays in the double-width window, so ``shift`` below
+        # loses nothing that its sticky bit should see
+        width = self._fmt.man_bits + 3
+        amount = Value.cast(v["diff"])
+        clamped = wire(m, Mux(amount > width, width, amount), "clamped")
+        wide = Cat(Const(0, width), Const(0, 2), v["sig_y"]) >> Cat(Const(0, 2), clamped[2:])
+        return {**_keep(v, "sign_x", "zero_sign", "eff_sub", "exp_x", "sig_x", *_SPECIALS),
+                "wide": wide[:2 * width], "fine": clamped[:2]}
+
+    def _step_shift(self, m, v):
+        width = self._fmt.man_bits + 3
+        wide = v["wide"] >> v["fine"]
+        shifted, sticky = wide[width:2 * width], wide[:width] != 0
         if self._fmt.rounding == "chop":
             shifted, sticky = Cat(Const(0, 2), shifted[2:]), Const(0, 1)
         return {**_keep(v, "sign_x", "zero_sign", "eff_sub", "exp_x", "sig_x", *_SPECIALS),

@@ -24,13 +24,15 @@ The five combinational steps, in order:
     (:func:`.fp_common.pack`).
 
 Pipeline registers go behind the steps chosen by :func:`.pipeline.place_registers` from
-the step weights (2, 5, 2, 2, 1). The default ``stages=3`` (the paper's multiplier
-depth) gives:
+each step's delay as placed and routed on an ECP5 (:mod:`.step_delays`). The default stage
+count is the fewest whose slowest stage meets the table's target: 3 in ``rtz`` and ``chop``
+(the paper's multiplier depth), 4 in ``rne``. FP24 ``rtz``, 3 stages:
 
 1. ``unpack``: the operands classified, the exponent sum and the two significands on
    registers (a DSP48's input registers);
 2. ``multiply``: the product on a register (the DSP48's product register);
-3. ``normalise`` + ``round`` + ``pack``: the result and its flags, on the output registers.
+3. ``normalise`` + ``round`` + ``pack``: the result and its flags, on the output registers
+   (in ``rne`` ``pack`` gets a stage of its own).
 
 ``stages`` can be anything from 1 (all five steps in one clock) to 5 (one step each).
 
@@ -63,14 +65,16 @@ from amaranth.lib.wiring import In, Out
 from .dsp48 import LIMB, DSP48Mul, multiplier_latency
 from .fp_common import check_format, pack, round_significand, unpack
 from .pipeline import Step, build_pipeline, delay, group_steps, place_registers
+from .step_delays import DEFAULT_STAGES, step_weights
 
-__all__ = ["FPMul", "SigMul", "MULTIPLIERS", "fp_mul_latency"]
+__all__ = ["FPMul", "SigMul", "MULTIPLIERS", "MUL_STEPS", "fp_mul_latency", "mul_weights",
+           "default_mul_stages"]
 
 #: Significand-multiplier targets of :class:`FPMul`.
 MULTIPLIERS = ("generic", "virtex4")
 
-#: (name, weight) of each combinational step, in datapath order.
-MUL_STEPS = (("unpack", 2), ("multiply", 5), ("normalise", 2), ("round", 2), ("pack", 1))
+#: The combinational steps, in datapath order (their weights: :mod:`.step_delays`).
+MUL_STEPS = ("unpack", "multiply", "normalise", "round", "pack")
 
 _CARRIED = ("sign", "exp", "nan", "invalid", "inf", "zero")
 
@@ -86,20 +90,33 @@ def check_multiplier(multiplier) -> str:
     return multiplier
 
 
+def mul_weights(fmt) -> list[int]:
+    """The measured weight of each step of :data:`MUL_STEPS` in ``fmt``'s rounding."""
+    return step_weights("fp_mul", check_format(fmt).rounding, MUL_STEPS)
+
+
+def default_mul_stages(fmt) -> int:
+    """The default stage count of ``FPMul(fmt)``: 3 in ``rtz`` and ``chop``, 4 in ``rne``
+    (:data:`.step_delays.DEFAULT_STAGES`)."""
+    return DEFAULT_STAGES["fp_mul"][check_format(fmt).rounding]
+
+
 def _plan(fmt, stages, multiplier):
-    """``(generic registered steps, latency)`` of an :class:`FPMul`."""
-    registered = place_registers([w for _, w in MUL_STEPS], stages)
+    """``(stages, generic registered steps, latency)`` of an :class:`FPMul`."""
+    if stages is None:
+        stages = default_mul_stages(fmt)
+    registered = place_registers(mul_weights(fmt), stages)
     if check_multiplier(multiplier) == "generic":
-        return registered, stages
+        return stages, registered, stages
     width = fmt.man_bits + 1
     if width > 2 * LIMB:
         raise ValueError(f"multiplier='virtex4' handles significands of up to {2 * LIMB} "
                          f"bits, not {width} (man_bits={fmt.man_bits})")
     behind = sum(1 for i in registered if i > _MULTIPLY)
-    return registered, multiplier_latency(width) + behind
+    return stages, registered, multiplier_latency(width) + behind
 
 
-def fp_mul_latency(fmt, stages: int = 3, multiplier: str = "generic") -> int:
+def fp_mul_latency(fmt, stages: int | None = None, multiplier: str = "generic") -> int:
     """Latency of ``FPMul(fmt, stages, multiplier)``, without building it.
 
     Raises
@@ -107,7 +124,7 @@ def fp_mul_latency(fmt, stages: int = 3, multiplier: str = "generic") -> int:
     ValueError
         As :class:`FPMul` does.
     """
-    return _plan(check_format(fmt), stages, multiplier)[1]
+    return _plan(check_format(fmt), stages, multiplier)[2]
 
 
 class SigMul(wiring.Component):
@@ -183,11 +200,11 @@ class FPMul(wiring.Component):
         than 34 bits).
     """
 
-    def __init__(self, fmt, stages: int = 3, multiplier: str = "generic"):
+    def __init__(self, fmt, stages: int | None = None, multiplier: str = "generic"):
         self._fmt = check_format(fmt)
         self._steps = tuple(Step(name, getattr(self, f"_step_{name}"), weight)
-                            for name, weight in MUL_STEPS)
-        self._registered, self._latency = _plan(fmt, stages, multiplier)
+                            for name, weight in zip(MUL_STEPS, mul_weights(fmt)))
+        stages, self._registered, self._latency = _plan(fmt, stages, multiplier)
         self._stages = stages
         self._multiplier = multiplier
         w = fmt.width

@@ -52,9 +52,9 @@ from amaranth.lib.wiring import In, Out
 
 from ..fp import FP24
 from ..model.records import PLANE, PS_RESULT, SPHERE
-from .fp_add import FPAdd, check_adder, fp_add_latency
+from .fp_add import FPAdd, check_adder, default_add_stages, fp_add_latency
 from .fp_common import check_format
-from .fp_mul import FPMul, check_multiplier, fp_mul_latency
+from .fp_mul import FPMul, check_multiplier, default_mul_stages, fp_mul_latency
 from .pipeline import delay
 from .records import struct_layout
 
@@ -85,6 +85,12 @@ def result_layout(rows: int, cols: int, id_bits: int) -> data.StructLayout:
     ``row_mask`` (bit k = row plane k), ``col_mask`` (bit k = column plane ``rows + k``),
     packed LSB first in that order."""
     return struct_layout(PS_RESULT, id_bits=id_bits, rows=rows, cols=cols)
+
+
+def _stages(fmt, mul_stages, add_stages):
+    """The FP units' stage counts, ``None`` meaning the format's default."""
+    return (default_mul_stages(fmt) if mul_stages is None else mul_stages,
+            default_add_stages(fmt) if add_stages is None else add_stages)
 
 
 def _check_int(name, value, low):
@@ -162,9 +168,11 @@ class PlaneSphereTester(wiring.Component):
         For a bad format, a slot count below 1 or an unknown multiplier or adder.
     """
 
-    def __init__(self, fmt=FP24, planes: int = 1, mul_stages: int = 3, add_stages: int = 4,
-                 multiplier: str = "generic", adder: str = "generic"):
+    def __init__(self, fmt=FP24, planes: int = 1, mul_stages: int | None = None,
+                 add_stages: int | None = None, multiplier: str = "generic",
+                 adder: str = "generic"):
         self._fmt = check_format(fmt)
+        mul_stages, add_stages = _stages(fmt, mul_stages, add_stages)
         _check_int("planes", planes, 1)
         self._planes = planes
         _check_int("mul_stages", mul_stages, 1)
@@ -309,9 +317,11 @@ class PlaneSphereArray(wiring.Component):
     """
 
     def __init__(self, fmt=FP24, *, rows: int, cols: int, testers: int | None = None,
-                 sphere_id_bits: int = 16, mul_stages: int = 3, add_stages: int = 4,
-                 multiplier: str = "generic", adder: str = "generic"):
+                 sphere_id_bits: int = 16, mul_stages: int | None = None,
+                 add_stages: int | None = None, multiplier: str = "generic",
+                 adder: str = "generic"):
         self._fmt = check_format(fmt)
+        mul_stages, add_stages = _stages(fmt, mul_stages, add_stages)
         _check_int("rows", rows, 1)
         _check_int("cols", cols, 1)
         if testers is None:

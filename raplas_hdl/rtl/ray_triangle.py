@@ -70,8 +70,8 @@ from ..model.conservative import MARGIN_NAMES, margin_constants
 from ..model.certified import certified_constants, check_certified_format
 from ..model.records import EVENT_COUNT_BITS, PAIR, RT_RESULT
 from .certified_bound import RTL_VARIANTS, BoundOps
-from .fp_add import FPAdd, check_adder, fp_add_latency
-from .fp_mul import FPMul, check_multiplier, fp_mul_latency
+from .fp_add import FPAdd, check_adder, default_add_stages, fp_add_latency
+from .fp_mul import FPMul, check_multiplier, default_mul_stages, fp_mul_latency
 from .pipeline import SRL_STAGES, check_srl, delay
 from .ram import BlockRAMFIFO
 from .records import struct_layout
@@ -176,8 +176,9 @@ class RayTriangleUnit(wiring.Component):
     """
 
     def __init__(self, fmt, *, mode: str = "paper", margin_scale: float = 1,
-                 ray_id_bits: int = 16, tri_id_bits: int = 16, add_stages: int = 4,
-                 mul_stages: int = 3, multiplier: str = "generic",
+                 ray_id_bits: int = 16, tri_id_bits: int = 16,
+                 add_stages: int | None = None, mul_stages: int | None = None,
+                 multiplier: str = "generic",
                  adder: str = "generic", bound_variant: str = "exp", srl=None,
                  bram_fifo=None):
         check_format(fmt)
@@ -203,6 +204,10 @@ class RayTriangleUnit(wiring.Component):
         self._margin_scale = float(margin_scale)
         self._ray_id_bits = ray_id_bits
         self._tri_id_bits = tri_id_bits
+        if add_stages is None:
+            add_stages = default_add_stages(fmt)
+        if mul_stages is None:
+            mul_stages = default_mul_stages(fmt)
         for name, st in (("add_stages", add_stages), ("mul_stages", mul_stages)):
             if not isinstance(st, int) or isinstance(st, bool) or st < 1:
                 raise ValueError(f"{name} must be a positive integer, not {st!r}")

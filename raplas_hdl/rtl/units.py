@@ -55,11 +55,13 @@ class Unit:
 
 UNITS = {u.name: u for u in [
     Unit("fp-add", "fp_add", "pipelined FP adder/subtractor",
-         "raplas_hdl.rtl.fp_add:FPAdd", {"stages": (int, 4, "pipeline stages"),
+         "raplas_hdl.rtl.fp_add:FPAdd", {"stages": (int, None, "pipeline stages (default: "
+                                                    "4, 6 in rne)"),
                                          "target": (str, "generic", "adder target: generic "
                                                     "| virtex4 (two DSP48)")}),
     Unit("fp-mul", "fp_mul", "pipelined FP multiplier (one (M+1)x(M+1) multiply)",
-         "raplas_hdl.rtl.fp_mul:FPMul", {"stages": (int, 3, "pipeline stages"),
+         "raplas_hdl.rtl.fp_mul:FPMul", {"stages": (int, None, "pipeline stages (default: "
+                                                    "3, 4 in rne)"),
                                          **TARGET_OPTION}),
     Unit("plane-sphere-tester", "plane_sphere_tester", "one plane-sphere tester",
          "raplas_hdl.rtl.plane_sphere:PlaneSphereTester", {**TARGET_OPTION, **ADDER_OPTION}),

