@@ -80,7 +80,7 @@ def test_certified_latency_and_schedule():
     unit = RayTriangleUnit(FP24, mode="certified")
     Fragment.get(unit, None)            # elaborates: every result and bound before the decision
     assert unit.decision_cycle > 6 * 4 + 2 * 3          # the bounds end after w
-    assert unit.latency == unit.decision_cycle + 2
+    assert unit.latency == unit.decision_cycle + 3
     assert unit.bound_variant == "exp"
 
 

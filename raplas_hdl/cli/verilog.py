@@ -15,7 +15,7 @@ UNIT_NAMES = ("fp-add", "fp-mul", "plane-sphere-tester", "plane-sphere", "ray-tr
 
 #: option -> {unit: (lo, hi, default)} for the integer options; choices for the others.
 UNIT_LIMITS = {
-    "stages": {"fp-add": (1, 9, "4, rne 6"), "fp-mul": (1, 5, "3, rne 4")},
+    "stages": {"fp-add": (1, 9, "5, rne 6"), "fp-mul": (1, 5, "3, rne 4")},
     "rows": {u: (1, g.MAX_LATTICE, 4) for u in ("plane-sphere", "intersection-unit",
                                                  "board-top")},
     "cols": {u: (1, g.MAX_LATTICE, 4) for u in ("plane-sphere", "intersection-unit",

