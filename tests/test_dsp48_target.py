@@ -268,7 +268,7 @@ def test_cli_target_option(tmp_path, capsys):
     assert "DSP48" not in gen.read_text()
     rt = tmp_path / "rt.v"
     assert main(["verilog", "plane-sphere-tester", "--target", "virtex4", "-o", str(rt)]) == 0
-    assert json.loads(rt.with_suffix(".json").read_text())["latency"] == 13
+    assert json.loads(rt.with_suffix(".json").read_text())["latency"] == 15
     capsys.readouterr()
     assert main(["verilog", "fp-mul", "--target", "xc7", "-o", str(tmp_path / "x.v")]) == 2
     assert "target must be one of generic, virtex4" in capsys.readouterr().err
