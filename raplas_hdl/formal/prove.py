@@ -22,7 +22,9 @@ any register contents before it (:mod:`.miter`). The proof covers ``o``, ``flags
 
 A counterexample found with the product cut is run again on the uncut model and the
 contract's bit-vector form, with the real product: only if they differ there is it
-reported (else the result is ``unknown``). A counterexample is decoded (:func:`describe`): the operands in hex and as numbers, the
+reported. Otherwise (the cut's product was no product) the uncut miter is searched
+directly, real multipliers on both sides: a wrong design usually gives a counterexample
+quickly even where a proof would not close; if not, the result is ``unknown``. A counterexample is decoded (:func:`describe`): the operands in hex and as numbers, the
 RTL's result, the reference's and the golden model's (:mod:`raplas_hdl.fp.model`), so that
 one sees which side is wrong.
 """
@@ -213,12 +215,19 @@ def prove(unit: str, fmt: FPFormat, stages: int | None = None, *, method: str | 
         steps.append({"proves": name, "result": run.result, "seconds": round(run.seconds, 3)})
         if run.result != "proved":
             result, reason = run.result, run.reason
-            if run.result == "counterexample":
+            if run.result == "counterexample" and method != "direct":
+                # the cut product may be no product: check, else search with the real one
+                cex = _confirm(u, op, fmt, run.values, timeout)
+                if cex is None:
+                    differs, watch = _violated(u, op, fmt, True)
+                    again = solve(z3.And(*u.assumptions, differs), timeout, watch)
+                    steps.append({"proves": "contract with the real product (the cut's "
+                                  "counterexample was not one)", "result": again.result,
+                                  "seconds": round(again.seconds, 3)})
+                    # proved here: the cut was too coarse, the uncut proof is a proof
+                    result, reason, cex = again.result, again.reason, again.values or None
+            elif run.result == "counterexample":
                 cex = run.values
-                if method != "direct":   # the cut product may be no product: check
-                    cex = _confirm(u, op, fmt, cex, timeout)
-                    if cex is None:
-                        result, reason = "unknown", "counterexample only under the cut"
             break
     return ProofResult(unit=unit, format=format_label(fmt), rounding=fmt.rounding,
                        stages=stages, target="generic", result=result, solver=SOLVER,
