@@ -213,6 +213,27 @@ def test_mutated_multiplier_fails_the_chain(work):
     assert res.steps[0]["result"] == "counterexample"
 
 
+# -- stall and reset ----------------------------------------------------------------------
+@pytest.mark.parametrize("unit", ["fp-add", "fp-mul"])
+def test_control_properties_proved(unit, work):
+    res = check_proof(unit, FP24, work, method="control")
+    assert res.result == "proved", (res.result, res.reason, res.steps)
+    assert [s["proves"] for s in res.steps] == ["control: hold", "control: reset",
+                                                "control: outputs"]
+
+
+@pytest.mark.parametrize("unit", ["fp-add", "fp-mul"])
+@pytest.mark.parametrize("prop, mutation", [
+    ("hold", ("if (en) begin", "if (1'h1) begin")),     # one register ignores the stall
+    ("reset", ("if (rst) begin", "if (1'h0) begin")),   # one valid bit ignores the reset
+])
+def test_control_mutants_fail(unit, prop, mutation, work):
+    res = check_proof(unit, FP24, work, method="control",
+                      mutate=lambda t: t.replace(*mutation, 1))
+    assert res.result == "counterexample"
+    assert res.steps[-1]["proves"] == f"control: {prop}"
+
+
 # -- command line -----------------------------------------------------------------------------
 def test_cli_proves_and_exits_0(capsys, monkeypatch, work):
     monkeypatch.chdir(work)

@@ -28,8 +28,11 @@ def add_parser(subparsers):
                     "proved with the significand product cut to one uninterpreted function "
                     "on both sides (--method cut, the default) or as a chain: the N-stage "
                     "unit equals its 1-stage form, which equals the contract (--method "
-                    "chain). Prints proved, a counterexample (operands, RTL, contract and "
-                    "golden model results) or 'unknown after S s'; exit 0, 1 or 3. Work "
+                    "chain); --method control proves the stall and reset properties "
+                    "instead (a stall holds every register, rst clears every valid, the "
+                    "outputs depend on the registers alone). Prints proved, a "
+                    "counterexample (operands, RTL, contract and golden model results) or "
+                    "'unknown after S s'; exit 0, 1 or 3. Work "
                     "files go to build/formal/ under the current directory. The virtex4 "
                     "target is not proved yet (docs/formal.md).")
     p.add_argument("unit", type=g.choice(*PROVE_UNITS, what="unit"), metavar="UNIT",
@@ -40,9 +43,13 @@ def add_parser(subparsers):
                                      "`raplas-hdl verilog` builds it)")
     p.add_argument("--timeout", type=g.float_range(0, 86400, lo_open=True), default=300.0,
                    metavar="S", help="seconds for each solver call (default 300)")
-    p.add_argument("--method", type=g.choice("direct", "cut", "chain", what="method"),
-                   default=None, metavar="{direct,cut,chain}",
-                   help="fp-add: direct; fp-mul: cut (default) or chain")
+    p.add_argument("--method", type=g.choice("direct", "cut", "chain", "control",
+                                             what="method"),
+                   default=None, metavar="{direct,cut,chain,control}",
+                   help="fp-add: direct; fp-mul: cut (default), chain or direct (the "
+                        "FloatingPoint contract with real multipliers: does not close at "
+                        "FP24); control (both units): the stall and reset properties "
+                        "instead of the datapath")
     p.add_argument("--target", type=g.choice("generic", "virtex4", what="target"),
                    default="generic", metavar="{generic,virtex4}",
                    help="unit target (only generic is proved so far)")

@@ -8,8 +8,8 @@ transition relation between neighbours, ``en`` and ``rst`` pinned on cycles ``0 
 the inputs are read in ``s0`` and the outputs in ``sL``. No initial state is assumed, so
 the result holds from any register contents.
 
-:func:`contract_miter` is the negation of "outputs equal the contract": unsatisfiable means
-proved, and a model is a counterexample. :func:`equivalence_miter` does the same for two
+:func:`contract_miter` is the negation of "outputs equal the contract": unsatisfiable
+means proved, and a model is a counterexample. :func:`equivalence_miter` does the same for two
 unrolled models fed the same inputs (the chain proofs of :mod:`.chain`).
 """
 
@@ -23,7 +23,8 @@ import z3
 from .netlist import Netlist
 from .reference import reference
 
-__all__ = ["Unrolled", "ports", "unroll", "contract_miter", "equivalence_miter", "DATA_INPUTS"]
+__all__ = ["Unrolled", "ports", "unroll", "violation", "contract_miter", "equivalence_miter",
+           "DATA_INPUTS"]
 
 #: The inputs that carry an operation (the others are pinned: ``en``, ``rst``; or unused:
 #: ``clk``).
@@ -102,13 +103,25 @@ def unroll(net: Netlist, cycles: int | None = None) -> Unrolled:
                     assumptions=assumptions)
 
 
-def contract_miter(u: Unrolled, op: str) -> tuple[z3.BoolRef, tuple, tuple]:
-    """``(goal, reference bits, reference flags)``: ``goal`` is satisfiable exactly when some
-    input gives an ``o``, ``flags`` or ``o_valid`` that differs from the contract."""
+def violation(u: Unrolled, op: str, *, bitvector: bool = False) -> tuple[z3.BoolRef, dict]:
+    """``(differs, watch)``: ``differs`` holds exactly when ``o``, ``flags`` or ``o_valid``
+    differ from the contract (:func:`.reference.reference`, ``bitvector`` as there);
+    ``watch`` names the terms a counterexample reports (``in.*``, ``rtl.*``, ``ref.o``,
+    ``ref.flags``)."""
     i, o = u.inputs, u.outputs
-    bits, flags = reference(u.net.fmt, op, i["a"], i["b"], i.get("sub"))
+    bits, flags = reference(u.net.fmt, op, i["a"], i["b"], i.get("sub"), bitvector=bitvector)
     same = z3.And(o["o"] == bits, o["flags"] == flags, o["o_valid"] == i["i_valid"])
-    return z3.And(*u.assumptions, z3.Not(same)), bits, flags
+    watch = {**{f"in.{k}": v for k, v in i.items()}, **{f"rtl.{k}": v for k, v in o.items()},
+             "ref.o": bits, "ref.flags": flags}
+    return z3.Not(same), watch
+
+
+def contract_miter(u: Unrolled, op: str, *, bitvector: bool = False
+                   ) -> tuple[z3.BoolRef, dict]:
+    """``(goal, watch)``: ``goal`` is satisfiable exactly when some input gives an ``o``,
+    ``flags`` or ``o_valid`` that differs from the contract (see :func:`violation`)."""
+    differs, watch = violation(u, op, bitvector=bitvector)
+    return z3.And(*u.assumptions, differs), watch
 
 
 def equivalence_miter(left: Unrolled, right: Unrolled) -> z3.BoolRef:

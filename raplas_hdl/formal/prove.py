@@ -2,15 +2,19 @@
 
 :func:`prove` runs one proof and returns a :class:`ProofResult`. The methods:
 
-``direct`` (``fp-add``)
+``direct`` (``fp-add``; also ``fp-mul``, where it does not close at FP24)
     The unit unrolled over its latency (:mod:`.miter`) against the contract of
-    :mod:`.reference`: the FloatingPoint-theory form for ``rtz`` and ``rne``, the
-    bit-vector form for ``chop``.
+    :mod:`.reference`: the FloatingPoint-theory form for ``rtz`` and ``rne`` (and the
+    multiplier's ``chop``), the bit-vector form for the ``chop`` adder.
 ``cut`` (``fp-mul``, the default there)
     The unit against the bit-vector form of the multiplier's contract, with the
     significand product on both sides cut to one uninterpreted function of its operands
     (:mod:`.cut`): no multiplier reasoning. A direct proof against the FloatingPoint
     theory does not close (z3 and bitwuzla: unknown after 120-150 s at FP24, one stage).
+``control`` (both units)
+    Not the datapath but the stall and reset behaviour (:mod:`.control`): a stall holds
+    every register, ``rst`` clears every valid bit, the outputs depend on the registers
+    alone. With the datapath proof this covers any pattern of ``en``.
 ``chain`` (``fp-mul``)
     Two proofs, both with the product cut: the ``stages``-stage unit equals its
     1-stage form (the same datapath with the inner registers as wires), and the 1-stage
@@ -24,7 +28,9 @@ A counterexample found with the product cut is run again on the uncut model and 
 contract's bit-vector form, with the real product: only if they differ there is it
 reported. Otherwise (the cut's product was no product) the uncut miter is searched
 directly, real multipliers on both sides: a wrong design usually gives a counterexample
-quickly even where a proof would not close; if not, the result is ``unknown``. A counterexample is decoded (:func:`describe`): the operands in hex and as numbers, the
+quickly even where a proof would not close; if not, the result is ``unknown``.
+
+A counterexample is decoded (:func:`describe`): the operands in hex and as numbers, the
 RTL's result, the reference's and the golden model's (:mod:`raplas_hdl.fp.model`), so that
 one sees which side is wrong.
 """
@@ -38,10 +44,10 @@ from pathlib import Path
 import z3
 
 from ..fp.format import FLAG_NAMES, PRESETS, FPFormat, check_format
+from .control import PROPERTIES, control_goal
 from .cut import cut_products, product_function
-from .miter import equivalence_miter, unroll
+from .miter import contract_miter, equivalence_miter, unroll, violation
 from .netlist import netlist
-from .reference import reference
 from .solve import SOLVER, solve
 
 __all__ = ["ProofResult", "prove", "describe", "UNITS", "METHODS", "default_stages",
@@ -51,7 +57,7 @@ __all__ = ["ProofResult", "prove", "describe", "UNITS", "METHODS", "default_stag
 UNITS = {"fp-add": ("add", "direct"), "fp-mul": ("mul", "cut")}
 
 #: Methods each unit takes.
-METHODS = {"fp-add": ("direct",), "fp-mul": ("cut", "chain")}
+METHODS = {"fp-add": ("direct", "control"), "fp-mul": ("cut", "chain", "direct", "control")}
 
 
 @dataclass
@@ -121,21 +127,6 @@ def _check(unit, method):
     return method
 
 
-def _violated(u, op, fmt, bitvector):
-    """``(differs, watch)``: the outputs differ from the contract; the terms to report."""
-    i, o = u.inputs, u.outputs
-    bits, flags = reference(fmt, op, i["a"], i["b"], i.get("sub"), bitvector=bitvector)
-    same = z3.And(o["o"] == bits, o["flags"] == flags, o["o_valid"] == i["i_valid"])
-    watch = {**{f"in.{k}": v for k, v in i.items()}, **{f"rtl.{k}": v for k, v in o.items()},
-             "ref.o": bits, "ref.flags": flags}
-    return z3.Not(same), watch
-
-
-def _contract_goal(u, op, fmt, bitvector):
-    differs, watch = _violated(u, op, fmt, bitvector)
-    return z3.And(*u.assumptions, differs), watch
-
-
 def _cut(goal, fmt, f=None):
     f = product_function(fmt.man_bits + 1) if f is None else f
     goal, count = cut_products(goal, f)
@@ -144,7 +135,7 @@ def _cut(goal, fmt, f=None):
     return goal
 
 
-def _confirm(u, op, fmt, values, timeout):
+def _confirm(u, op, values, timeout):
     """Run the uncut model and the contract on a counterexample's inputs.
 
     Returns the real values (``in.*``, ``rtl.*``, ``ref.*``) if the RTL and the contract
@@ -152,7 +143,7 @@ def _confirm(u, op, fmt, values, timeout):
     one, so it says nothing).
     """
     pins = [v == values[f"in.{k}"] for k, v in u.inputs.items() if f"in.{k}" in values]
-    differs, watch = _violated(u, op, fmt, op == "mul")
+    differs, watch = violation(u, op, bitvector=op == "mul")
     run = solve(z3.And(*u.assumptions, *pins, differs), timeout, watch)
     return run.values if run.result == "counterexample" else None
 
@@ -168,7 +159,9 @@ def prove(unit: str, fmt: FPFormat, stages: int | None = None, *, method: str | 
     stages : int, optional
         Default: the registry's default for the unit.
     method : str, optional
-        ``direct`` (``fp-add``), ``cut`` or ``chain`` (``fp-mul``); default per unit.
+        ``direct`` (``fp-add``), ``cut``, ``chain`` or ``direct`` (``fp-mul``), ``control``
+        (both: stall and reset instead of the datapath); default:
+        ``direct`` for the adder, ``cut`` for the multiplier.
     timeout : float
         Seconds for each solver call.
     cwd : path
@@ -188,20 +181,23 @@ def prove(unit: str, fmt: FPFormat, stages: int | None = None, *, method: str | 
     op = UNITS[unit][0]
     t0 = time.monotonic()
     net = netlist(unit, fmt, stages, cwd=cwd, mutate=mutate)
-    u = unroll(net)
+    u = unroll(net) if method != "control" else None
     steps = []
-    if method == "chain":
+    if method == "control":
+        links = [(f"control: {p}", control_goal(net, p), {}) for p in PROPERTIES]
+        described = "control: " + ", ".join(PROPERTIES)
+    elif method == "chain":
         one = unroll(netlist(unit, fmt, 1, tag="s1", cwd=cwd))
         f = product_function(fmt.man_bits + 1)
         eq_watch = {**{f"in.{k}": v for k, v in u.inputs.items()},
                     **{f"rtl.{k}": v for k, v in u.outputs.items()}}
-        c_goal, c_watch = _contract_goal(one, op, fmt, True)
+        c_goal, c_watch = contract_miter(one, op, bitvector=True)
         links = [(f"{stages}-stage == 1-stage (product cut)",
                   _cut(equivalence_miter(u, one), fmt, f), eq_watch),
                  ("1-stage == contract (product cut)", _cut(c_goal, fmt, f), c_watch)]
         described = f"chain: {links[0][0]}; {links[1][0]}"
     else:
-        goal, watch = _contract_goal(u, op, fmt, method == "cut")
+        goal, watch = contract_miter(u, op, bitvector=method == "cut")
         if method == "cut":
             goal = _cut(goal, fmt)
         described = ("cut: product as one uninterpreted function, bit-vector contract"
@@ -215,18 +211,18 @@ def prove(unit: str, fmt: FPFormat, stages: int | None = None, *, method: str | 
         steps.append({"proves": name, "result": run.result, "seconds": round(run.seconds, 3)})
         if run.result != "proved":
             result, reason = run.result, run.reason
-            if run.result == "counterexample" and method != "direct":
+            if run.result == "counterexample" and method in ("cut", "chain"):
                 # the cut product may be no product: check, else search with the real one
-                cex = _confirm(u, op, fmt, run.values, timeout)
+                cex = _confirm(u, op, run.values, timeout)
                 if cex is None:
-                    differs, watch = _violated(u, op, fmt, True)
+                    differs, watch = violation(u, op, bitvector=True)
                     again = solve(z3.And(*u.assumptions, differs), timeout, watch)
                     steps.append({"proves": "contract with the real product (the cut's "
                                   "counterexample was not one)", "result": again.result,
                                   "seconds": round(again.seconds, 3)})
                     # proved here: the cut was too coarse, the uncut proof is a proof
                     result, reason, cex = again.result, again.reason, again.values or None
-            elif run.result == "counterexample":
+            elif run.result == "counterexample" and method != "control":
                 cex = run.values
             break
     return ProofResult(unit=unit, format=format_label(fmt), rounding=fmt.rounding,

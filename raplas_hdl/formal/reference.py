@@ -144,7 +144,7 @@ def _leading_zeros(value, width, out_width):
 
 def _chop_add(fmt, ca, cb, a, b, sub):
     m, e = fmt.man_bits, fmt.exp_bits
-    ew = e + 7                                  # signed working exponent (z3 >= and <= on it are signed)
+    ew = e + 7                      # signed working exponent (z3's >= and <= on it are signed)
     sign_b = cb.sign ^ sub if sub is not None else cb.sign
     any_nan = z3.Or(ca.nan, cb.nan)
     inf_inf = z3.And(ca.inf, cb.inf, ca.sign != sign_b)
