@@ -271,3 +271,30 @@ def test_cli_bad_input_is_one_line_exit_2(argv, message, capsys, monkeypatch, tm
     err = capsys.readouterr().err.strip()
     assert message in err and len(err.splitlines()) == 1, err
     assert not (tmp_path / "build").exists(), "work was done before the error"
+
+
+def test_cli_help_is_plain(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["prove", "--help"])
+    assert exc.value.code == 0
+    text = capsys.readouterr().out
+    assert "``" not in text and ":mod:" not in text and "(default None)" not in text
+    assert "--method {direct,cut,chain,control}" in text
+
+
+def test_model_and_host_never_import_the_prover():
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = str(Path(__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        [root, *filter(None, [os.environ.get("PYTHONPATH")])])}
+    code = ("import sys, raplas_hdl.fp.model, raplas_hdl.host, raplas_hdl.rtl.units, "
+            "raplas_hdl.cli; "
+            "bad = [m for m in sys.modules if m.startswith('raplas_hdl.formal') or m == 'z3']; "
+            "assert not bad, bad")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120, env=env, cwd=root)
+    assert res.returncode == 0, res.stderr[-2000:]
