@@ -4,8 +4,9 @@ Runs :func:`raplas_hdl.formal.prove` on ``fp-add`` and ``fp-mul`` at FP16, FP20,
 FP32 in rtz, rne and chop at the registry's default stage count, then every stage count
 of both units at FP24 rtz, the multiplier's chain at every format (rtz), and the
 multiplier's direct proof against the FloatingPoint contract at FP24 rtz, 1 stage (the
-one the cut replaces; expected: unknown), and the stall/reset properties (``control``) of
-both units at every format (rtz, default stages). One solver call at a time, each bounded by
+one the cut replaces; expected: unknown), and the stall/reset properties (``control``, and
+their port-level form with SymbiYosys, ``sby``) of both units at every format (rtz,
+default stages). One solver call at a time, each bounded by
 ``--timeout``. Each record notes the 1-minute load average before and after it (the
 machine is shared).
 
@@ -54,6 +55,7 @@ def plan(formats):
         jobs.append(("fp-mul", name, "rtz", default_stages("fp-mul"), "chain"))
         for unit in ("fp-mul", "fp-add"):
             jobs.append((unit, name, "rtz", default_stages(unit), "control"))
+            jobs.append((unit, name, "rtz", default_stages(unit), "sby"))
     for unit in ("fp-mul", "fp-add"):
         for n in range(1, MAX_STAGES[unit] + 1):
             if n != default_stages(unit):

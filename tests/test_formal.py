@@ -234,6 +234,15 @@ def test_control_mutants_fail(unit, prop, mutation, work):
     assert res.steps[-1]["proves"] == f"control: {prop}"
 
 
+@pytest.mark.parametrize("unit", ["fp-add", "fp-mul"])
+def test_sby_agrees_at_the_ports(unit, work):
+    res = check_proof(unit, FP24, work, method="sby")
+    assert res.result == "proved", (res.result, res.reason)
+    for mutation in (("if (en) begin", "if (1'h1) begin"), ("if (rst) begin", "if (1'h0) begin")):
+        bad = check_proof(unit, FP24, work, method="sby", mutate=lambda t: t.replace(*mutation))
+        assert bad.result == "counterexample", (mutation, bad.result, bad.reason)
+
+
 # -- command line -----------------------------------------------------------------------------
 def test_cli_proves_and_exits_0(capsys, monkeypatch, work):
     monkeypatch.chdir(work)
@@ -279,7 +288,7 @@ def test_cli_help_is_plain(capsys):
     assert exc.value.code == 0
     text = capsys.readouterr().out
     assert "``" not in text and ":mod:" not in text and "(default None)" not in text
-    assert "--method {direct,cut,chain,control}" in text
+    assert "--method {direct,cut,chain,control,sby}" in text
 
 
 def test_model_and_host_never_import_the_prover():

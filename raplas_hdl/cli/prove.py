@@ -30,7 +30,8 @@ def add_parser(subparsers):
                     "unit equals its 1-stage form, which equals the contract (--method "
                     "chain); --method control proves the stall and reset properties "
                     "instead (a stall holds every register, rst clears every valid, the "
-                    "outputs depend on the registers alone). Prints proved, a "
+                    "outputs depend on the registers alone), --method sby their port-level "
+                    "form with SymbiYosys. Prints proved, a "
                     "counterexample (operands, RTL, contract and golden model results) or "
                     "'unknown after S s'; exit 0, 1 or 3. Work "
                     "files go to build/formal/ under the current directory. The virtex4 "
@@ -43,13 +44,14 @@ def add_parser(subparsers):
                                      "`raplas-hdl verilog` builds it)")
     p.add_argument("--timeout", type=g.float_range(0, 86400, lo_open=True), default=300.0,
                    metavar="S", help="seconds for each solver call (default 300)")
-    p.add_argument("--method", type=g.choice("direct", "cut", "chain", "control",
+    p.add_argument("--method", type=g.choice("direct", "cut", "chain", "control", "sby",
                                              what="method"),
-                   default=None, metavar="{direct,cut,chain,control}",
+                   default=None, metavar="{direct,cut,chain,control,sby}",
                    help="fp-add: direct; fp-mul: cut (default), chain or direct (the "
                         "FloatingPoint contract with real multipliers: does not close at "
                         "FP24); control (both units): the stall and reset properties "
-                        "instead of the datapath")
+                        "instead of the datapath; sby (both units): their port-level form "
+                        "checked by SymbiYosys")
     p.add_argument("--target", type=g.choice("generic", "virtex4", what="target"),
                    default="generic", metavar="{generic,virtex4}",
                    help="unit target (only generic is proved so far)")
@@ -84,6 +86,10 @@ def check(args) -> None:
         raise g.UsageError("z3 is not installed: pip install z3-solver "
                            "(or `make setup`)") from None
     yosys_command()      # FileNotFoundError naming what to install
+    if args.method == "sby":
+        from ..formal.sby import sby_tools
+
+        sby_tools()
 
 
 def run(args) -> int:

@@ -15,6 +15,9 @@
     Not the datapath but the stall and reset behaviour (:mod:`.control`): a stall holds
     every register, ``rst`` clears every valid bit, the outputs depend on the registers
     alone. With the datapath proof this covers any pattern of ``en``.
+``sby`` (both units)
+    The port-level consequences of ``control`` checked by a second tool, SymbiYosys
+    (:mod:`.sby`): a stall changes no output, ``rst`` clears ``o_valid``.
 ``chain`` (``fp-mul``)
     Two proofs, both with the product cut: the ``stages``-stage unit equals its
     1-stage form (the same datapath with the inner registers as wires), and the 1-stage
@@ -57,7 +60,8 @@ __all__ = ["ProofResult", "prove", "describe", "UNITS", "METHODS", "default_stag
 UNITS = {"fp-add": ("add", "direct"), "fp-mul": ("mul", "cut")}
 
 #: Methods each unit takes.
-METHODS = {"fp-add": ("direct", "control"), "fp-mul": ("cut", "chain", "direct", "control")}
+METHODS = {"fp-add": ("direct", "control", "sby"),
+           "fp-mul": ("cut", "chain", "direct", "control", "sby")}
 
 
 @dataclass
@@ -160,7 +164,7 @@ def prove(unit: str, fmt: FPFormat, stages: int | None = None, *, method: str | 
         Default: the registry's default for the unit.
     method : str, optional
         ``direct`` (``fp-add``), ``cut``, ``chain`` or ``direct`` (``fp-mul``), ``control``
-        (both: stall and reset instead of the datapath); default:
+        or ``sby`` (both: stall and reset instead of the datapath); default:
         ``direct`` for the adder, ``cut`` for the multiplier.
     timeout : float
         Seconds for each solver call.
@@ -180,6 +184,19 @@ def prove(unit: str, fmt: FPFormat, stages: int | None = None, *, method: str | 
     stages = default_stages(unit) if stages is None else stages
     op = UNITS[unit][0]
     t0 = time.monotonic()
+    if method == "sby":
+        from .sby import run_sby
+
+        result, seconds, detail = run_sby(unit, fmt, stages, timeout=timeout, cwd=cwd,
+                                          mutate=mutate)
+        return ProofResult(
+            unit=unit, format=format_label(fmt), rounding=fmt.rounding, stages=stages,
+            target="generic", result=result, solver="SymbiYosys (smtbmc z3)",
+            seconds=round(time.monotonic() - t0, 3),
+            method="sby: a stall keeps o/flags/o_valid, rst clears o_valid (k-induction)",
+            steps=[{"proves": "sby: stall and reset at the ports", "result": result,
+                    "seconds": round(seconds, 3)}],
+            reason="" if result == "proved" else detail)
     net = netlist(unit, fmt, stages, cwd=cwd, mutate=mutate)
     u = unroll(net) if method != "control" else None
     steps = []
