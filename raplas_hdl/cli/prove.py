@@ -99,7 +99,8 @@ def run(args) -> int:
     from ..formal.prove import describe, prove
 
     res = prove(args.unit, args.fmt, args.stages, method=args.method, timeout=args.timeout)
-    head = f"{args.unit} {args.fmt}, {res.stages} stages, {res.target}"
+    plural = "" if res.stages == 1 else "s"
+    head = f"{args.unit} {args.fmt}, {res.stages} stage{plural}, {res.target}"
     if res.result == "proved":
         print(f"{head}: proved in {res.seconds:.1f} s by {res.method}")
     elif res.result == "counterexample":
