@@ -1,0 +1,128 @@
+"""Proof table of issue 23: every FP unit proved against the contract, with times.
+
+Runs :func:`raplas_hdl.formal.prove` on ``fp-add`` and ``fp-mul`` at FP16, FP20, FP24 and
+FP32 in rtz, rne and chop at the registry's default stage count, then every stage count
+of both units at FP24 rtz, the multiplier's chain at every format (rtz), and the
+multiplier's direct proof against the FloatingPoint contract at FP24 rtz, 1 stage (the
+one the cut replaces; expected: unknown), and the stall/reset properties (``control``, and
+their port-level form with SymbiYosys, ``sby``) of both units at every format (rtz,
+default stages). One solver call at a time, each bounded by
+``--timeout``. Each record notes the 1-minute load average before and after it (the
+machine is shared).
+
+Writes ``docs/results/proofs.json`` (merged by unit, format, rounding, stages, method,
+so a partial run updates its rows) and the table between the markers of
+``docs/formal.md``.
+
+Usage::
+
+    python benchmarks/bench_prove.py [--timeout 300] [--formats FP16 FP24 ...]
+                                     [--only-missing]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from raplas_hdl.fp import PRESETS, ROUNDINGS  # noqa: E402
+from raplas_hdl.formal import default_stages, prove  # noqa: E402
+from raplas_hdl.rtl.fp_add import ADD_STEPS  # noqa: E402
+from raplas_hdl.rtl.fp_mul import MUL_STEPS  # noqa: E402
+
+JSON = ROOT / "docs" / "results" / "proofs.json"
+DOC = ROOT / "docs" / "formal.md"
+BEGIN, END = "<!-- proofs:begin -->", "<!-- proofs:end -->"
+MAX_STAGES = {"fp-add": len(ADD_STEPS), "fp-mul": len(MUL_STEPS)}
+
+
+def plan(formats):
+    """``(unit, format name, rounding, stages, method)`` in run order, cheap ones first."""
+    jobs = []
+    for name in formats:
+        for unit in ("fp-mul", "fp-add"):
+            for rnd in ROUNDINGS:
+                jobs.append((unit, name, rnd, default_stages(unit), None))
+        jobs.append(("fp-mul", name, "rtz", default_stages("fp-mul"), "chain"))
+        for unit in ("fp-mul", "fp-add"):
+            jobs.append((unit, name, "rtz", default_stages(unit), "control"))
+            jobs.append((unit, name, "rtz", default_stages(unit), "sby"))
+    for unit in ("fp-mul", "fp-add"):
+        for n in range(1, MAX_STAGES[unit] + 1):
+            if n != default_stages(unit):
+                jobs.append((unit, "FP24", "rtz", n, None))
+    jobs.append(("fp-mul", "FP24", "rtz", 1, "direct"))
+    # the slow ones last
+    return sorted(jobs, key=lambda j: (j[1] == "FP32", j[4] == "direct"))
+
+
+def key(r):
+    return (r["unit"], r["format"], r["rounding"], r["stages"], r["method"].split(":")[0])
+
+
+def load():
+    return json.loads(JSON.read_text())["proofs"] if JSON.exists() else []
+
+
+def table(rows):
+    lines = ["| unit | format | rounding | stages | method | result | seconds | solver s | "
+             "load |", "|---|---|---|---|---|---|---:|---:|---|"]
+    order = {n: i for i, n in enumerate(PRESETS)}
+    for r in sorted(rows, key=lambda r: (r["unit"], order.get(r["format"], 9), r["rounding"],
+                                         r["stages"], r["method"])):
+        solver = sum(s["seconds"] for s in r["steps"])
+        lines.append(f"| {r['unit']} | {r['format']} | {r['rounding']} | {r['stages']} | "
+                     f"{r['method'].split(':')[0]} | {r['result']} | {r['seconds']:.1f} | "
+                     f"{solver:.1f} | {r['load'][0]:.1f} / {r['load'][1]:.1f} |")
+    return "\n".join(lines)
+
+
+def write(rows):
+    JSON.parent.mkdir(parents=True, exist_ok=True)
+    meta = {"machine": f"{platform.machine()}, {os.cpu_count()} cores (shared)",
+            "python": platform.python_version(), "written": time.strftime("%Y-%m-%d %H:%M UTC",
+                                                                           time.gmtime()),
+            "load": "1-minute load average before / after each proof"}
+    JSON.write_text(json.dumps({"meta": meta, "proofs": rows}, indent=1, sort_keys=True) + "\n")
+    if DOC.exists():
+        text = DOC.read_text()
+        if BEGIN in text and END in text:
+            head, rest = text.split(BEGIN, 1)
+            _, tail = rest.split(END, 1)
+            DOC.write_text(f"{head}{BEGIN}\n{table(rows)}\n{END}{tail}")
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--timeout", type=float, default=300.0, help="seconds per solver call")
+    p.add_argument("--formats", nargs="+", default=list(PRESETS), help="default: all presets")
+    p.add_argument("--only-missing", action="store_true",
+                   help="skip the rows proofs.json already has")
+    args = p.parse_args(argv)
+    rows = {key(r): r for r in load()}
+    for unit, name, rnd, stages, method in plan(args.formats):
+        fmt = PRESETS[name].with_rounding(rnd)
+        k = (unit, name, rnd, stages, method or ("direct" if unit == "fp-add" else "cut"))
+        if args.only_missing and k in rows:
+            continue
+        before = os.getloadavg()[0]
+        res = prove(unit, fmt, stages, method=method, timeout=args.timeout, cwd=ROOT)
+        rec = {**res.as_dict(), "load": [round(before, 2), round(os.getloadavg()[0], 2)]}
+        rows[key(rec)] = rec
+        print(f"{unit:7} {name:5} {rnd:4} s{stages} {k[4]:6} {res.result:14} "
+              f"{res.seconds:7.1f} s  load {rec['load']}", flush=True)
+        write(list(rows.values()))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

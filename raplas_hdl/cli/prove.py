@@ -1,0 +1,118 @@
+"""``raplas-hdl prove UNIT``: prove an FP unit's Verilog equal to the contract for all inputs.
+
+Exit codes: 0 proved, 1 counterexample, 3 unknown (the solver ran out of time), 2 a bad
+command line (one line, before any work). See ``docs/formal.md``.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from . import grammar as g
+
+#: Units that can be proved so far.
+PROVE_UNITS = ("fp-add", "fp-mul")
+
+#: Exit code of an unknown result (0 proved, 1 counterexample, 2 usage).
+EXIT_UNKNOWN = 3
+
+
+def add_parser(subparsers):
+    p = subparsers.add_parser(
+        "prove", help="prove an FP unit's Verilog equal to the arithmetic contract for all "
+                      "inputs (Yosys + z3)",
+        description="Emit the unit's Verilog, turn it into an SMT-LIB model with Yosys, "
+                    "unroll it over its latency with en=1 and rst=0, and prove with z3 that "
+                    "o, flags and o_valid equal the contract of docs/fp-format.md for every "
+                    "input. fp-add proves add and sub (sub is a free input). fp-mul is "
+                    "proved with the significand product cut to one uninterpreted function "
+                    "on both sides (--method cut, the default) or as a chain: the N-stage "
+                    "unit equals its 1-stage form, which equals the contract (--method "
+                    "chain); --method control proves the stall and reset properties "
+                    "instead (a stall holds every register, rst clears every valid, the "
+                    "outputs depend on the registers alone), --method sby their port-level "
+                    "form with SymbiYosys. Prints proved, a "
+                    "counterexample (operands, RTL, contract and golden model results) or "
+                    "'unknown after S s'; exit 0, 1 or 3. Work "
+                    "files go to build/formal/ under the current directory. The virtex4 "
+                    "target is not proved yet (docs/formal.md).")
+    p.add_argument("unit", type=g.choice(*PROVE_UNITS, what="unit"), metavar="UNIT",
+                   help="unit to prove: " + ", ".join(PROVE_UNITS))
+    g.add_format_option(p)
+    p.add_argument("--stages", type=g.int_range(1, None, name="stages"), default=None,
+                   metavar="N", help="pipeline stages (default: the unit's default, as "
+                                     "`raplas-hdl verilog` builds it)")
+    p.add_argument("--timeout", type=g.float_range(0, 86400, lo_open=True), default=300.0,
+                   metavar="S", help="seconds for each solver call (default 300)")
+    p.add_argument("--method", type=g.choice("direct", "cut", "chain", "control", "sby",
+                                             what="method"),
+                   default=None, metavar="{direct,cut,chain,control,sby}",
+                   help="fp-add: direct; fp-mul: cut (default), chain or direct (the "
+                        "FloatingPoint contract with real multipliers: does not close at "
+                        "FP24); control (both units): the stall and reset properties "
+                        "instead of the datapath; sby (both units): their port-level form "
+                        "checked by SymbiYosys")
+    p.add_argument("--target", type=g.choice("generic", "virtex4", what="target"),
+                   default="generic", metavar="{generic,virtex4}",
+                   help="unit target (only generic is proved so far)")
+    p.add_argument("--json", default=None, metavar="FILE.json",
+                   help="also write the result record as JSON")
+    return p
+
+
+def check(args) -> None:
+    from ..formal.prove import METHODS, default_stages
+    from ..synth.yosys import yosys_command
+    from .verilog import UNIT_LIMITS
+
+    args.fmt = g.format_from_args(args)
+    if args.target != "generic":
+        raise g.UsageError(f"--target {args.target} is not proved yet (docs/formal.md: only "
+                           "the generic target is); leave --target out")
+    lo, hi, _ = UNIT_LIMITS["stages"][args.unit]
+    if args.stages is not None and not lo <= args.stages <= hi:
+        raise g.UsageError(f"--stages of {args.unit} must be {lo} to {hi}, not {args.stages}")
+    if args.method is not None and args.method not in METHODS[args.unit]:
+        raise g.UsageError(f"--method of {args.unit} must be "
+                           f"{' or '.join(METHODS[args.unit])}, not {args.method}")
+    if args.fmt.man_bits < 2:
+        raise g.UsageError(f"--format {args.fmt}: the proof needs at least 2 fraction bits")
+    if args.json:
+        g.check_output_file(args.json, (".json",), "--json")
+    args.stages = default_stages(args.unit) if args.stages is None else args.stages
+    try:
+        import z3  # noqa: F401
+    except ModuleNotFoundError:
+        raise g.UsageError("z3 is not installed: pip install z3-solver "
+                           "(or `make setup`)") from None
+    yosys_command()      # FileNotFoundError naming what to install
+    if args.method == "sby":
+        from ..formal.sby import sby_tools
+
+        sby_tools()
+
+
+def run(args) -> int:
+    import json
+    from pathlib import Path
+
+    from ..formal.prove import describe, prove
+
+    res = prove(args.unit, args.fmt, args.stages, method=args.method, timeout=args.timeout)
+    plural = "" if res.stages == 1 else "s"
+    head = f"{args.unit} {args.fmt}, {res.stages} stage{plural}, {res.target}"
+    if res.result == "proved":
+        print(f"{head}: proved in {res.seconds:.1f} s by {res.method}")
+    elif res.result == "counterexample":
+        print(f"{head}: counterexample ({res.steps[-1]['proves']})")
+        for line in describe(res, args.fmt):
+            print(line)
+    else:
+        print(f"{head}: unknown after {res.seconds:.0f} s ({res.reason})")
+    for step in res.steps:
+        print(f"  {step['result']:<14} {step['seconds']:8.2f} s  {step['proves']}",
+              file=sys.stderr)
+    print(f"  solver: {res.solver}", file=sys.stderr)
+    if args.json:
+        Path(args.json).write_text(json.dumps(res.as_dict(), indent=1, sort_keys=True) + "\n")
+    return {"proved": 0, "counterexample": 1}.get(res.result, EXIT_UNKNOWN)

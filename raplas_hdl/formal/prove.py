@@ -1,0 +1,282 @@
+"""Prove an FP unit's emitted Verilog equal to the contract, for all inputs.
+
+:func:`prove` runs one proof and returns a :class:`ProofResult`. The methods:
+
+``direct`` (``fp-add``; also ``fp-mul``, where it does not close at FP24)
+    The unit unrolled over its latency (:mod:`.miter`) against the contract of
+    :mod:`.reference`: the FloatingPoint-theory form for ``rtz`` and ``rne`` (and the
+    multiplier's ``chop``), the bit-vector form for the ``chop`` adder.
+``cut`` (``fp-mul``, the default there)
+    The unit against the bit-vector form of the multiplier's contract, with the
+    significand product on both sides cut to one uninterpreted function of its operands
+    (:mod:`.cut`): no multiplier reasoning. A direct proof against the FloatingPoint
+    theory does not close (z3 and bitwuzla: unknown after 120-150 s at FP24, one stage).
+``control`` (both units)
+    Not the datapath but the stall and reset behaviour (:mod:`.control`): a stall holds
+    every register, ``rst`` clears every valid bit, the outputs depend on the registers
+    alone. With the datapath proof this covers any pattern of ``en``.
+``sby`` (both units)
+    The port-level consequences of ``control`` checked by a second tool, SymbiYosys
+    (:mod:`.sby`): a stall changes no output, ``rst`` clears ``o_valid``.
+``chain`` (``fp-mul``)
+    Two proofs, both with the product cut: the ``stages``-stage unit equals its
+    1-stage form (the same datapath with the inner registers as wires), and the 1-stage
+    form equals the contract. Proved only if both are.
+
+What every method assumes: ``en`` = 1 and ``rst`` = 0 on every cycle of the unrolling,
+any register contents before it (:mod:`.miter`). The proof covers ``o``, ``flags`` and
+``o_valid`` for every ``a``, ``b`` (and ``sub``, ``i_valid``).
+
+A counterexample found with the product cut is run again on the uncut model and the
+contract's bit-vector form, with the real product: only if they differ there is it
+reported. Otherwise (the cut's product was no product) the uncut miter is searched
+directly, real multipliers on both sides: a wrong design usually gives a counterexample
+quickly even where a proof would not close; if not, the result is ``unknown``.
+
+A counterexample is decoded (:func:`describe`): the operands in hex and as numbers, the
+RTL's result, the reference's and the golden model's (:mod:`raplas_hdl.fp.model`), so that
+one sees which side is wrong.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import z3
+
+from ..fp.format import FLAG_NAMES, PRESETS, FPFormat, check_format
+from .control import PROPERTIES, control_goal
+from .cut import cut_products, product_function
+from .miter import contract_miter, equivalence_miter, unroll, violation
+from .netlist import netlist
+from .solve import SOLVER, solve
+
+__all__ = ["ProofResult", "prove", "describe", "UNITS", "METHODS", "default_stages",
+           "format_label"]
+
+#: unit -> (operation of the reference, default method).
+UNITS = {"fp-add": ("add", "direct"), "fp-mul": ("mul", "cut")}
+
+#: Methods each unit takes.
+METHODS = {"fp-add": ("direct", "control", "sby"),
+           "fp-mul": ("cut", "chain", "direct", "control", "sby")}
+
+
+@dataclass
+class ProofResult:
+    """One proof and how it ended.
+
+    Attributes
+    ----------
+    unit, format, rounding : str
+        ``format`` is the preset name (``FP24``) or ``eXmY``.
+    stages : int
+    target : str
+        ``generic`` (the only target proved so far).
+    result : str
+        ``proved``, ``counterexample`` or ``unknown``.
+    solver : str
+    seconds : float
+        Yosys, building and solving, wall clock.
+    method : str
+        How it was proved (for a chain, its links).
+    steps : list of dict
+        Each solver call: what it proved, result, seconds.
+    counterexample : dict or None
+        Input and output values (see :func:`describe`).
+    reason : str
+        Why a result is ``unknown``.
+    """
+
+    unit: str
+    format: str
+    rounding: str
+    stages: int
+    target: str
+    result: str
+    solver: str
+    seconds: float
+    method: str
+    steps: list = field(default_factory=list)
+    counterexample: dict | None = None
+    reason: str = ""
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def format_label(fmt: FPFormat) -> str:
+    """``FP24`` for a preset, ``e4m3`` otherwise (no rounding)."""
+    base = fmt.with_rounding("rtz")
+    return next((k for k, v in PRESETS.items() if v == base),
+                f"e{fmt.exp_bits}m{fmt.man_bits}")
+
+
+def default_stages(unit: str) -> int:
+    """The registry's default stage count of ``unit`` (never a copy of it)."""
+    from ..rtl.units import UNITS as REGISTRY
+
+    return REGISTRY[unit].options["stages"][1]
+
+
+def _check(unit, method):
+    if unit not in UNITS:
+        raise ValueError(f"unit must be one of {', '.join(UNITS)}, not {unit!r}")
+    method = method or UNITS[unit][1]
+    if method not in METHODS[unit]:
+        raise ValueError(f"{unit} is proved by method {' or '.join(METHODS[unit])}, "
+                         f"not {method!r}")
+    return method
+
+
+def _cut(goal, fmt, f=None):
+    f = product_function(fmt.man_bits + 1) if f is None else f
+    goal, count = cut_products(goal, f)
+    if count == 0:
+        raise RuntimeError("no significand product found to cut")
+    return goal
+
+
+def _confirm(u, op, values, timeout):
+    """Run the uncut model and the contract on a counterexample's inputs.
+
+    Returns the real values (``in.*``, ``rtl.*``, ``ref.*``) if the RTL and the contract
+    really differ there, else ``None`` (the counterexample needed a product that is not
+    one, so it says nothing).
+    """
+    pins = [v == values[f"in.{k}"] for k, v in u.inputs.items() if f"in.{k}" in values]
+    differs, watch = violation(u, op, bitvector=op == "mul")
+    run = solve(z3.And(*u.assumptions, *pins, differs), timeout, watch)
+    return run.values if run.result == "counterexample" else None
+
+
+def prove(unit: str, fmt: FPFormat, stages: int | None = None, *, method: str | None = None,
+          timeout: float = 300, cwd: Path | str = ".", mutate=None) -> ProofResult:
+    """Prove ``unit`` (``fp-add`` or ``fp-mul``, generic target) against the contract.
+
+    Parameters
+    ----------
+    unit : str
+    fmt : FPFormat
+    stages : int, optional
+        Default: the registry's default for the unit.
+    method : str, optional
+        ``direct`` (``fp-add``), ``cut``, ``chain`` or ``direct`` (``fp-mul``), ``control``
+        or ``sby`` (both: stall and reset instead of the datapath); default:
+        ``direct`` for the adder, ``cut`` for the multiplier.
+    timeout : float
+        Seconds for each solver call.
+    cwd : path
+        Where ``build/formal/`` goes.
+    mutate : callable, optional
+        ``str -> str`` applied to the unit's Verilog (negative controls; for a chain, to
+        the ``stages``-stage unit only).
+
+    Raises
+    ------
+    ValueError
+        For an unknown unit, method or a stage count the unit does not take.
+    """
+    fmt = check_format(fmt)
+    method = _check(unit, method)
+    stages = default_stages(unit) if stages is None else stages
+    op = UNITS[unit][0]
+    t0 = time.monotonic()
+    if method == "sby":
+        from .sby import run_sby
+
+        result, seconds, detail = run_sby(unit, fmt, stages, timeout=timeout, cwd=cwd,
+                                          mutate=mutate)
+        return ProofResult(
+            unit=unit, format=format_label(fmt), rounding=fmt.rounding, stages=stages,
+            target="generic", result=result, solver="SymbiYosys (smtbmc z3)",
+            seconds=round(time.monotonic() - t0, 3),
+            method="sby: a stall keeps o/flags/o_valid, rst clears o_valid (k-induction)",
+            steps=[{"proves": "sby: stall and reset at the ports", "result": result,
+                    "seconds": round(seconds, 3)}],
+            reason="" if result == "proved" else detail)
+    net = netlist(unit, fmt, stages, cwd=cwd, mutate=mutate)
+    u = unroll(net) if method != "control" else None
+    steps = []
+    if method == "control":
+        links = [(f"control: {p}", control_goal(net, p), {}) for p in PROPERTIES]
+        described = "control: " + ", ".join(PROPERTIES)
+    elif method == "chain":
+        one = unroll(netlist(unit, fmt, 1, tag="s1", cwd=cwd))
+        f = product_function(fmt.man_bits + 1)
+        eq_watch = {**{f"in.{k}": v for k, v in u.inputs.items()},
+                    **{f"rtl.{k}": v for k, v in u.outputs.items()}}
+        c_goal, c_watch = contract_miter(one, op, bitvector=True)
+        links = [(f"{stages}-stage == 1-stage (product cut)",
+                  _cut(equivalence_miter(u, one), fmt, f), eq_watch),
+                 ("1-stage == contract (product cut)", _cut(c_goal, fmt, f), c_watch)]
+        described = f"chain: {links[0][0]}; {links[1][0]}"
+    else:
+        goal, watch = contract_miter(u, op, bitvector=method == "cut")
+        if method == "cut":
+            goal = _cut(goal, fmt)
+        described = ("cut: product as one uninterpreted function, bit-vector contract"
+                     if method == "cut" else
+                     "direct: " + ("bit-vector chop contract" if fmt.rounding == "chop" and
+                                   op == "add" else "FloatingPoint contract (fpa2bv)"))
+        links = [(described, goal, watch)]
+    result, reason, cex = "proved", "", None
+    for name, goal, watch in links:
+        run = solve(goal, timeout, watch)
+        steps.append({"proves": name, "result": run.result, "seconds": round(run.seconds, 3)})
+        if run.result != "proved":
+            result, reason = run.result, run.reason
+            if run.result == "counterexample" and method in ("cut", "chain"):
+                # the cut product may be no product: check, else search with the real one
+                cex = _confirm(u, op, run.values, timeout)
+                if cex is None:
+                    differs, watch = violation(u, op, bitvector=True)
+                    again = solve(z3.And(*u.assumptions, differs), timeout, watch)
+                    steps.append({"proves": "contract with the real product (the cut's "
+                                  "counterexample was not one)", "result": again.result,
+                                  "seconds": round(again.seconds, 3)})
+                    # proved here: the cut was too coarse, the uncut proof is a proof
+                    result, reason, cex = again.result, again.reason, again.values or None
+            elif run.result == "counterexample" and method != "control":
+                cex = run.values
+            break
+    return ProofResult(unit=unit, format=format_label(fmt), rounding=fmt.rounding,
+                       stages=stages, target="generic", result=result, solver=SOLVER,
+                       seconds=round(time.monotonic() - t0, 3), method=described, steps=steps,
+                       counterexample=cex, reason=reason)
+
+
+def _flags(value):
+    names = [n for bit, n in sorted(FLAG_NAMES.items()) if value & bit]
+    return ",".join(names) or "-"
+
+
+def _show(fmt, bits):
+    from ..fp import model
+
+    return f"0x{bits:0{(fmt.width + 3) // 4}x} ({float(model.decode(bits, fmt))!r})"
+
+
+def describe(res: ProofResult, fmt: FPFormat) -> list[str]:
+    """A counterexample as lines: operands, RTL, reference and golden model results."""
+    from ..fp import model
+
+    c = res.counterexample
+    if not c:
+        return []
+    a, b = c["in.a"], c["in.b"]
+    sub = c.get("in.sub", 0)
+    op = "-" if sub else ("+" if res.unit == "fp-add" else "*")
+    lines = [f"  a        = {_show(fmt, a)}", f"  b        = {_show(fmt, b)}",
+             f"  op       = a {op} b, i_valid={c.get('in.i_valid', 0)}"]
+    if "rtl.o" in c:
+        lines.append(f"  RTL      = {_show(fmt, c['rtl.o'])} flags {_flags(c['rtl.flags'])}"
+                     f" o_valid={c['rtl.o_valid']}")
+    if "ref.o" in c:
+        lines.append(f"  contract = {_show(fmt, c['ref.o'])} flags {_flags(c['ref.flags'])}")
+    fn = model.mul if res.unit == "fp-mul" else model.sub if sub else model.add
+    gb, gf = fn(a, b, fmt, flags=True)
+    lines.append(f"  golden   = {_show(fmt, int(gb))} flags {_flags(int(gf))}")
+    return lines

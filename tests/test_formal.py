@@ -1,0 +1,337 @@
+"""Issue 23, first slice: the FP units' Verilog proved equal to the contract for all inputs.
+
+What is checked here, and why each can fail:
+
+- the proofs themselves (adders FP16/FP24 in rtz, rne, chop at the registry's default
+  stages; the FP24 1-stage multiplier; the chain of the default multiplier);
+- the references: the bit-vector forms (the chop adder, the multiplier) against the golden
+  model on every operand pair of two 8-bit formats and on random FP24 pairs, evaluated
+  concretely from the very terms the proofs use; the FloatingPoint-theory adder against
+  the golden model on every pair of two 6-bit formats (folded by z3's simplifier); the
+  multiplier's bit-vector form proved equal to its FloatingPoint-theory form at small
+  formats;
+- negative controls: mutated designs (a saturation constant changed in the Verilog text,
+  the alignment or the rounding sticky bit dropped while building) must give a
+  counterexample, and it must be a real one: the golden model agrees with the contract's
+  result there and not with the RTL's;
+- the command line: exit codes 0, 1, 3 and 2.
+
+Each proof takes seconds (about 60 s in all on a quiet 2-core machine); the durations are
+printed (``pytest -s``) and shown by ``--durations``.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+
+import numpy as np
+import pytest
+import z3
+
+from raplas_hdl.cli import main
+from raplas_hdl.fp import FP16, FP24, FPFormat, model
+from raplas_hdl.formal import default_stages, describe, prove
+from raplas_hdl.formal.concrete import evaluate
+from raplas_hdl.formal.reference import reference
+from raplas_hdl.rtl import fp_add, fp_mul
+
+TIMEOUT = 120
+
+
+@pytest.fixture(scope="module")
+def work(tmp_path_factory):
+    return tmp_path_factory.mktemp("formal")
+
+
+def check_proof(unit, fmt, work, stages=None, **kw):
+    t0 = time.monotonic()
+    res = prove(unit, fmt, stages, timeout=TIMEOUT, cwd=work, **kw)
+    print(f"{unit} {fmt} stages={res.stages} {res.method}: {res.result} "
+          f"in {time.monotonic() - t0:.1f} s")
+    return res
+
+
+def check_real_counterexample(res, fmt):
+    """The counterexample is real: golden model == contract != RTL on its operands."""
+    assert res.result == "counterexample", (res.result, res.reason)
+    c = res.counterexample
+    op = model.mul if res.unit == "fp-mul" else model.sub if c.get("in.sub") else model.add
+    gb, gf = op(c["in.a"], c["in.b"], fmt, flags=True)
+    assert (c["ref.o"], c["ref.flags"]) == (int(gb), int(gf)), "the contract disagrees " \
+        "with the golden model"
+    assert (c["rtl.o"], c["rtl.flags"]) != (int(gb), int(gf)), "the RTL is right here"
+    text = "\n".join(describe(res, fmt))
+    assert f"0x{c['in.a']:06x}" in text and "golden" in text and "contract" in text
+
+
+# -- proofs -----------------------------------------------------------------------------
+@pytest.mark.parametrize("fmt", [FP16, FP24], ids=["FP16", "FP24"])
+@pytest.mark.parametrize("rounding", ["rtz", "rne", "chop"])
+def test_adder_proved(fmt, rounding, work):
+    res = check_proof("fp-add", fmt.with_rounding(rounding), work)
+    assert res.result == "proved", (res.result, res.reason, res.counterexample)
+    assert res.stages == default_stages("fp-add")
+
+
+def test_fp24_one_stage_multiplier_proved(work):
+    res = check_proof("fp-mul", FP24, work, stages=1)
+    assert res.result == "proved", (res.result, res.reason)
+    assert "cut" in res.method
+
+
+def test_default_multiplier_proved_by_chain(work):
+    res = check_proof("fp-mul", FP24, work, method="chain")
+    assert res.result == "proved", (res.result, res.reason)
+    assert [s["result"] for s in res.steps] == ["proved", "proved"]
+    assert res.steps[0]["proves"].startswith(f"{default_stages('fp-mul')}-stage == 1-stage")
+
+
+def test_default_stages_follow_the_registry(work, monkeypatch):
+    from dataclasses import replace
+
+    from raplas_hdl.rtl import units
+
+    spec = units.UNITS["fp-mul"]
+    opts = {**spec.options, "stages": (int, 2, "pipeline stages")}
+    monkeypatch.setitem(units.UNITS, "fp-mul", replace(spec, options=opts))
+    res = check_proof("fp-mul", FP16, work)
+    assert res.stages == 2 and res.result == "proved"
+
+
+# -- references against the golden model -------------------------------------------------
+def _all_pairs(fmt):
+    n = 1 << fmt.width
+    return np.repeat(np.arange(n, dtype=np.uint64), n), np.tile(np.arange(n, dtype=np.uint64), n)
+
+
+def _random_pairs(fmt, count, seed):
+    rng = np.random.default_rng(seed)
+    a = rng.integers(0, 1 << fmt.width, count, dtype=np.uint64)
+    b = rng.integers(0, 1 << fmt.width, count, dtype=np.uint64)
+    # half of them near each other: cancellation and small alignment shifts
+    near = a ^ rng.integers(0, 1 << (fmt.man_bits + 2), count, dtype=np.uint64)
+    return a, np.where(np.arange(count) % 2 == 0, b, near)
+
+
+def check_reference(fmt, op, a, b, sub=0):
+    w = fmt.width
+    va, vb, vs = z3.BitVec("a", w), z3.BitVec("b", w), z3.BitVec("s", 1)
+    bits, flags = reference(fmt, op, va, vb, vs if op == "add" else None,
+                            bitvector=op == "mul")
+    values = {"a": a, "b": b, "s": np.full(a.size, sub, dtype=np.uint64)}
+    rb, rf = evaluate(bits, values, a.size), evaluate(flags, values, a.size)
+    fn = model.mul if op == "mul" else model.sub if sub else model.add
+    gb, gf = fn(a.astype(np.uint32), b.astype(np.uint32), fmt, flags=True)
+    bad = np.nonzero((rb != gb) | (rf != gf))[0]
+    assert bad.size == 0, [(hex(int(a[i])), hex(int(b[i])), hex(int(rb[i])), hex(int(gb[i])),
+                            int(rf[i]), int(gf[i])) for i in bad[:5]]
+
+
+@pytest.mark.parametrize("fmt", [FPFormat(4, 3, "chop"), FPFormat(3, 4, "chop")],
+                         ids=["e4m3", "e3m4"])
+@pytest.mark.parametrize("sub", [0, 1], ids=["add", "sub"])
+def test_chop_reference_matches_golden_on_every_pair(fmt, sub):
+    check_reference(fmt, "add", *_all_pairs(fmt), sub)
+
+
+@pytest.mark.parametrize("sub", [0, 1], ids=["add", "sub"])
+def test_chop_reference_matches_golden_fp24_random(sub):
+    check_reference(FP24.with_rounding("chop"), "add", *_random_pairs(FP24, 200_000, 23 + sub),
+                    sub)
+
+
+@pytest.mark.parametrize("rounding", ["rtz", "rne", "chop"])
+def test_bitvector_mul_reference_matches_golden(rounding):
+    check_reference(FPFormat(4, 3, rounding), "mul", *_all_pairs(FPFormat(4, 3)))
+    fmt = FP24.with_rounding(rounding)
+    check_reference(fmt, "mul", *_random_pairs(fmt, 200_000, 7))
+
+
+@pytest.mark.parametrize("fmt", [FPFormat(3, 2), FPFormat(2, 3)], ids=["e3m2", "e2m3"])
+@pytest.mark.parametrize("rounding", ["rtz", "rne"])
+def test_floating_point_adder_reference_matches_golden_on_every_pair(fmt, rounding):
+    """The FloatingPoint-theory reference has no concrete evaluator of its own: z3's
+    simplifier folds it for each constant operand pair (4096 pairs, add and sub:
+    about 1 s)."""
+    fmt = fmt.with_rounding(rounding)
+    w = fmt.width
+    a, b, s = z3.BitVec("a", w), z3.BitVec("b", w), z3.BitVec("s", 1)
+    term = z3.Concat(*reference(fmt, "add", a, b, s))
+    n = 1 << w
+    pa, pb = _all_pairs(fmt)
+    bad = []
+    for sub, fn in ((0, model.add), (1, model.sub)):
+        gb, gf = fn(pa.astype(np.uint32), pb.astype(np.uint32), fmt, flags=True)
+        for i in range(n * n):
+            got = z3.simplify(z3.substitute(term, (a, z3.BitVecVal(int(pa[i]), w)),
+                                            (b, z3.BitVecVal(int(pb[i]), w)),
+                                            (s, z3.BitVecVal(sub, 1))))
+            if got.as_long() != (int(gb[i]) << 3) | int(gf[i]):
+                bad.append((sub, int(pa[i]), int(pb[i])))
+    assert not bad, bad[:5]
+
+
+@pytest.mark.parametrize("fmt", [FPFormat(4, 3), FPFormat(3, 4), FPFormat(5, 6)],
+                         ids=["e4m3", "e3m4", "e5m6"])
+@pytest.mark.parametrize("rounding", ["rtz", "rne"])
+def test_bitvector_mul_reference_equals_floating_point_theory(fmt, rounding):
+    fmt = fmt.with_rounding(rounding)
+    a, b = z3.BitVecs("a b", fmt.width)
+    bv = reference(fmt, "mul", a, b, bitvector=True)
+    fp = reference(fmt, "mul", a, b)
+    s = z3.Solver()
+    s.set("timeout", 60_000)
+    s.add(z3.Or(bv[0] != fp[0], bv[1] != fp[1]))
+    assert s.check() == z3.unsat
+
+
+# -- negative controls ----------------------------------------------------------------------
+def _saturate_wrong(text):
+    """rtz overflow gives max finite - 1 ulp (the constant in the pack step)."""
+    return text.replace(f"23'h{FP24.max_finite:06x}", f"23'h{FP24.max_finite - 1:06x}")
+
+
+def test_mutated_saturation_gives_real_counterexample(work):
+    res = check_proof("fp-add", FP24, work, mutate=_saturate_wrong)
+    check_real_counterexample(res, FP24)
+    assert res.counterexample["rtl.flags"] & 1    # the overflow path is the one changed
+
+
+def test_dropped_alignment_sticky_gives_real_counterexample(work, monkeypatch):
+    real = fp_add.shift_right_sticky
+
+    def no_sticky(value, amount, limit=None):
+        shifted, _ = real(value, amount, limit)
+        return shifted, 0
+
+    monkeypatch.setattr(fp_add, "shift_right_sticky", no_sticky)
+    res = check_proof("fp-add", FP24, work)
+    check_real_counterexample(res, FP24)
+    assert res.counterexample["in.a"] >> 23 != res.counterexample["in.b"] >> 23 \
+        or res.counterexample["in.sub"], "only an effective subtraction needs the sticky bit"
+
+
+def _round_without_sticky(module, monkeypatch):
+    real = module.round_significand
+
+    def rounding(fmt, sig, exp, guard, sticky):
+        return real(fmt, sig, exp, guard, 0)
+
+    monkeypatch.setattr(module, "round_significand", rounding)
+
+
+def test_rne_adder_without_sticky_gives_real_counterexample(work, monkeypatch):
+    _round_without_sticky(fp_add, monkeypatch)
+    fmt = FP24.with_rounding("rne")
+    check_real_counterexample(check_proof("fp-add", fmt, work), fmt)
+
+
+def test_rne_multiplier_without_sticky_gives_real_counterexample(work, monkeypatch):
+    _round_without_sticky(fp_mul, monkeypatch)
+    fmt = FP24.with_rounding("rne")
+    check_real_counterexample(check_proof("fp-mul", fmt, work), fmt)
+
+
+def test_mutated_multiplier_fails_the_chain(work):
+    res = check_proof("fp-mul", FP24, work, method="chain", mutate=_saturate_wrong)
+    check_real_counterexample(res, FP24)
+    assert res.steps[0]["result"] == "counterexample"
+
+
+# -- stall and reset ----------------------------------------------------------------------
+@pytest.mark.parametrize("unit", ["fp-add", "fp-mul"])
+def test_control_properties_proved(unit, work):
+    res = check_proof(unit, FP24, work, method="control")
+    assert res.result == "proved", (res.result, res.reason, res.steps)
+    assert [s["proves"] for s in res.steps] == ["control: hold", "control: reset",
+                                                "control: outputs"]
+
+
+@pytest.mark.parametrize("unit", ["fp-add", "fp-mul"])
+@pytest.mark.parametrize("prop, mutation", [
+    ("hold", ("if (en) begin", "if (1'h1) begin")),     # one register ignores the stall
+    ("reset", ("if (rst) begin", "if (1'h0) begin")),   # one valid bit ignores the reset
+])
+def test_control_mutants_fail(unit, prop, mutation, work):
+    res = check_proof(unit, FP24, work, method="control",
+                      mutate=lambda t: t.replace(*mutation, 1))
+    assert res.result == "counterexample"
+    assert res.steps[-1]["proves"] == f"control: {prop}"
+
+
+@pytest.mark.parametrize("unit", ["fp-add", "fp-mul"])
+def test_sby_agrees_at_the_ports(unit, work):
+    res = check_proof(unit, FP24, work, method="sby")
+    assert res.result == "proved", (res.result, res.reason)
+    for mutation in (("if (en) begin", "if (1'h1) begin"), ("if (rst) begin", "if (1'h0) begin")):
+        bad = check_proof(unit, FP24, work, method="sby", mutate=lambda t: t.replace(*mutation))
+        assert bad.result == "counterexample", (mutation, bad.result, bad.reason)
+
+
+# -- command line -----------------------------------------------------------------------------
+def test_cli_proves_and_exits_0(capsys, monkeypatch, work):
+    monkeypatch.chdir(work)
+    assert main(["prove", "fp-mul", "--format", "FP16/rne"]) == 0
+    out = capsys.readouterr().out
+    stages = default_stages("fp-mul")
+    assert re.search(rf"fp-mul FP16/rne, {stages} stages, generic: proved in [\d.]+ s by cut",
+                     out), out
+
+
+def test_cli_counterexample_exits_1(capsys, monkeypatch, work):
+    monkeypatch.chdir(work)
+    _round_without_sticky(fp_mul, monkeypatch)
+    assert main(["prove", "fp-mul", "--format", "FP16/rne", "--stages", "1"]) == 1
+    out = capsys.readouterr().out
+    assert "counterexample" in out and "golden" in out and "RTL" in out
+
+
+def test_cli_unknown_exits_3(capsys, monkeypatch, work):
+    monkeypatch.chdir(work)
+    assert main(["prove", "fp-add", "--format", "FP24/rne", "--timeout", "0.05"]) == 3
+    assert "unknown after" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["fp-div"], "unit must be one of fp-add, fp-mul"),
+    (["fp-mul", "--stages", "6"], "--stages of fp-mul must be 1 to 5"),
+    (["fp-add", "--method", "cut"], "--method of fp-add must be direct"),
+    (["fp-add", "--target", "virtex4"], "not proved yet"),
+    (["fp-add", "--timeout", "-1"], "--timeout"),
+    (["fp-add", "--format", "FP48"], "FP48"),
+    (["fp-add", "--json", "out.txt"], ".json"),
+])
+def test_cli_bad_input_is_one_line_exit_2(argv, message, capsys, monkeypatch, tmp_path):
+    monkeypatch.chdir(tmp_path)
+    assert main(["prove", *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1, err
+    assert not (tmp_path / "build").exists(), "work was done before the error"
+
+
+def test_cli_help_is_plain(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["prove", "--help"])
+    assert exc.value.code == 0
+    text = capsys.readouterr().out
+    assert "``" not in text and ":mod:" not in text and "(default None)" not in text
+    assert "--method {direct,cut,chain,control,sby}" in text
+
+
+def test_model_and_host_never_import_the_prover():
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = str(Path(__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        [root, *filter(None, [os.environ.get("PYTHONPATH")])])}
+    code = ("import sys, raplas_hdl.fp.model, raplas_hdl.host, raplas_hdl.rtl.units, "
+            "raplas_hdl.cli; "
+            "bad = [m for m in sys.modules if m.startswith('raplas_hdl.formal') or m == 'z3']; "
+            "assert not bad, bad")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120, env=env, cwd=root)
+    assert res.returncode == 0, res.stderr[-2000:]
