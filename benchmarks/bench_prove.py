@@ -34,7 +34,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from raplas_hdl.fp import PRESETS, ROUNDINGS  # noqa: E402
+from raplas_hdl.fp import PRESETS, ROUNDINGS, parse_format  # noqa: E402
 from raplas_hdl.formal import default_stages, prove  # noqa: E402
 from raplas_hdl.rtl.fp_add import ADD_STEPS  # noqa: E402
 from raplas_hdl.rtl.fp_mul import MUL_STEPS  # noqa: E402
@@ -45,20 +45,24 @@ BEGIN, END = "<!-- proofs:begin -->", "<!-- proofs:end -->"
 MAX_STAGES = {"fp-add": len(ADD_STEPS), "fp-mul": len(MUL_STEPS)}
 
 
+def _default(unit, name, rounding):
+    return default_stages(unit, parse_format(name).with_rounding(rounding))
+
+
 def plan(formats):
     """``(unit, format name, rounding, stages, method)`` in run order, cheap ones first."""
     jobs = []
     for name in formats:
         for unit in ("fp-mul", "fp-add"):
             for rnd in ROUNDINGS:
-                jobs.append((unit, name, rnd, default_stages(unit), None))
-        jobs.append(("fp-mul", name, "rtz", default_stages("fp-mul"), "chain"))
+                jobs.append((unit, name, rnd, _default(unit, name, rnd), None))
+        jobs.append(("fp-mul", name, "rtz", _default("fp-mul", name, "rtz"), "chain"))
         for unit in ("fp-mul", "fp-add"):
-            jobs.append((unit, name, "rtz", default_stages(unit), "control"))
-            jobs.append((unit, name, "rtz", default_stages(unit), "sby"))
+            jobs.append((unit, name, "rtz", _default(unit, name, "rtz"), "control"))
+            jobs.append((unit, name, "rtz", _default(unit, name, "rtz"), "sby"))
     for unit in ("fp-mul", "fp-add"):
         for n in range(1, MAX_STAGES[unit] + 1):
-            if n != default_stages(unit):
+            if n != _default(unit, "FP24", "rtz"):
                 jobs.append((unit, "FP24", "rtz", n, None))
     jobs.append(("fp-mul", "FP24", "rtz", 1, "direct"))
     # the slow ones last

@@ -72,7 +72,8 @@ def check_real_counterexample(res, fmt):
 def test_adder_proved(fmt, rounding, work):
     res = check_proof("fp-add", fmt.with_rounding(rounding), work)
     assert res.result == "proved", (res.result, res.reason, res.counterexample)
-    assert res.stages == default_stages("fp-add")
+    assert res.stages == default_stages("fp-add", fmt.with_rounding(rounding))
+    assert res.stages == (6 if rounding == "rne" else 5)
 
 
 def test_fp24_one_stage_multiplier_proved(work):
@@ -85,17 +86,17 @@ def test_default_multiplier_proved_by_chain(work):
     res = check_proof("fp-mul", FP24, work, method="chain")
     assert res.result == "proved", (res.result, res.reason)
     assert [s["result"] for s in res.steps] == ["proved", "proved"]
-    assert res.steps[0]["proves"].startswith(f"{default_stages('fp-mul')}-stage == 1-stage")
+    assert res.steps[0]["proves"].startswith(f"{default_stages('fp-mul', FP24)}-stage == 1-stage")
 
 
-def test_default_stages_follow_the_registry(work, monkeypatch):
-    from dataclasses import replace
+def test_default_stages_follow_the_rtl(work, monkeypatch):
+    """The proof takes the RTL's own default stage count, whatever it is."""
+    from raplas_hdl.rtl import step_delays
 
-    from raplas_hdl.rtl import units
-
-    spec = units.UNITS["fp-mul"]
-    opts = {**spec.options, "stages": (int, 2, "pipeline stages")}
-    monkeypatch.setitem(units.UNITS, "fp-mul", replace(spec, options=opts))
+    table = {u: dict(per) for u, per in step_delays.DEFAULT_STAGES.items()}
+    table["fp_mul"]["rtz"] = 2
+    monkeypatch.setattr(step_delays, "DEFAULT_STAGES", table)
+    monkeypatch.setattr("raplas_hdl.rtl.fp_mul.DEFAULT_STAGES", table)
     res = check_proof("fp-mul", FP16, work)
     assert res.stages == 2 and res.result == "proved"
 
@@ -274,7 +275,7 @@ def test_cli_proves_and_exits_0(capsys, monkeypatch, work):
     monkeypatch.chdir(work)
     assert main(["prove", "fp-mul", "--format", "FP16/rne"]) == 0
     out = capsys.readouterr().out
-    stages = default_stages("fp-mul")
+    stages = default_stages("fp-mul", FP16.with_rounding("rne"))
     assert re.search(rf"fp-mul FP16/rne, {stages} stages, generic: proved in [\d.]+ s by cut",
                      out), out
 

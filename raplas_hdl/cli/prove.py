@@ -79,7 +79,7 @@ def check(args) -> None:
         raise g.UsageError(f"--format {args.fmt}: the proof needs at least 2 fraction bits")
     if args.json:
         g.check_output_file(args.json, (".json",), "--json")
-    args.stages = default_stages(args.unit) if args.stages is None else args.stages
+    args.stages = default_stages(args.unit, args.fmt) if args.stages is None else args.stages
     try:
         import z3  # noqa: F401
     except ModuleNotFoundError:

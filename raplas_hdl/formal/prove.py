@@ -114,11 +114,13 @@ def format_label(fmt: FPFormat) -> str:
                 f"e{fmt.exp_bits}m{fmt.man_bits}")
 
 
-def default_stages(unit: str) -> int:
-    """The registry's default stage count of ``unit`` (never a copy of it)."""
-    from ..rtl.units import UNITS as REGISTRY
+def default_stages(unit: str, fmt: FPFormat) -> int:
+    """The default stage count of ``unit`` in ``fmt`` (the RTL's own, from its measured step
+    delays: :mod:`raplas_hdl.rtl.step_delays`; never a copy of it)."""
+    from ..rtl.fp_add import default_add_stages
+    from ..rtl.fp_mul import default_mul_stages
 
-    return REGISTRY[unit].options["stages"][1]
+    return (default_add_stages if unit == "fp-add" else default_mul_stages)(fmt)
 
 
 def _check(unit, method):
@@ -181,7 +183,7 @@ def prove(unit: str, fmt: FPFormat, stages: int | None = None, *, method: str | 
     """
     fmt = check_format(fmt)
     method = _check(unit, method)
-    stages = default_stages(unit) if stages is None else stages
+    stages = default_stages(unit, fmt) if stages is None else stages
     op = UNITS[unit][0]
     t0 = time.monotonic()
     if method == "sby":
