@@ -69,7 +69,7 @@ class Timing:
     feed_offset: int = 3        # command taken -> first sphere at the array input
     select_offset: int = 0      # array output -> selector take
     job_offset: int = 2         # job into the job FIFO -> fetch can take it
-    fetch_offset: int = 4       # pair started -> at the ray-triangle unit's input
+    fetch_offset: int = 6       # pair started -> at the ray-triangle unit's input
     out_offset: int = 2         # the marker's result at the framing -> last beat taken
     load_offset: int = 1        # drained -> planes loaded, beyond rows + cols
 
@@ -313,7 +313,7 @@ def simulate(profile: Profile, config: UnitConfig, timing: Timing, *,
         raise ValueError(f"results must be one of {', '.join(RESULT_PATHS)}, not {results!r}")
     lanes = config.lanes if lanes is None else int(lanes)
     passes = math.ceil(config.n_planes / config.n_testers)
-    lane_cap = timing.fifo_depth + timing.rt_fifo_depth + 3
+    lane_cap = timing.fifo_depth + timing.rt_fifo_depth + 5
     if profile.n_runs == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
     writes, after = ((np.zeros(profile.n_runs, np.int64), np.full(profile.n_runs, -1))

@@ -146,7 +146,8 @@ def _source_digest(config: UnitConfig, multiplier: str = "generic",
     if adder != "generic":
         h.update(b"adder-" + adder.encode())
     h.update(amaranth.__version__.encode())
-    for path in sorted((root / "rtl").glob("*.py")) + [root / "model" / "memory_image.py",
+    # every RTL source, the stages of rtl/unit/ too (a changed stage must not reuse the text)
+    for path in sorted((root / "rtl").rglob("*.py")) + [root / "model" / "memory_image.py",
                                                         root / "model" / "records.py",
                                                         root / "fp" / "format.py"]:
         h.update(path.name.encode())
