@@ -208,7 +208,7 @@ def test_ray_triangle_virtex4_under_icarus(tmp_path):
     exp = expected(fmt, vec, ray_ids, tri_ids, "paper")
     compare(got, exp)
     assert 0 < exp["hit"].sum() < count
-    assert int(lat_file.read_text()) == latency == 43   # FP24 rne: adders of 6 stages, multipliers 4+1
+    assert int(lat_file.read_text()) == latency == 43   # rne: adders of 6, multipliers 4+1
 
 
 def test_plane_sphere_array_virtex4_under_icarus(tmp_path):

@@ -62,7 +62,7 @@ def evaluate(term, values: dict, size: int):
         For an operation it does not know, a node wider than 64 bits or an unknown variable.
     """
     memo = {}
-    order, stack = [], [(term, False)]
+    stack = [(term, False)]
     while stack:                                    # post-order without recursion
         t, done = stack.pop()
         if t.get_id() in memo:

@@ -3,7 +3,8 @@
 The datapath is the golden model's (:mod:`raplas_hdl.model.ray_triangle`) operation for
 operation: 33 operations (18 :class:`FPMul`, 15 :class:`FPAdd`), 34 in the conservative
 mode, which adds ``w = det - s``. With adder latency ``La`` and multiplier latency ``Lm``
-(5 and 3 by default at FP24 ``rtz``, :mod:`.step_delays`) the schedule, in cycles after a pair is accepted, is:
+(5 and 3 by default at FP24 ``rtz``, :mod:`.step_delays`) the schedule, in cycles after a
+pair is accepted, is:
 
 1. cycle 0: ``T = V0 - O`` (3 subs) and the products ``N*D`` of ``det`` (3 muls) start;
    the margin exponents of the conservative mode are formed from the input exponent

@@ -1,7 +1,9 @@
 """Stages 1 and 2: the command / plane loader and the sphere feeder.
 
-Run position -> [run-list read] -> [Sphere Memory read] -> ``o``, a 2-stage stall pipeline,
-one sphere per cycle, then the run's marker; before a run whose bank's planes are not the
+Run position -> [run-list read] -> [the sphere's index on a register] -> [Sphere Memory
+read] -> [the sphere on a register] -> ``o``, a 4-stage stall pipeline, one sphere per
+cycle, then the run's marker (the registers keep each block RAM's clock-to-out off the
+wires to the next memory and to the array, as in :mod:`.fetch`); before a run whose bank's planes are not the
 array's, the drain and the plane load (see ``docs/intersection-unit.md``).
 """
 
@@ -68,11 +70,13 @@ class SphereFeeder(wiring.Component):
         run = Signal(cmd_layout(cfg))         # the run being fed
         pos = Signal(cfg.run_count_bits)      # its next position
         f1 = Signal(data.StructLayout({"v": 1, "ind": 1, "sid": sid_bits, "tag": tag}))
+        fs = Signal(data.StructLayout({"v": 1, "tag": tag}))
         f2 = Signal(data.StructLayout({"v": 1, "tag": tag}))
+        f3 = Signal(data.StructLayout({"v": 1, "tag": tag, "c": 3 * w, "r": w}))
         adv = Signal()                        # the pipeline moves
         issue = Signal()
         issue_marker = Signal()
-        m.d.comb += adv.eq(~f2.v | self.o.ready)
+        m.d.comb += adv.eq(~f3.v | self.o.ready)
 
         # a plane write makes that bank's planes stale in the array
         dirty = Signal(2, init=0b11)
@@ -85,7 +89,7 @@ class SphereFeeder(wiring.Component):
         in_array = Signal(range(self._capacity))
         m.d.sync += in_array.eq(in_array + (self.o.valid & self.o.ready) - self.retired)
         drained = Signal()
-        m.d.comb += drained.eq((in_array == 0) & ~f1.v & ~f2.v)
+        m.d.comb += drained.eq((in_array == 0) & ~f1.v & ~fs.v & ~f2.v & ~f3.v)
 
         ld_k = Signal(range(n_planes))
         ld_v = Signal()
@@ -127,7 +131,7 @@ class SphereFeeder(wiring.Component):
         m.d.comb += [self.pw_en.eq(ld_v), self.pw_addr.eq(ld_kd),
                      self.pw_data.eq(self.plane.data)]
 
-        # position -> f1 (run-list read) -> f2 (Sphere Memory read)
+        # position -> f1 (run-list read) -> fs (the index) -> f2 (Sphere Memory read) -> f3
         sid_direct = Signal(sid_bits)
         m.d.comb += [sid_direct.eq(run.first + pos),
                      self.rlist.addr.eq(Mux(run.bank, sid_direct + cfg.max_spheres,
@@ -135,14 +139,16 @@ class SphereFeeder(wiring.Component):
                      self.rlist.en.eq(adv)]
         f1_sid = Signal(sid_bits)
         m.d.comb += [f1_sid.eq(Mux(f1.ind, self.rlist.data, f1.sid)),
-                     self.sphere.addr.eq(f1_sid), self.sphere.en.eq(adv)]
+                     self.sphere.addr.eq(fs.tag.sphere), self.sphere.en.eq(adv)]
         with m.If(adv):
             m.d.sync += [f1.v.eq(issue), f1.ind.eq(run.indirect), f1.sid.eq(sid_direct),
                          f1.tag.marker.eq(issue_marker), f1.tag.bank.eq(run.bank),
                          f1.tag.keep_all.eq(run.keep_all),
-                         f2.v.eq(f1.v), f2.tag.eq(f1.tag), f2.tag.sphere.eq(f1_sid)]
-        m.d.comb += [self.o.valid.eq(f2.v), self.o.payload.id.eq(f2.tag),
-                     self.o.payload.c.eq(self.sphere.data[:3 * w]),
-                     self.o.payload.r.eq(self.sphere.data[3 * w:4 * w]),
-                     self.spheres.eq(f2.v & self.o.ready & ~f2.tag.marker)]
+                         fs.v.eq(f1.v), fs.tag.eq(f1.tag), fs.tag.sphere.eq(f1_sid),
+                         f2.v.eq(fs.v), f2.tag.eq(fs.tag),
+                         f3.v.eq(f2.v), f3.tag.eq(f2.tag), f3.c.eq(self.sphere.data[:3 * w]),
+                         f3.r.eq(self.sphere.data[3 * w:4 * w])]
+        m.d.comb += [self.o.valid.eq(f3.v), self.o.payload.id.eq(f3.tag),
+                     self.o.payload.c.eq(f3.c), self.o.payload.r.eq(f3.r),
+                     self.spheres.eq(f3.v & self.o.ready & ~f3.tag.marker)]
         return m
