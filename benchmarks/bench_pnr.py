@@ -76,7 +76,11 @@ def run_matrix(args) -> int:
     for unit, options, roundings, speeds in MATRIX:
         if args.only and unit not in args.only:
             continue
+        if args.default_options and options:
+            continue
         for rounding in roundings:
+            if args.roundings and rounding not in args.roundings:
+                continue
             for speed in speeds:
                 if args.speeds and speed not in args.speeds:
                     continue
@@ -281,6 +285,10 @@ def main(argv=None) -> int:
     p.add_argument("--speeds", nargs="+", type=int, default=None,
                    help="speed grades to run (default: each configuration's own)")
     p.add_argument("--seeds", type=int, default=3, help="seeds 1..N (default 3)")
+    p.add_argument("--roundings", nargs="+", default=None,
+                   help="roundings to run (default: each configuration's own)")
+    p.add_argument("--default-options", action="store_true",
+                   help="only the configurations at the units' default options")
     p.add_argument("--steps", action="store_true",
                    help="measure the FP units' step delays and rewrite rtl/step_delays.py")
     args = p.parse_args(argv)
