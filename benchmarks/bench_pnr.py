@@ -174,6 +174,20 @@ def render(runs: list) -> str:
                    f"{ref['latency'] if ref else ''} | "
                    f"{format(ref['synth']['ff'], ',') if ref else ''} | {mhz(a6)} | "
                    f"{mhz(a8)} |")
+    iu = find("intersection-unit")
+    if iu and iu["fmax"]["clk"]["median"] < 100.0:
+        cp = iu["critical_path"] or {}
+        out += ["", "**The whole unit does not meet 100 MHz yet.** Its critical path runs "
+                    f"`{cp.get('start', '')}` -> `{cp.get('end', '')}` "
+                    f"({cp.get('total_ns', 0):.1f} ns, {cp.get('routing_ns', 0):.1f} of it "
+                    "routing, "
+                    f"{cp.get('cells', 0)} cells): the stall-enable of a stream stage (the "
+                    "record fetch's `adv`: FIFO level -> `ready` -> every data register "
+                    "and block RAM enable of the stage, hundreds of loads). The FP units, the "
+                    "tester and the ray-triangle unit meet 100 MHz; what is left is control "
+                    "fan-out, to be cut by credit-based stages whose data registers never "
+                    "stall (as the ray-triangle unit's own pipeline already is), which "
+                    "changes the cycle model under back-pressure."]
     out += ["", "## Every run", "",
             "| unit | format | options | speed | Fmax median (min-max) | latency | LUT4 | "
             "carry | FF | MULT18X18D | EBR | critical path | P&R s/seed |",
