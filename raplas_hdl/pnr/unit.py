@@ -39,9 +39,11 @@ def summary_line(rec: dict) -> str:
     """One line: unit, device, speed, Fmax median (min-max) per clock, LUT4, FF, multipliers."""
     s = rec["synth"]
     clocks = "; ".join(f"{clk} {f['median']:.1f} MHz (min {f['min']:.1f}, max {f['max']:.1f}, "
-                       f"{f['seeds']} seeds)" for clk, f in rec["fmax"].items())
+                       f"{f['seeds']} seed{'s' if f['seeds'] != 1 else ''})"
+                       for clk, f in rec["fmax"].items())
+    latency = rec["latency"] if rec["latency"] is not None else "n/a"
     return (f"{rec['unit']} {rec['format']}: {rec['device']} speed {rec['speed']}: {clocks}; "
-            f"latency {rec['latency']}; LUT4 {s['lut4']}, carry {s['carry']}, FF {s['ff']}, "
+            f"latency {latency}; LUT4 {s['lut4']}, carry {s['carry']}, FF {s['ff']}, "
             f"MULT18X18D {s['mult18']}, EBR {s['ebr']}")
 
 
