@@ -122,15 +122,15 @@ def test_bench_quick_writes_report_and_plots(quick):
 
 def _cycles(passes, mode):
     """The device model of docs/bench.md, written out again: per run P plane loads, G
-    clocks per sphere, the array's latency G + 13, one clock per pair, the ray-triangle
-    latency (28 paper, 32 conservative)."""
-    l_rt = 28 if mode == "paper" else 32
+    clocks per sphere, the array's latency G + 15 (the tester's 14 and the decoder), one
+    clock per pair, the ray-triangle latency (34 paper, 39 conservative)."""
+    l_rt = 34 if mode == "paper" else 39
     total = 0
     for q in passes:
         planes = q["rows"] + q["cols"]
         g = -(-planes // q["testers"])
         assert g == q["passes"], f"{q}: passes {q['passes']}, expected {g}"
-        total += q["runs"] * (planes + g + 13 + l_rt) + q["spheres"] * g + q["pairs"]
+        total += q["runs"] * (planes + g + 15 + l_rt) + q["spheres"] * g + q["pairs"]
     return total
 
 
