@@ -160,8 +160,9 @@ class FPAdd(wiring.Component):
     fmt : FPFormat
         Format and rounding (``rtz``, ``rne`` or ``chop``).
     stages : int
-        Pipeline depth, 1 to 7 (default 4, as in the paper). The ``virtex4`` adder's depth
-        is set by its DSP48 registers (latency 7); ``stages`` is checked but not used.
+        Pipeline depth, 1 to 9 (default: 5, 6 in rne; :func:`default_add_stages`). The
+        ``virtex4`` adder's depth is set by its DSP48 registers (latency 7); ``stages`` is
+        checked but not used.
     target : {"generic", "virtex4"}
         ``virtex4``: shifts and significand add in two DSP48 (:mod:`.fp_add_dsp48`).
     multiplier : {"generic", "virtex4"}, optional

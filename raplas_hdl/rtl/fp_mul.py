@@ -167,9 +167,9 @@ class FPMul(wiring.Component):
     fmt : FPFormat
         Format and rounding (``rtz``, ``rne`` or ``chop``, which equals ``rtz`` here).
     stages : int
-        Pipeline depth, 1 to 5 (default 3, as in the paper). With ``multiplier="virtex4"``
-        it places the registers behind the multiply as in the generic unit (module
-        docstring).
+        Pipeline depth, 1 to 5 (default: 3, 4 in rne; :func:`default_mul_stages`). With
+        ``multiplier="virtex4"`` it places the registers behind the multiply as in the
+        generic unit (module docstring).
     multiplier : {"generic", "virtex4"}
         The significand multiply: an inferred ``a * b`` (:class:`SigMul`), or Virtex-4
         ``DSP48`` primitives with AREG/BREG/MREG/PREG (:class:`~.dsp48.DSP48Mul`).

@@ -130,7 +130,7 @@ class PlaneSphereTester(wiring.Component):
         Plane slots in the tester's registers (1 for the paper's tester; the array uses
         one per pass when it time-shares).
     mul_stages, add_stages : int
-        Depths of the FP units (defaults 3 and 4: latency 12).
+        Depths of the FP units (default: the format's, 3 and 5 in rtz: latency 14).
     multiplier : {"generic", "virtex4"}
         Significand multiplier of the three :class:`~.fp_mul.FPMul` (``virtex4``: DSP48
         primitives, one cycle more at FP24).

@@ -144,7 +144,7 @@ class RayTriangleUnit(wiring.Component):
     ray_id_bits, tri_id_bits : int
         Widths of the IDs carried with each pair.
     add_stages, mul_stages : int
-        Depths of the FP adders (default 4) and multipliers (default 3).
+        Depths of the FP adders and multipliers (default: the format's, 5 and 3 in rtz).
     multiplier : {"generic", "virtex4"}
         Significand multiplier of the 18 :class:`~.fp_mul.FPMul` (``virtex4``: one DSP48
         each at FP24 and one cycle more, so ``latency`` grows by 2).
