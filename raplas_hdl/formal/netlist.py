@@ -24,7 +24,7 @@ from pathlib import Path
 
 from ..fp.format import FPFormat, check_format
 
-__all__ = ["Netlist", "unit_verilog", "netlist", "SCRIPT", "WORK_DIR"]
+__all__ = ["Netlist", "unit_verilog", "mutated_verilog", "netlist", "SCRIPT", "WORK_DIR"]
 
 #: Where the Verilog and SMT-LIB files go, under the current directory.
 WORK_DIR = Path("build") / "formal"
@@ -88,6 +88,20 @@ def _yosys_version() -> str:
         return "unknown"
 
 
+def mutated_verilog(unit: str, fmt: FPFormat, stages: int, top: str,
+                    mutate: Callable[[str], str] | None = None) -> tuple[str, int]:
+    """:func:`unit_verilog`, then ``mutate`` on its text (a negative control).
+
+    Raises ``ValueError`` if ``mutate`` leaves the Verilog unchanged."""
+    text, latency = unit_verilog(unit, fmt, stages, top)
+    if mutate is not None:
+        mutated = mutate(text)
+        if mutated == text:
+            raise ValueError("the mutation did not change the Verilog")
+        text = mutated
+    return text, latency
+
+
 def netlist(unit: str, fmt: FPFormat, stages: int, *, tag: str = "",
             mutate: Callable[[str], str] | None = None, cwd: Path | str = ".",
             timeout: float = 300) -> Netlist:
@@ -118,12 +132,7 @@ def netlist(unit: str, fmt: FPFormat, stages: int, *, tag: str = "",
     from ..synth.yosys import yosys_command
 
     top = unit.replace("-", "_") + (f"_{tag}" if tag else "")
-    text, latency = unit_verilog(unit, fmt, stages, top)
-    if mutate is not None:
-        mutated = mutate(text)
-        if mutated == text:
-            raise ValueError("the mutation did not change the Verilog")
-        text = mutated
+    text, latency = mutated_verilog(unit, fmt, stages, top, mutate)
     digest = hashlib.sha256("\n".join([text, SCRIPT, _yosys_version()]).encode()
                             ).hexdigest()[:12]
     work = Path(cwd) / WORK_DIR / f"{top}-{fmt.name}-s{stages}-{digest}"

@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 
 from ..fp.format import FPFormat
-from .netlist import WORK_DIR, unit_verilog
+from .netlist import WORK_DIR, mutated_verilog
 
 __all__ = ["sby_tools", "wrapper", "run_sby", "SBY_FILE"]
 
@@ -122,12 +122,7 @@ def run_sby(unit: str, fmt: FPFormat, stages: int, *, timeout: float = 300,
     """
     tools = sby_tools()
     top = unit.replace("-", "_")
-    text, latency = unit_verilog(unit, fmt, stages, top)
-    if mutate is not None:
-        mutated = mutate(text)
-        if mutated == text:
-            raise ValueError("the mutation did not change the Verilog")
-        text = mutated
+    text, latency = mutated_verilog(unit, fmt, stages, top, mutate)
     digest = hashlib.sha256(text.encode()).hexdigest()[:12]
     work = Path(cwd) / WORK_DIR / f"sby-{top}-{fmt.name}-s{stages}-{digest}"
     work.mkdir(parents=True, exist_ok=True)
