@@ -51,7 +51,7 @@ ROUNDINGS = ("rtz", "rne", "chop")
 MATRIX = (
     [("fp-add", {}, ROUNDINGS, (6, 8)), ("fp-mul", {}, ROUNDINGS, (6, 8)),
      ("plane-sphere-tester", {}, ROUNDINGS, (6,)), ("plane-sphere", {}, ROUNDINGS, (6,)),
-     ("ray-triangle", {}, ROUNDINGS, (6,)),
+     ("ray-triangle", {}, ROUNDINGS, (6, 8)),
      ("ray-triangle", {"mode": "certified"}, ("rtz", "rne"), (6,)),
      ("intersection-unit", {}, ("rtz",), (6, 8)),
      ("intersection-unit", {"mode": "certified"}, ("rtz",), (6,)),
