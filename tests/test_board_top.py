@@ -68,7 +68,7 @@ def test_board_cosim_matches_model(simulator, scene_runs):
 # -- constraints ----------------------------------------------------------------------------
 # The port names do not depend on the build parameters: a small build keeps emission short.
 SMALL = ["--format", "FP16", "--rows", "2", "--cols", "2", "--tris-per-sphere", "2",
-         "--max-triangles", "16", "--max-spheres", "8", "--fifo-depth", "2"]
+         "--max-triangles", "16", "--max-spheres", "8", "--fifo-depth", "3"]
 
 
 @pytest.fixture(scope="module")
@@ -78,7 +78,7 @@ def small_ports():
     from raplas_hdl.sim.board_sim import board_verilog   # emitted once for every xdist worker
 
     cfg = UnitConfig(fmt=FP16, rows=2, cols=2, tris_per_sphere=2, max_triangles=16,
-                     max_spheres=8, fifo_depth=2)
+                     max_spheres=8, fifo_depth=3)
     return board_ports(board_verilog(cfg))
 
 

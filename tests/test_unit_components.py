@@ -10,6 +10,8 @@ collectors apply random back-pressure. The whole unit against the model:
 import numpy as np
 import pytest
 from amaranth.hdl import Module
+from amaranth.lib import wiring
+from amaranth.lib.fifo import SyncFIFOBuffered
 from amaranth.sim import Simulator
 
 from raplas_hdl.fp import FPFormat
@@ -299,11 +301,37 @@ def test_selector_matches_enumerate_pairs(scene, bundles, bank):
 
 
 # -- record fetch ------------------------------------------------------------------------------
-def test_fetch_pairs_carry_the_model_records(scene, bundles):
+class FetchAndFifo(wiring.Component):
+    """The record fetch in front of a ``depth``-entry pair FIFO, as a lane wires them: ``o``
+    is the FIFO's read side, the FIFO's reads give the fetch its credits back."""
+
+    def __init__(self, cfg, depth):
+        self.fetch = RecordFetch(cfg, depth=depth)
+        self._depth = depth
+        super().__init__({name: member for name, member in self.fetch.signature.members.items()
+                          if name != "freed"})
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.fetch = fetch = self.fetch
+        m.submodules.fifo = fifo = SyncFIFOBuffered(width=fetch.o.payload.shape().size,
+                                                    depth=self._depth)
+        for name in ("i", "tlist", "tri", "ray"):
+            wiring.connect(m, wiring.flipped(getattr(self, name)), getattr(fetch, name))
+        wiring.connect(m, fetch.o, fifo.w_stream)
+        wiring.connect(m, fifo.r_stream, wiring.flipped(self.o))
+        m.d.comb += [fetch.freed.eq(fifo.r_stream.valid & fifo.r_stream.ready),
+                     self.overflow.eq(fetch.overflow)]
+        return m
+
+
+@pytest.mark.parametrize("depth", [3, 5, 16])
+def test_fetch_pairs_carry_the_model_records(scene, bundles, depth):
     """Each job's triangles in list order, each pair with its ray's and triangle's records
-    (the model's ``PAIR``); a marker job gives one pair with the marker bit."""
+    (the model's ``PAIR``); a marker job gives one pair with the marker bit. The pair FIFO
+    behind is read at random: the credits keep every pair (no overflow) at any depth."""
     cfg, rng = CFG, np.random.default_rng(13)
-    dut = RecordFetch(cfg)
+    dut = FetchAndFifo(cfg, depth)
     jl, rb = job_layout(cfg), cfg.ray_id_bits
     jobs = [(int(rng.integers(0, cfg.n_rays)), int(s), int(rng.integers(0, 2)))
             for s in rng.choice(np.nonzero(scene.tri_counts)[0], 10)]

@@ -25,7 +25,7 @@ UNIT_LIMITS = {
     "tris_per_sphere": {u: (1, 4096, 8) for u in ("intersection-unit", "board-top")},
     "max_triangles": {"board-top": (1, 65536, 1024)},
     "max_spheres": {"board-top": (1, 16384, 256)},
-    "fifo_depth": {"board-top": (2, 1024, 16)},
+    "fifo_depth": {"board-top": (3, 1024, 16)},
     "lanes": {"intersection-unit": (1, 8, 1)},
 }
 CHOICE_OPTIONS = {

@@ -119,7 +119,9 @@ class UnitConfig:
     margin_scale : int
         Scale of the conservative margin (the ray-triangle unit's parameter).
     fifo_depth : int
-        Depth of the pair FIFO in front of the ray-triangle unit (2 to 1024).
+        Depth of the pair FIFO in front of the ray-triangle unit (3 to 1024: the record
+        fetch holds one credit per entry, and a 2-entry buffered FIFO cannot take a write
+        while its stored entry moves to its output register).
     lanes : int
         Ray-triangle units fed by the one plane-sphere array (1 to 8): pairs are dealt to
         them round-robin and their results merged back in the same order, so the result
@@ -167,7 +169,7 @@ class UnitConfig:
             if self.margin_scale != 1:
                 raise ValueError(f"the certified unit takes margin_scale 1 only, not "
                                  f"{self.margin_scale}")
-        _check_int("fifo_depth", self.fifo_depth, 2, 1024)
+        _check_int("fifo_depth", self.fifo_depth, 3, 1024)
         _check_int("lanes", self.lanes, 1, 8)
         if not isinstance(self.reduce, (bool, np.bool_)):
             raise ValueError(f"reduce must be True or False, not {self.reduce!r}")

@@ -74,6 +74,7 @@ class Timing:
     fetch_offset: int = 6       # pair started -> at the ray-triangle unit's input
     out_offset: int = 2         # the marker's result at the framing -> last beat taken
     load_offset: int = 1        # drained -> planes loaded, beyond rows + cols
+    lane_slack: int = -1        # a lane holds fifo_depth + rt_fifo_depth + this many pairs
 
     @classmethod
     def of(cls, config: UnitConfig, array_latency: int, array_capacity: int,
@@ -316,7 +317,7 @@ def simulate(profile: Profile, config: UnitConfig, timing: Timing, *,
         raise ValueError(f"results must be one of {', '.join(RESULT_PATHS)}, not {results!r}")
     lanes = config.lanes if lanes is None else int(lanes)
     passes = math.ceil(config.n_planes / config.n_testers)
-    lane_cap = timing.fifo_depth + timing.rt_fifo_depth + 5
+    lane_cap = timing.fifo_depth + timing.rt_fifo_depth + timing.lane_slack
     if profile.n_runs == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
     writes, after = ((np.zeros(profile.n_runs, np.int64), np.full(profile.n_runs, -1))

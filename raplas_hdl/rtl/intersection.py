@@ -354,7 +354,7 @@ class IntersectionUnit(wiring.Component):
         Returns ([fetch], [rtu], [pair FIFO])."""
         cfg = self._cfg
         job_fifo = SyncFIFOBuffered(width=job_layout(cfg).size, depth=JOB_FIFO_DEPTH)
-        fetch = RecordFetch(cfg, job_last=job_last)
+        fetch = RecordFetch(cfg, depth=cfg.fifo_depth, job_last=job_last)
         pair_fifo = SyncFIFOBuffered(width=fetch.o.payload.shape().size, depth=cfg.fifo_depth)
         m.submodules["job_fifo" + suffix] = job_fifo
         m.submodules["fetch" + suffix] = fetch
@@ -365,6 +365,7 @@ class IntersectionUnit(wiring.Component):
         wiring.connect(m, job_fifo.r_stream, fetch.i)
         wiring.connect(m, fetch.o, pair_fifo.w_stream)
         wiring.connect(m, pair_fifo.r_stream, rtu.i)
+        m.d.comb += fetch.freed.eq(pair_fifo.r_stream.valid & pair_fifo.r_stream.ready)
         return [fetch], [rtu], [pair_fifo]
 
 def build_intersection_unit(fmt=None, multiplier: str = "generic", adder: str = "generic",
