@@ -72,7 +72,7 @@ class Timing:
     select_offset: int = 0      # array output -> selector take
     job_offset: int = 2         # job into the job FIFO -> fetch can take it
     fetch_offset: int = 6       # pair started -> at the ray-triangle unit's input
-    out_offset: int = 2         # the marker's result at the framing -> last beat taken
+    out_offset: int = 4         # the marker's result into the result FIFO -> last beat taken
     load_offset: int = 1        # drained -> planes loaded, beyond rows + cols
     lane_slack: int = -1        # a lane holds fifo_depth + rt_fifo_depth + this many pairs
 

