@@ -8,6 +8,11 @@ where listed); the median Fmax, latency, flip-flops and LUTs of each go to
 in pieces, one place and route at a time) and the table to ``docs/pnr.md``. Runs are cached
 per netlist and seed under ``build/pnr/``.
 
+``--copies N`` runs each configuration as N copies side by side in one design
+(``raplas-hdl pnr --copies N``: how many fit, at what clock); the record keeps ``copies`` and
+is merged beside the single unit's. ``synth capacity`` reads the intersection unit's
+multi-copy runs for its ECP5 rows.
+
 ``--steps`` measures each combinational step of the FP adder and multiplier alone between
 two register banks (:mod:`raplas_hdl.pnr.steps`) in each rounding at FP24 and rewrites the
 table of :mod:`raplas_hdl.rtl.step_delays` (the pipelines' weights and default stage counts)
@@ -16,6 +21,8 @@ and ``docs/results/pnr_steps.json``.
 Usage::
 
     python benchmarks/bench_pnr.py [--only fp-add fp-mul ...] [--seeds 3] [--speeds 6 8]
+    python benchmarks/bench_pnr.py --only intersection-unit --default-options \\
+        --roundings rtz --speeds 6 --copies 2
     python benchmarks/bench_pnr.py --steps
 
 A whole intersection unit takes 3-4 minutes of synthesis and 15-20 minutes of place and
@@ -59,8 +66,10 @@ MATRIX = (
 
 
 def _key(rec) -> str:
-    return json.dumps([rec["unit"], rec["format"], rec["options"], rec["speed"],
-                       rec["seeds"]], sort_keys=True)
+    key = [rec["unit"], rec["format"], rec["options"], rec["speed"], rec["seeds"]]
+    if rec.get("copies", 1) != 1:
+        key.append(rec["copies"])
+    return json.dumps(key, sort_keys=True)
 
 
 def _load(path: Path) -> list:
@@ -88,6 +97,7 @@ def run_matrix(args) -> int:
                 t0, c0 = time.monotonic(), time.process_time()
                 load = os.getloadavg()[0]
                 rec = pnr_unit(unit, fmt, options, speed=speed, seeds=range(1, args.seeds + 1),
+                               copies=args.copies,
                                progress=lambda line: print("  " + line, file=sys.stderr,
                                                            flush=True))
                 rec["bench"] = {"wall_s": round(time.monotonic() - t0, 1),
@@ -104,7 +114,7 @@ def _write(rows: dict) -> None:
     merged = {_key(r): r for r in _load(RESULTS)}     # what another run wrote meanwhile
     merged.update(rows)
     runs = sorted(merged.values(), key=lambda r: (r["unit"], r["format"], json.dumps(
-        r["options"], sort_keys=True), r["speed"]))
+        r["options"], sort_keys=True), r["speed"], r.get("copies", 1)))
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps({"machine": _machine(), "runs": runs}, indent=1,
                                   sort_keys=True) + "\n")
@@ -134,7 +144,8 @@ def render(runs: list) -> str:
     def find(unit, rounding="rtz", speed=6, options=None):
         for r in runs:
             if (r["unit"], r["rounding"], r["speed"], r["options"]) == (unit, rounding, speed,
-                                                                         options or {}):
+                                                                         options or {}) \
+                    and r.get("copies", 1) == 1:
                 return r
         return None
 
@@ -202,7 +213,7 @@ def render(runs: list) -> str:
         cp = r["critical_path"] or {}
         per = r["seconds"]["per_seed"]
         out.append(
-            f"| {r['unit']} | {r['format']} | {_opts(r['options'])} | {r['speed']} | "
+            f"| {_unit(r)} | {r['format']} | {_opts(r['options'])} | {r['speed']} | "
             f"**{f['median']:.1f}** ({f['min']:.1f}-{f['max']:.1f}, {f['seeds']} "
             f"seed{'s' if f['seeds'] != 1 else ''}) | "
             f"{r['latency'] or 'n/a'} | {s['lut4']:,} | {s['carry']:,} | {s['ff']:,} | {s['mult18']} | "
@@ -211,8 +222,48 @@ def render(runs: list) -> str:
             f"{statistics.median(per.values()):.0f} |")
     out += ["", "P&R s/seed is wall time of one nextpnr run (the machine: 2 cores, often shared; "
                 "`bench.load_before` in the JSON).", ""]
+    out += _render_copies(runs)
     out += _render_steps()
     return "\n".join(out)
+
+
+def _unit(r) -> str:
+    return r["unit"] + (f" x{r['copies']}" if r.get("copies", 1) > 1 else "")
+
+
+def _render_copies(runs: list) -> list:
+    """The multi-copy runs (``--copies``): utilisation of the device and Fmax beside one
+    copy's; nothing when there is none."""
+    multi = [r for r in runs if r.get("copies", 1) > 1]
+    if not multi:
+        return []
+    out = ["## Copies side by side", "",
+           "N copies of a unit in one design, each on its own ports, placed and routed "
+           "together (`raplas-hdl pnr UNIT --copies N`, `bench_pnr.py --copies N`): the "
+           "share of the device they take (nextpnr's used / available) and the clock they "
+           "keep, beside the single unit's Fmax at the same format, options and speed.", "",
+           "| unit | format | options | speed | copies | LUT4 (TRELLIS_COMB) | FF | "
+           "MULT18X18D | EBR | Fmax median (min-max) | one copy | P&R s/seed |",
+           "|---|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|"]
+    for r in multi:
+        u = r["utilisation"]
+
+        def cell(k):
+            v = u.get(k)
+            return f"{v['used']:,} ({v['used'] / v['available']:.1%})" if v else "n/a"
+
+        one = next((x for x in runs if x.get("copies", 1) == 1 and (
+            x["unit"], x["format"], x["options"], x["speed"]) == (
+            r["unit"], r["format"], r["options"], r["speed"])), None)
+        f = r["fmax"]["clk"]
+        alone = f"{one['fmax']['clk']['median']:.1f}" if one else "not run"
+        per_seed = statistics.median(r["seconds"]["per_seed"].values())
+        out.append(f"| {r['unit']} | {r['format']} | {_opts(r['options'])} | {r['speed']} | "
+                   f"{r['copies']} | {cell('TRELLIS_COMB')} | {cell('TRELLIS_FF')} | "
+                   f"{cell('MULT18X18D')} | {cell('DP16KD')} | **{f['median']:.1f}** "
+                   f"({f['min']:.1f}-{f['max']:.1f}, {f['seeds']} seed"
+                   f"{'s' if f['seeds'] != 1 else ''}) | {alone} | {per_seed:.0f} |")
+    return out + [""]
 
 
 def _render_steps() -> list:
@@ -308,9 +359,14 @@ def main(argv=None) -> int:
                    help="roundings to run (default: each configuration's own)")
     p.add_argument("--default-options", action="store_true",
                    help="only the configurations at the units' default options")
+    p.add_argument("--copies", type=int, default=1,
+                   help="place and route N copies of each configuration side by side "
+                        "(default 1)")
     p.add_argument("--steps", action="store_true",
                    help="measure the FP units' step delays and rewrite rtl/step_delays.py")
     args = p.parse_args(argv)
+    if args.copies < 1:
+        p.error("--copies must be at least 1")
     return run_steps(args) if args.steps else run_matrix(args)
 
 

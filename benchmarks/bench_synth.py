@@ -117,7 +117,12 @@ def capacity_main(args) -> int:
     found = gather(fmt, rows=earlier, cached_only=args.cached_only,
                    progress=lambda line: print(line, flush=True))
     tp = load_throughput(args.throughput)
-    cap = build_capacity(fmt, found["rows"], tp, CAPACITY_TRIANGLES)
+    from raplas_hdl.synth.capacity_ecp5 import load_pnr_runs
+
+    pnr = ROOT / "docs" / "results" / "pnr.json"
+    cap = build_capacity(fmt, found["rows"], tp, CAPACITY_TRIANGLES,
+                         pnr_runs=load_pnr_runs(pnr) if pnr.exists() else None,
+                         pnr_source=os.path.relpath(pnr, ROOT))
     children = resource.getrusage(resource.RUSAGE_CHILDREN)
     cap.update(missing=found["missing"], throughput_file=os.path.relpath(args.throughput, ROOT),
                command="python benchmarks/bench_synth.py --capacity"

@@ -117,3 +117,86 @@ def test_cli_capacity_errors(tmp_path, capsys):
     assert "--adder does not apply to capacity" in capsys.readouterr().err
     assert main(["synth", "ray-triangle", "--adder", "virtex4", "--family", "xc7"]) == 2
     assert "takes the generic RTL only" in capsys.readouterr().err
+
+
+def _pnr_run(copies, comb, mult, fmax=(92.0, 90.0, 95.0), **kw):
+    util = {"TRELLIS_COMB": {"used": comb, "available": 83640},
+            "TRELLIS_FF": {"used": comb // 2, "available": 83640},
+            "MULT18X18D": {"used": mult, "available": 156},
+            "DP16KD": {"used": 48, "available": 208}}
+    return {"unit": "intersection-unit", "format": "e7m16-rtz", "options": {}, "speed": 6,
+            "device": "LFE5U-85F", "copies": copies, "utilisation": util,
+            "fmax": {"clk": {"median": fmax[0], "min": fmax[1], "max": fmax[2], "seeds": 3}},
+            "command": "raplas-hdl pnr intersection-unit --copies 2", **kw}
+
+
+def test_ecp5_row_not_measured_without_a_multi_copy_run():
+    from raplas_hdl.synth.capacity_ecp5 import ecp5_rows, render_ecp5
+
+    tp = [{"scene": "s", "testers": 8, "lanes": 1, "pairs_per_cycle": 0.9}]
+    single = _pnr_run(1, 32000, 42)
+    other = {**_pnr_run(2, 1000, 0), "unit": "fp-add"}
+    for runs in (None, [], [single, other]):
+        (row,) = ecp5_rows(runs, tp, FP24)
+        assert row["measured"] is False and "units" not in row and "fmax" not in row
+    text = "\n".join(render_ecp5([row], 100e6))
+    assert "| LFE5U-85F | 6 | generic | 8 | 1 | off | **not measured**" in text
+    assert "MHz" not in text.split("not measured")[1].split("\n")[0].replace("Fmax MHz", "")
+
+
+def test_ecp5_row_from_placed_copies():
+    from raplas_hdl.synth.capacity_ecp5 import ecp5_rows, render_ecp5
+
+    tp = [{"scene": "a", "testers": 8, "lanes": 1, "pairs_per_cycle": 0.9},
+          {"scene": "b", "testers": 8, "lanes": 1, "pairs_per_cycle": 0.99},
+          {"scene": "a", "testers": 4, "lanes": 1, "pairs_per_cycle": 0.5}]
+    (row,) = ecp5_rows([_pnr_run(2, 64240, 84), _pnr_run(1, 32000, 42)], tp, FP24)
+    assert row["measured"] and row["copies"] == 2 and row["basis"].startswith("place and route")
+    assert row["bound_by"] == "TRELLIS_COMB" and row["units"] == 2      # 76.8 % for two
+    assert row["fmax"]["median"] == 92.0
+    assert row["pairs_per_s_placed"] == pytest.approx(2 * 0.9 * 92e6)
+    assert row["pairs_per_s"] == pytest.approx(2 * 0.9 * 92e6)
+    (row,) = ecp5_rows([_pnr_run(2, 30000, 84)], tp, FP24)
+    assert row["bound_by"] == "MULT18X18D" and row["units"] == 3        # 2 / (84 / 156)
+    assert row["pairs_per_s"] == pytest.approx(3 * 0.9 * 92e6)
+    line = render_ecp5([row], 100e6)[-1]
+    assert "| 2 | 30,000 / 83,640 (35.9%) | 84 / 156 (53.8%) |" in line
+    assert "**3** (MULT18X18D) | **92.0** (90.0-95.0, 3) | 0.900-0.990 | 166 M | 248 M | 2.48x" \
+        in line
+
+
+def test_capacity_table_says_estimate_and_carries_the_ecp5_rows():
+    key = lambda u, o, f="xc4v": (u, tuple(sorted(o.items())), f)   # noqa: E731
+    base = {"rows": 4, "cols": 4, "target": "generic", "adder": "generic"}
+    found = {
+        key("intersection-unit", {**base, "testers": 8}): _row(42, 14798, 40, bram=46),
+        key("plane-sphere", {**base, "testers": 8}): _row(24, 8488, 39),
+        key("ray-triangle", {"target": "generic", "adder": "generic", "mode": "paper"}):
+            _row(18, 6039, 40),
+    }
+    tp = [{"scene": "s", "testers": 8, "lanes": k, "pairs_per_cycle": 0.9} for k in (1, 2, 3)]
+    cap = build_capacity(FP24, found, tp, {"1k": 1024})
+    assert [r["measured"] for r in cap["ecp5"]] == [False]
+    text = "\n".join(render_capacity(cap))
+    assert "Every figure of this table is a Yosys estimate" in text
+    assert all(x.endswith("| Yosys estimate |") for x in text.splitlines()
+               if x.startswith("| XC4VSX35 |"))
+    assert "### ECP5: placed and routed" in text and "**not measured**" in text
+    cap = build_capacity(FP24, found, tp, {"1k": 1024}, pnr_runs=[_pnr_run(2, 64240, 84)])
+    assert cap["ecp5"][0]["units"] == 2
+    assert "| place and route (nextpnr-ecp5) | 2 |" in "\n".join(render_capacity(cap))
+
+
+def test_cli_capacity_pnr_file_errors(tmp_path, capsys):
+    import os
+
+    tp = os.path.join(os.path.dirname(os.path.dirname(__file__)), "docs", "results",
+                      "throughput.json")
+    assert main(["synth", "capacity", "--throughput", tp, "--pnr",
+                 str(tmp_path / "none.json")]) == 2
+    assert "--pnr: no such file" in capsys.readouterr().err
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"rows": []}))
+    assert main(["synth", "capacity", "--throughput", tp, "--pnr", str(bad)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--pnr:" in err and "no \"runs\" list" in err

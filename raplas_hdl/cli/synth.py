@@ -34,7 +34,10 @@ def add_parser(subparsers):
                     "ray-triangle lanes K; XC4VSX35 and two 7-series devices) from the "
                     "synthesised parts and prints the units that fit (minimum over DSP, "
                     "slices, block RAM) and the pairs per second from the throughput model's "
-                    "pairs per cycle (--throughput).")
+                    "pairs per cycle (--throughput): Yosys estimates. Its ECP5 rows are "
+                    "measured instead: several whole units placed and routed side by side "
+                    "(`raplas-hdl pnr intersection-unit --copies N`, the runs of --pnr), or "
+                    "'not measured'.")
     p.add_argument("unit", type=g.choice(*UNIT_NAMES, "all", "capacity", what="unit"),
                    metavar="UNIT",
                    help="a unit of `raplas-hdl verilog` (" + ", ".join(UNIT_NAMES)
@@ -53,6 +56,10 @@ def add_parser(subparsers):
     p.add_argument("--throughput", default=None, metavar="FILE.json",
                    help="capacity: pairs per cycle per (scene, testers, lanes) "
                         "(default docs/results/throughput.json under the current directory)")
+    p.add_argument("--pnr", default=None, metavar="FILE.json",
+                   help="capacity: place-and-route results with multi-copy runs for the ECP5 "
+                        "rows (default docs/results/pnr.json under the current directory; "
+                        "none there: the rows say 'not measured')")
     p.add_argument("--cached-only", action="store_true",
                    help="capacity: use cached syntheses only (no Yosys run)")
     return p
@@ -128,6 +135,19 @@ def _check_capacity(args) -> None:
     except (ValueError, KeyError, TypeError) as exc:
         raise g.UsageError(f"--throughput: {exc}") from None
     args.throughput = str(path)
+    from ..synth.capacity_ecp5 import load_pnr_runs
+
+    pnr = Path(args.pnr or "docs/results/pnr.json")
+    args.pnr_runs = None
+    if pnr.is_file():
+        try:
+            args.pnr_runs = load_pnr_runs(pnr)
+        except (ValueError, KeyError, TypeError, AttributeError) as exc:
+            raise g.UsageError(f"--pnr: {exc}") from None
+    elif args.pnr is not None:
+        raise g.UsageError(f"--pnr: no such file {pnr} (the results of "
+                           "benchmarks/bench_pnr.py)")
+    args.pnr = str(pnr)
 
 
 def _run_capacity(args) -> int:
@@ -142,7 +162,8 @@ def _run_capacity(args) -> int:
     text, caps = [], []
     for fmt in args.fmts:
         found = gather(fmt, cached_only=args.cached_only, progress=progress)
-        cap = build_capacity(fmt, found["rows"], args.throughput_rows, CAPACITY_TRIANGLES)
+        cap = build_capacity(fmt, found["rows"], args.throughput_rows, CAPACITY_TRIANGLES,
+                             pnr_runs=args.pnr_runs, pnr_source=args.pnr)
         cap["missing"] = found["missing"]
         caps.append(cap)
         text += render_capacity(cap) + [""]

@@ -219,11 +219,17 @@ def place_and_route(syn: EcpSynth, *, device: str = "LFE5U-85F", speed: int = 6,
 def run_flow(verilog: str, top: str, *, device: str = "LFE5U-85F", speed: int = 6,
              freq: float = 100.0, seeds: Sequence[int] = (1, 2, 3), use_cache: bool = True,
              base: Path | None = None, progress: Callable[[str], None] | None = None,
-             timeout: float = 7200.0) -> FlowResult:
-    """Synthesis, then out-of-context place and route for each seed."""
+             timeout: float = 7200.0,
+             check: Callable[[dict], object] | None = None) -> FlowResult:
+    """Synthesis, then out-of-context place and route for each seed.
+
+    ``check`` is called with the synthesised resource columns before any place and route
+    (:func:`.fit.check_fit`: it raises when the design cannot fit the device)."""
     check_device(device, speed)
     syn = synthesize_ecp5(verilog, top, base=base, use_cache=use_cache, timeout=timeout,
                           progress=progress)
+    if check is not None:
+        check(syn.counts)
     res = FlowResult(top=top, device=device, speed=speed, freq=freq, synth=syn.counts,
                      tools=tool_versions(), work=str(syn.work))
     res.seconds = {"synthesis": syn.seconds, "synthesis_cached": syn.cached,

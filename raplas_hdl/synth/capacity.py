@@ -30,6 +30,10 @@ Memory through their own read ports: Yosys builds those memories ``K`` times.
 ``K``) on the bench scenes x 100 MHz, not ``K`` x clock: the pairs per cycle come from the
 throughput model's results (rows ``scene, format, rows, cols, testers, lanes,
 pairs_per_cycle``). The paper: one unit, 100 M pairs/s at its board's 100 MHz.
+
+**These rows are Yosys estimates** (synthesis only; no place and route for the Xilinx
+devices here). The ECP5 rows (:mod:`.capacity_ecp5`) are the opposite: read from a place and
+route of several whole units side by side (``docs/results/pnr.json``), or *not measured*.
 """
 
 from __future__ import annotations
@@ -389,11 +393,16 @@ def _get(found, unit, options, family):
     return found.get((unit, tuple(sorted(_norm(unit, options).items())), family))
 
 
-def build_capacity(fmt, found: dict, throughput_rows, n_triangles: dict) -> dict:
+def build_capacity(fmt, found: dict, throughput_rows, n_triangles: dict, *,
+                   pnr_runs=None, pnr_source: str = "docs/results/pnr.json") -> dict:
     """The table, its inputs and the validation of the composition (see module docstring).
 
     ``rest`` of a family comes from its generic 8-tester whole-unit run (xc4v) or any
-    whole-unit run of the family; the other whole-unit runs validate the composition."""
+    whole-unit run of the family; the other whole-unit runs validate the composition.
+    ``pnr_runs`` (the runs of ``docs/results/pnr.json``) give the ECP5 rows
+    (:func:`.capacity_ecp5.ecp5_rows`; without a multi-copy run: *not measured*)."""
+    from .capacity_ecp5 import ecp5_rows
+
     parts, validation, rests = {}, [], {}
     units = [(opts, fam, r) for (u, okey, fam), r in found.items()
              if u == "intersection-unit" for opts in [dict(okey)]]
@@ -460,7 +469,8 @@ def build_capacity(fmt, found: dict, throughput_rows, n_triangles: dict) -> dict
                             for f, rc in reduce_cost.items()},
             "n_triangles": n_triangles, "devices": DEVICES,
             "clock_mhz": CLOCK_MHZ, "paper_pairs_per_second": PAPER_PAIRS_PER_SECOND,
-            "packing_margin": PACKING_MARGIN}
+            "packing_margin": PACKING_MARGIN,
+            "ecp5": ecp5_rows(pnr_runs, throughput_rows, fmt), "ecp5_source": pnr_source}
 
 
 def _brief(row: dict) -> dict:
@@ -498,7 +508,9 @@ def render_capacity(cap: dict, *, worst_path: int | None = None) -> list[str]:
     out = ["## Capacity per configuration (issue 15)", ""]
     devs = ", ".join(f"{name} ({d['family']}: {d['dsp48']} DSP, {d['slices']:,} slices, "
                      f"{d['bram18']} x 18 Kbit BRAM)" for name, d in cap["devices"].items())
-    out += [f"Devices: {devs}. Format {cap['format']}; 4x4 bundles. **target** `virtex4` is "
+    out += [f"Devices: {devs}. **Every figure of this table is a Yosys estimate** (synthesis "
+            "only, no place and route; the ECP5 rows below are placed and routed). "
+            f"Format {cap['format']}; 4x4 bundles. **target** `virtex4` is "
             "`--target virtex4 --adder virtex4` (significand multiplies and FP adders in "
             "Virtex-4 DSP48 primitives); the 7-series rows are the generic RTL (Yosys maps "
             "the multiplies to DSP48E1; the two-DSP48 adder is a Virtex-4 primitive design). "
@@ -523,7 +535,7 @@ def render_capacity(cap: dict, *, worst_path: int | None = None) -> list[str]:
     hdr += ["DSP limit", "slice limit", "x1.25 limit"] + [f"BRAM limit ({k})" for k in labels]
     hdr += [f"units ({first})", f"units x1.25 ({first})", "pairs/cycle (scenes)",
             "if lanes kept their results",
-            "pairs/s", "pairs/s x1.25", "vs paper", "vs paper x1.25", "path"]
+            "pairs/s", "pairs/s x1.25", "vs paper", "vs paper x1.25", "path", "basis"]
     out += ["| " + " | ".join(hdr) + " |", "|" + "---|" * len(hdr)]
     paper = cap["paper_pairs_per_second"]
     for r in table:
@@ -544,7 +556,7 @@ def render_capacity(cap: dict, *, worst_path: int | None = None) -> list[str]:
                   _lim(r["limits"]["slices_x1.25"])]
         cells += [_lim(r["bram_limits"][k]) for k in labels]
         cells += [f"**{r[f'units[{first}]']}**", r[f"units_x1.25[{first}]"], ppc_s, lane_s,
-                  _mps(p), _mps(p125), ratio, ratio125, path]
+                  _mps(p), _mps(p125), ratio, ratio125, path, "Yosys estimate"]
         out.append("| " + " | ".join(str(c) for c in cells) + " |")
     out.append("")
     for dev in cap["devices"]:
@@ -558,6 +570,11 @@ def render_capacity(cap: dict, *, worst_path: int | None = None) -> list[str]:
             f"the paper; with the x1.25 packing margin {b125['target']} t{b125['testers']} "
             f"K{b125['lanes']}, {b125[f'units_x1.25[{first}]']} unit(s), {p125 / 1e6:.0f} M "
             f"pairs/s = **{p125 / paper:.2f}x**.")
+    if "ecp5" in cap:
+        from .capacity_ecp5 import render_ecp5
+
+        out += [""] + render_ecp5(cap["ecp5"], paper, cap.get("ecp5_source",
+                                                             "docs/results/pnr.json"))
     out += _render_method(cap) + [""]
     for label in labels[1:]:
         fits = [r for r in table if r[f"units[{label}]"] > 0]
