@@ -89,6 +89,36 @@ def test_lanes_match_model(simulator):
     check_cycles(SMALL, scene, runs, res_overlap, overlap=True)
 
 
+def test_feeder_credits_bound_cycles_equal_model():
+    """Runs whose every sphere is culled (the selector takes one per cycle) and the array
+    takes one sphere per cycle: the feeder's credits are the limit (the model with one
+    credit fewer, or a credit one cycle slower, gives other cycles), and the ``cycles``
+    counter equals the cycle model's, run by run."""
+    from raplas_hdl.model.memory_image import Run
+    from raplas_hdl.sim.unit_driver import random_bundle, random_scene
+
+    scene = random_scene(SMALL, 120, seed=4, size=1.2, extent=4.0, empty_spheres=2)
+    away = random_bundle(SMALL, seed=5, target=np.array([0.0, 60.0, 0.0]), spread=0.01)
+    runs = [Run(away, np.resize(np.arange(scene.n_spheres), 120), False),
+            Run(away, None, False)]
+    prof = profile_runs(SMALL, scene, runs)
+    assert prof.pairs == 0 and prof.spheres > 150
+    tm = timing(SMALL)
+    from raplas_hdl.rtl.unit.feeder import SPHERE_FIFO_DEPTH
+
+    assert tm.feed_registers == SPHERE_FIFO_DEPTH
+    want = simulate(prof, SMALL, tm, overlap=False)
+    for other in (dataclasses.replace(tm, feed_registers=tm.feed_registers - 1),
+                  dataclasses.replace(tm, feed_return=tm.feed_return + 1)):
+        t_cmd, t_last = simulate(prof, SMALL, other, overlap=False)
+        assert not np.array_equal(t_last - t_cmd, want[1] - want[0])
+    with UnitSession("verilator", SMALL, scene, ready_density=1.0,
+                     build_key="lanes-test") as s:
+        res = s.run(runs)
+    check_against_model(SMALL, scene, runs, res)
+    check_cycles(SMALL, scene, runs, res)
+
+
 def test_cycle_model_bounds():
     cfg = dataclasses.replace(SMALL, rows=4, cols=4, testers=8, lanes=1)
     scene, runs = scene_and_runs(cfg, 200, seed=11)

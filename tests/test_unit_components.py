@@ -183,7 +183,8 @@ def test_write_decoder_fills_the_memory_image(scene, bundles):
 def test_feeder_sends_the_runs_spheres_and_loads_stale_planes(scene, bundles):
     """Each run's spheres in order (direct, or from the bank's run list), then its marker;
     the bank's planes copied into the array before a run whose planes are stale (another
-    bank, or rewritten by the host), and only when the run before has left the array."""
+    bank, or rewritten by the host), and only when the run before has left the array. The
+    ``spheres`` event fires once per sphere, never for a marker."""
     cfg, rng = CFG, np.random.default_rng(7)
     dut = SphereFeeder(cfg, capacity=16)
     top = Module()
@@ -202,7 +203,7 @@ def test_feeder_sends_the_runs_spheres_and_loads_stale_planes(scene, bundles):
     words = scene_words(cfg, scene)
     planes = bundle_words(cfg, bundles)["plane"]
     cmd = CMD.bind(cfg)
-    spheres, plane_log, taken = [], [], []
+    spheres, plane_log, taken, counted = [], [], [], []
 
     async def bench(ctx):
         for k, (first, count, bank, ind, keep, dirty) in enumerate(runs):
@@ -218,8 +219,10 @@ def test_feeder_sends_the_runs_spheres_and_loads_stale_planes(scene, bundles):
 
     async def watch(ctx):
         cycle = 0
-        async for _, _, en, addr, data, valid, ready in ctx.tick().sample(
-                dut.pw_en, dut.pw_addr, dut.pw_data.as_value(), dut.o.valid, dut.o.ready):
+        async for _, _, en, addr, data, valid, ready, event in ctx.tick().sample(
+                dut.pw_en, dut.pw_addr, dut.pw_data.as_value(), dut.o.valid, dut.o.ready,
+                dut.spheres):
+            counted.append(int(event))
             if en:
                 plane_log.append((cycle, int(addr), int(data)))
             if valid and ready:
@@ -228,16 +231,16 @@ def test_feeder_sends_the_runs_spheres_and_loads_stale_planes(scene, bundles):
 
     run_sim(top, bench, serve(dut.rlist, rlist), serve(dut.sphere, words["sphere"]),
             serve(dut.plane, planes), watch,
-            collector(dut.o, spheres, rng, 0.6, dut.spheres))
+            collector(dut.o, spheres, rng, 0.6))
     tags, sph = tag_layout(cfg), sphere_layout(cfg)
     out = iter(spheres)
+    assert sum(counted) == sum(r[1] for r in runs)
     for first, count, bank, ind, keep, _ in runs:
         ids = lists[bank][first:first + count] if ind else np.arange(first, first + count)
         for s in [*ids, None]:
-            payload, counted = next(out)
+            payload = next(out)
             tag = unpack(tags, unpack(sph, payload)["id"])
             assert (tag["marker"], tag["bank"], tag["keep_all"]) == (s is None, bank, keep)
-            assert counted == (s is not None)
             if s is not None:
                 assert tag["sphere"] == s
                 assert payload >> sph["c"].offset == words["sphere"][s]

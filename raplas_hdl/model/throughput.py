@@ -66,9 +66,11 @@ class Timing:
     rt_latency: int
     rt_fifo_depth: int
     fifo_depth: int = 16
-    feed_offset: int = 5        # command taken -> first sphere at the array input
-    feed_registers: int = 4     # the feeder's stall pipeline (an item waits for the one
-    #                             this many ahead to be taken by the array)
+    feed_offset: int = 7        # command taken -> first sphere at the array input
+    feed_registers: int = 8     # the feeder's credits, its sphere FIFO's depth (an item
+    #                             starts feed_return cycles after the one this many ahead
+    #                             is taken by the array)
+    feed_return: int = 2        # a credit's way back: the array's take -> a start
     select_offset: int = 0      # array output -> selector take
     job_offset: int = 2         # job into the job FIFO -> fetch can take it
     fetch_offset: int = 6       # pair started -> at the ray-triangle unit's input
@@ -194,7 +196,7 @@ def profile_runs(config: UnitConfig, scene, runs) -> Profile:
 def _simulate(run_items, run_load, writes, after, item_slots, item_jobs, job_slot, job_pairs,
               lanes, stream, overlap, passes, n_planes, c_array_lat, c_array_cap, c_select,
               c_job, c_fetch, c_back, c_out, c_feed, c_load, c_lane_cap, job_depth,
-              feed_regs):
+              feed_regs, feed_ret):
     n_runs = run_load.size
     n_items = item_slots.size
     n_jobs = job_pairs.size
@@ -233,11 +235,12 @@ def _simulate(run_items, run_load, writes, after, item_slots, item_jobs, job_slo
         i0 = run_items[r]
         i1 = run_items[r + 1]
         for s in range(i0, i1):
-            # the feeder issues item s when its registers move (the item feed_regs ahead
-            # is taken by the array); the array takes it c_feed - 1 cycles later at best
+            # the feeder starts item s when it holds a credit (feed_ret cycles after the
+            # item feed_regs ahead is taken by the array); the array takes it c_feed - 1
+            # cycles later at best
             p = start if s == i0 else p + 1
-            if s - feed_regs >= i0:
-                p = max(p, acc[s - feed_regs])
+            if s - feed_regs >= 0:
+                p = max(p, acc[s - feed_regs] + feed_ret)
             a = max(p + c_feed - 1, a_prev + passes)
             if s - c_array_cap >= 0:
                 a = max(a, take[s - c_array_cap] + 1)
@@ -329,7 +332,7 @@ def simulate(profile: Profile, config: UnitConfig, timing: Timing, *,
                      timing.array_latency, timing.array_capacity, timing.select_offset,
                      timing.job_offset, timing.fetch_offset, timing.rt_latency,
                      timing.out_offset, timing.feed_offset, timing.load_offset, lane_cap,
-                     JOB_FIFO_DEPTH, timing.feed_registers)
+                     JOB_FIFO_DEPTH, timing.feed_registers, timing.feed_return)
 
 
 def pairs_per_cycle(profile: Profile, config: UnitConfig, timing: Timing, *,
