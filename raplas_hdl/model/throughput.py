@@ -76,6 +76,7 @@ class Timing:
     fetch_offset: int = 6       # pair started -> at the ray-triangle unit's input
     out_offset: int = 4         # the marker's result into the result FIFO -> last beat taken
     load_offset: int = 1        # drained -> planes loaded, beyond rows + cols
+    drain_offset: int = 2       # the previous run's marker taken by the selector -> drained
     lane_slack: int = -1        # a lane holds fifo_depth + rt_fifo_depth + this many pairs
 
     @classmethod
@@ -196,7 +197,7 @@ def profile_runs(config: UnitConfig, scene, runs) -> Profile:
 def _simulate(run_items, run_load, writes, after, item_slots, item_jobs, job_slot, job_pairs,
               lanes, stream, overlap, passes, n_planes, c_array_lat, c_array_cap, c_select,
               c_job, c_fetch, c_back, c_out, c_feed, c_load, c_lane_cap, job_depth,
-              feed_regs, feed_ret):
+              feed_regs, feed_ret, c_drain):
     n_runs = run_load.size
     n_items = item_slots.size
     n_jobs = job_pairs.size
@@ -231,7 +232,7 @@ def _simulate(run_items, run_load, writes, after, item_slots, item_jobs, job_slo
         t_cmd[r] = t
         start = t + 1
         if run_load[r]:
-            start = max(start, marker_take + 1) + n_planes + c_load
+            start = max(start, marker_take + c_drain) + n_planes + c_load
         i0 = run_items[r]
         i1 = run_items[r + 1]
         for s in range(i0, i1):
@@ -332,7 +333,8 @@ def simulate(profile: Profile, config: UnitConfig, timing: Timing, *,
                      timing.array_latency, timing.array_capacity, timing.select_offset,
                      timing.job_offset, timing.fetch_offset, timing.rt_latency,
                      timing.out_offset, timing.feed_offset, timing.load_offset, lane_cap,
-                     JOB_FIFO_DEPTH, timing.feed_registers, timing.feed_return)
+                     JOB_FIFO_DEPTH, timing.feed_registers, timing.feed_return,
+                     timing.drain_offset)
 
 
 def pairs_per_cycle(profile: Profile, config: UnitConfig, timing: Timing, *,

@@ -61,7 +61,7 @@ class SphereFeeder(wiring.Component):
     plane_written : In(2)
         Bit b: the host writes a plane of bank b this cycle (the bank goes stale).
     retired : In(1)
-        A sphere left the array (its ``o`` handshake).
+        A sphere left the array (its ``o`` handshake); taken a cycle late.
     spheres : Out(1)
         A sphere of a run (not a marker) enters the sphere FIFO this cycle (on its way to
         the array: counted once per sphere, as the array tests it).
@@ -111,7 +111,11 @@ class SphereFeeder(wiring.Component):
         # spheres between the array's input and output handshakes: the planes may change
         # only when none is left
         in_array = Signal(range(self._capacity + SPHERE_FIFO_DEPTH))
-        m.d.sync += in_array.eq(in_array + f3.v - self.retired)
+        # (``retired`` comes from the selector's take through the array's FIFO: registered
+        # here, so that the chain selector -> array -> this counter is cut; the count then
+        # lags by a cycle, which only delays a drain by one)
+        retired = Signal()
+        m.d.sync += [retired.eq(self.retired), in_array.eq(in_array + f3.v - retired)]
         drained = Signal()
         m.d.comb += drained.eq((in_array == 0) & ~f1.v & ~fs.v & ~f2.v & ~f3.v)
 
