@@ -116,6 +116,12 @@ def test_cli_pnr_writes_json_markdown_and_a_summary(tmp_path, capsys, monkeypatc
     assert main(["pnr", "fp-mul", "--stages", "2", "--seeds", "2", "--speed", "8",
                  "-o", str(out)]) == 0
     assert json.loads((out / "fp-mul.json").read_text())["cached_seeds"] == [1, 2]
+    # the placer's timing weight reaches nextpnr (a run of its own) and the record
+    assert main(["pnr", "fp-mul", "--stages", "2", "--seeds", "1", "--speed", "8",
+                 "--placer-timing-weight", "40", "-o", str(out)]) == 0
+    rec = json.loads((out / "fp-mul.json").read_text())
+    assert rec["placer_timing_weight"] == 40 and rec["cached_seeds"] == []
+    assert "--placer-timing-weight 40" in rec["command"]
 
 
 @pytest.mark.parametrize("args,message", [
@@ -125,6 +131,8 @@ def test_cli_pnr_writes_json_markdown_and_a_summary(tmp_path, capsys, monkeypatc
     (["fp-add", "--device", "LFE5U-12F"], "device"),
     (["fp-add", "--seeds", "0"], "--seeds"),
     (["fp-add", "--rows", "2"], "--rows does not apply to unit fp-add"),
+    (["fp-add", "--placer-timing-weight", "0"], "--placer-timing-weight"),
+    (["fp-add", "--bitstream", "--placer-timing-weight", "40"], "--placer-timing-weight"),
 ])
 def test_cli_pnr_bad_input_is_one_line(args, message, capsys, tmp_path):
     assert main(["pnr", *args, "-o", str(tmp_path / "o")]) == 2

@@ -68,6 +68,12 @@ def add_parser(subparsers):
     p.add_argument("--copies", type=g.int_range(1, MAX_COPIES), default=1, metavar="N",
                    help="place and route N copies of the unit side by side, each on its own "
                         "ports (default 1)")
+    p.add_argument("--placer-timing-weight", type=g.int_range(1, 1000), default=None,
+                   metavar="N", dest="timing_weight",
+                   help="nextpnr's --placer-heap-timingweight: how hard the placer pulls the "
+                        "cells of critical paths together (default: nextpnr's own); the "
+                        "benchmark uses 40 for the units whose multipliers' DSP paths decide "
+                        "the clock (docs/pnr.md)")
     p.add_argument("--bitstream", action="store_true",
                    help="the unit behind a serial wrapper on the ULX3S, every port placed by "
                         "an .lpf, routed in context and packed into a .bit (yowasp-ecppack)")
@@ -90,6 +96,9 @@ def check(args) -> None:
                                "an ECP5 place and route takes the generic RTL only")
     args.speed = int(args.speed)
     if args.bitstream:
+        if args.timing_weight is not None:
+            raise g.UsageError("--placer-timing-weight applies to the out-of-context runs, not "
+                               "to --bitstream")
         if args.unit in OWN_CLOCK_UNITS:
             raise g.UsageError(f"--bitstream: {args.unit} has its own clock and reset ports "
                                "(clk, rst); the serial wrapper clocks a unit and drives its "
@@ -129,7 +138,8 @@ def run(args) -> int:
     else:
         result = pnr_unit(args.unit, args.fmt, args.options, device=args.device,
                           speed=args.speed, freq=args.freq, seeds=seeds, copies=args.copies,
-                          use_cache=not args.no_cache, progress=progress, command=command)
+                          use_cache=not args.no_cache, progress=progress, command=command,
+                          timing_weight=args.timing_weight)
         extra = []
     paths = write_pnr_report(result, args.out_dir) + extra
     print(result["summary"])

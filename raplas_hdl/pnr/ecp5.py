@@ -220,8 +220,12 @@ def run_flow(verilog: str, top: str, *, device: str = "LFE5U-85F", speed: int = 
              freq: float = 100.0, seeds: Sequence[int] = (1, 2, 3), use_cache: bool = True,
              base: Path | None = None, progress: Callable[[str], None] | None = None,
              timeout: float = 7200.0,
-             check: Callable[[dict], object] | None = None) -> FlowResult:
+             check: Callable[[dict], object] | None = None,
+             timing_weight: int | None = None) -> FlowResult:
     """Synthesis, then out-of-context place and route for each seed.
+
+    ``timing_weight``: nextpnr's ``--placer-heap-timingweight`` (its default when None): how
+    hard the analytic placer pulls the cells of critical paths together.
 
     ``check`` is called with the synthesised resource columns before any place and route
     (:func:`.fit.check_fit`: it raises when the design cannot fit the device)."""
@@ -237,9 +241,11 @@ def run_flow(verilog: str, top: str, *, device: str = "LFE5U-85F", speed: int = 
     for seed in seeds:
         if progress:
             progress(f"{top}: seed {seed}: place and route ({device}, speed {speed})")
+        extra = () if timing_weight is None else ("--placer-heap-timingweight",
+                                                   str(timing_weight))
         r, secs, cached = place_and_route(syn, device=device, speed=speed, freq=freq,
                                           seed=seed, use_cache=use_cache, timeout=timeout,
-                                          progress=progress)
+                                          progress=progress, extra=extra)
         res.runs[seed] = {**r.to_dict(), "seconds": secs, "cached": cached}
         res.seconds["place_and_route"] = round(res.seconds["place_and_route"] + secs, 2)
         if progress:

@@ -109,9 +109,11 @@ def flow_record(unit: str, module: str, fmt, options: dict, latency, flow, *, em
 def pnr_unit(unit: str, fmt, options: dict, *, device: str = "LFE5U-85F", speed: int = 6,
              freq: float = 100.0, seeds: Iterable[int] = (1, 2, 3), use_cache: bool = True,
              progress: Callable[[str], None] | None = None, command: str | None = None,
-             base: Path | None = None, copies: int = 1) -> dict:
+             base: Path | None = None, copies: int = 1,
+             timing_weight: int | None = None) -> dict:
     """Place and route ``unit`` (``copies`` of it side by side) and return the record
-    (module docstring). ``ValueError`` when the synthesised design cannot fit ``device``."""
+    (module docstring). ``ValueError`` when the synthesised design cannot fit ``device``.
+    ``timing_weight``: nextpnr's placer timing weight (its default when None)."""
     t0 = time.monotonic()
     if progress:
         progress(f"{unit}: building the Verilog" + (f" ({copies} copies)" if copies > 1 else ""))
@@ -124,11 +126,15 @@ def pnr_unit(unit: str, fmt, options: dict, *, device: str = "LFE5U-85F", speed:
     seeds = list(seeds)
     flow = run_flow(text, module, device=device, speed=speed, freq=freq, seeds=seeds,
                     use_cache=use_cache, base=base, progress=progress,
-                    check=lambda counts: check_fit(counts, device, what))
-    return flow_record(unit, module, fmt, options, latency, flow, emit_s=emit_s,
-                       device=device, speed=speed, freq=freq, seeds=seeds, copies=copies,
-                       command=command or _command(unit, fmt, options, device, speed, freq,
-                                                   len(seeds), copies))
+                    check=lambda counts: check_fit(counts, device, what),
+                    timing_weight=timing_weight)
+    rec = flow_record(unit, module, fmt, options, latency, flow, emit_s=emit_s,
+                      device=device, speed=speed, freq=freq, seeds=seeds, copies=copies,
+                      command=command or _command(unit, fmt, options, device, speed, freq,
+                                                  len(seeds), copies,
+                                                  timing_weight=timing_weight))
+    rec["placer_timing_weight"] = timing_weight
+    return rec
 
 
 def check_copies(unit: str, fmt, options: dict, copies: int, device: str, what: str, *,
@@ -144,7 +150,8 @@ def check_copies(unit: str, fmt, options: dict, copies: int, device: str, what: 
     check_fit({k: v * copies for k, v in one.counts.items()}, device, what, io=io)
 
 
-def _command(unit, fmt, options, device, speed, freq, n, copies=1, bitstream=False) -> str:
+def _command(unit, fmt, options, device, speed, freq, n, copies=1, bitstream=False,
+             timing_weight=None) -> str:
     parts = ["raplas-hdl pnr", unit, "--format", fmt.name]
     for k, v in sorted(options.items()):
         flag = "--" + k.replace("_", "-")
@@ -157,6 +164,8 @@ def _command(unit, fmt, options, device, speed, freq, n, copies=1, bitstream=Fal
         parts += ["--copies", str(copies)]
     if bitstream:
         parts.append("--bitstream")
+    if timing_weight is not None:
+        parts += ["--placer-timing-weight", str(timing_weight)]
     return " ".join(parts)
 
 
