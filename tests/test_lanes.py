@@ -119,6 +119,27 @@ def test_feeder_credits_bound_cycles_equal_model():
     check_cycles(SMALL, scene, runs, res)
 
 
+def test_fetch_credits_bound_cycles_equal_model():
+    """A 4-deep pair FIFO: the record fetch's credits (one per entry, back two cycles after
+    the pair reached the ray-triangle unit) halve its rate, and the ``cycles`` counter
+    equals the cycle model's, run by run (a credit a cycle faster or slower in the model
+    gives other cycles)."""
+    cfg = dataclasses.replace(SMALL, fifo_depth=4)
+    scene, runs = scene_and_runs(cfg, 120, seed=4)
+    prof = profile_runs(cfg, scene, runs)
+    tm = timing(cfg)
+    want = simulate(prof, cfg, tm, overlap=False)
+    for other in (dataclasses.replace(tm, fetch_return=tm.fetch_return - 1),
+                  dataclasses.replace(tm, fetch_return=tm.fetch_return + 1)):
+        t_cmd, t_last = simulate(prof, cfg, other, overlap=False)
+        assert not np.array_equal(t_last - t_cmd, want[1] - want[0])
+    with UnitSession("verilator", cfg, scene, ready_density=1.0,
+                     build_key="lanes-fetch-credits") as s:
+        res = s.run(runs)
+    check_against_model(cfg, scene, runs, res)
+    check_cycles(cfg, scene, runs, res)
+
+
 def test_cycle_model_bounds():
     cfg = dataclasses.replace(SMALL, rows=4, cols=4, testers=8, lanes=1)
     scene, runs = scene_and_runs(cfg, 200, seed=11)

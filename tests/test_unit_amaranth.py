@@ -33,8 +33,8 @@ def test_unit_amaranth_matches_model():
     assert sum(r[1]["hits"] for r in ref) > 0
     assert any(len(r[0]) == 1 and r[0]["empty"][0] for r in ref)
     assert_operation_events(ref)
-    # the pair FIFO filled up under back-pressure, and never went over
-    assert results[-1][1]["_max_fifo_level"] == SMALL.fifo_depth
+    # the pair FIFO was used and never went over its depth (the fetch's credits)
+    assert 0 < results[-1][1]["_max_fifo_level"] <= SMALL.fifo_depth
 
 
 @pytest.mark.filterwarnings("ignore::amaranth.hdl.UnusedElaboratable")

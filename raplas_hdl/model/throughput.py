@@ -74,6 +74,7 @@ class Timing:
     select_offset: int = 0      # array output -> selector take
     job_offset: int = 2         # job into the job FIFO -> fetch can take it
     fetch_offset: int = 6       # pair started -> at the ray-triangle unit's input
+    fetch_return: int = 2       # the record fetch's credit back: unit input -> a start
     out_offset: int = 4         # the marker's result into the result FIFO -> last beat taken
     load_offset: int = 1        # drained -> planes loaded, beyond rows + cols
     drain_offset: int = 2       # the previous run's marker taken by the selector -> drained
@@ -197,7 +198,7 @@ def profile_runs(config: UnitConfig, scene, runs) -> Profile:
 def _simulate(run_items, run_load, writes, after, item_slots, item_jobs, job_slot, job_pairs,
               lanes, stream, overlap, passes, n_planes, c_array_lat, c_array_cap, c_select,
               c_job, c_fetch, c_back, c_out, c_feed, c_load, c_lane_cap, job_depth,
-              feed_regs, feed_ret, c_drain):
+              feed_regs, feed_ret, c_drain, depth, fetch_ret):
     n_runs = run_load.size
     n_items = item_slots.size
     n_jobs = job_pairs.size
@@ -210,6 +211,7 @@ def _simulate(run_items, run_load, writes, after, item_slots, item_jobs, job_slo
     lane_next = np.zeros(lanes, np.int64)       # earliest next pop of each lane
     lane_count = np.zeros(lanes, np.int64)      # pairs through each lane so far
     ring = np.full((lanes, c_lane_cap), -(1 << 40), np.int64)  # merge times, per lane
+    starts = np.zeros((lanes, depth), np.int64)  # the last pairs' start cycles, per lane
     a_prev = -(1 << 40)
     x_free = -(1 << 40)        # the iterator can take the next item from this cycle
     hold = -(1 << 40)          # the enable stage is free from this cycle
@@ -272,6 +274,11 @@ def _simulate(run_items, run_load, writes, after, item_slots, item_jobs, job_slo
                     q = lane_count[lane]
                     if q >= c_lane_cap:
                         s_start = max(s_start, ring[lane, q % c_lane_cap] + 1)
+                    # the record fetch's credits: one per pair FIFO entry, back
+                    # fetch_ret cycles after the pair D ahead reached the unit
+                    if q >= depth:
+                        s_start = max(s_start, starts[lane, q % depth] + c_fetch + fetch_ret)
+                    starts[lane, q % depth] = s_start
                     mt = s_start + c_fetch + c_back
                     if stream:
                         mt = max(mt, merge_prev + 1)
@@ -334,7 +341,7 @@ def simulate(profile: Profile, config: UnitConfig, timing: Timing, *,
                      timing.job_offset, timing.fetch_offset, timing.rt_latency,
                      timing.out_offset, timing.feed_offset, timing.load_offset, lane_cap,
                      JOB_FIFO_DEPTH, timing.feed_registers, timing.feed_return,
-                     timing.drain_offset)
+                     timing.drain_offset, timing.fifo_depth, timing.fetch_return)
 
 
 def pairs_per_cycle(profile: Profile, config: UnitConfig, timing: Timing, *,
