@@ -68,7 +68,8 @@ MATRIX = (
 #: nextpnr's placer timing weight (``--placer-heap-timingweight``) per unit, where its default
 #: leaves a multiplier's DSP path long: the plane-sphere array's 24 MULT18X18D (each between
 #: two registers, 3.9 ns inside) were placed up to 29 rows from the registers around them
-#: (seed 2: 86.8 MHz at the default weight, 102.2 MHz at 40).
+#: (seed 2: 86.8 MHz at the default weight, 102.2 MHz at 40). The whole unit at speed 6, seeds
+#: 1-3: 96.8, 96.2, 104.7 MHz at 40; 104.8, 96.0, 96.4 at 100 (not better).
 TIMING_WEIGHT = {"plane-sphere": 40, "intersection-unit": 40}
 
 

@@ -72,6 +72,23 @@ def check_cycles(cfg, scene, runs, results, overlap=False):
     assert results[-1][1]["cycles"] == busy_cycles(t_cmd, t_last)
 
 
+def check_binding(cfg, scene, runs, build_key, *shifts):
+    """The cycle model's constants of ``shifts`` (``(name, shift)`` pairs) bind in ``runs``
+    (each shifted, the model gives other cycles), and the RTL's ``cycles`` counter, run by run,
+    equals the model's with the true constants (Verilator, no back-pressure)."""
+    prof = profile_runs(cfg, scene, runs)
+    tm = timing(cfg)
+    t_cmd, t_last = simulate(prof, cfg, tm, overlap=False)
+    for name, shift in shifts:
+        other = dataclasses.replace(tm, **{name: getattr(tm, name) + shift})
+        o_cmd, o_last = simulate(prof, cfg, other, overlap=False)
+        assert not np.array_equal(o_last - o_cmd, t_last - t_cmd), name
+    with UnitSession("verilator", cfg, scene, ready_density=1.0, build_key=build_key) as s:
+        res = s.run(runs)
+    check_against_model(cfg, scene, runs, res)
+    check_cycles(cfg, scene, runs, res)
+
+
 @pytest.mark.parametrize("simulator", ["icarus", "verilator"])
 def test_lanes_match_model(simulator):
     scene, runs = scene_and_runs(SMALL, 120, seed=4)
@@ -103,20 +120,11 @@ def test_feeder_credits_bound_cycles_equal_model():
             Run(away, None, False)]
     prof = profile_runs(SMALL, scene, runs)
     assert prof.pairs == 0 and prof.spheres > 150
-    tm = timing(SMALL)
     from raplas_hdl.rtl.unit.feeder import SPHERE_FIFO_DEPTH
 
-    assert tm.feed_registers == SPHERE_FIFO_DEPTH
-    want = simulate(prof, SMALL, tm, overlap=False)
-    for other in (dataclasses.replace(tm, feed_registers=tm.feed_registers - 1),
-                  dataclasses.replace(tm, feed_return=tm.feed_return + 1)):
-        t_cmd, t_last = simulate(prof, SMALL, other, overlap=False)
-        assert not np.array_equal(t_last - t_cmd, want[1] - want[0])
-    with UnitSession("verilator", SMALL, scene, ready_density=1.0,
-                     build_key="lanes-test") as s:
-        res = s.run(runs)
-    check_against_model(SMALL, scene, runs, res)
-    check_cycles(SMALL, scene, runs, res)
+    assert timing(SMALL).feed_registers == SPHERE_FIFO_DEPTH
+    check_binding(SMALL, scene, runs, "lanes-test", ("feed_registers", -1),
+                  ("feed_return", +1))
 
 
 def test_fetch_credits_bound_cycles_equal_model():
@@ -126,18 +134,8 @@ def test_fetch_credits_bound_cycles_equal_model():
     gives other cycles)."""
     cfg = dataclasses.replace(SMALL, fifo_depth=4)
     scene, runs = scene_and_runs(cfg, 120, seed=4)
-    prof = profile_runs(cfg, scene, runs)
-    tm = timing(cfg)
-    want = simulate(prof, cfg, tm, overlap=False)
-    for other in (dataclasses.replace(tm, fetch_return=tm.fetch_return - 1),
-                  dataclasses.replace(tm, fetch_return=tm.fetch_return + 1)):
-        t_cmd, t_last = simulate(prof, cfg, other, overlap=False)
-        assert not np.array_equal(t_last - t_cmd, want[1] - want[0])
-    with UnitSession("verilator", cfg, scene, ready_density=1.0,
-                     build_key="lanes-fetch-credits") as s:
-        res = s.run(runs)
-    check_against_model(cfg, scene, runs, res)
-    check_cycles(cfg, scene, runs, res)
+    check_binding(cfg, scene, runs, "lanes-fetch-credits", ("fetch_return", -1),
+                  ("fetch_return", +1))
 
 
 def test_cycle_model_bounds():

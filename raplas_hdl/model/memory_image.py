@@ -121,7 +121,8 @@ class UnitConfig:
     fifo_depth : int
         Depth of the pair FIFO in front of the ray-triangle unit (3 to 1024: the record
         fetch holds one credit per entry, and a 2-entry buffered FIFO cannot take a write
-        while its stored entry moves to its output register).
+        while its stored entry moves to its output register). Below 8 the credits' round
+        trip limits the fetch to ``fifo_depth`` pairs per 8 cycles.
     lanes : int
         Ray-triangle units fed by the one plane-sphere array (1 to 8): pairs are dealt to
         them round-robin and their results merged back in the same order, so the result

@@ -8,15 +8,18 @@ job (one enabled ray of one sphere) at a time in a compiled loop:
 
 1. **feeder**: a run's command is taken when the feeder is idle; a bundle not in the array
    waits for the array to drain, then its ``rows + cols`` planes load, one per cycle; then
-   one sphere per cycle, then the run's marker;
+   one sphere per cycle while the feeder holds a credit for its sphere FIFO, then the run's
+   marker;
 2. **plane-sphere array**: one sphere every ``G = ceil((rows + cols) / testers)`` cycles,
    ``array_latency`` cycles to the selector, at most ``array_capacity`` spheres inside;
 3. **pair selector**: per sphere, one cycle per ray whose row and column planes both keep
    it (one cycle for a culled sphere or a marker); each enabled ray is a job into the job
    FIFO of lane ``job mod lanes`` (depth 4; a full FIFO stalls the iterator);
 4. **record fetch** (per lane): one pair per cycle, the next job taken in the cycle the
-   last pair of the current one starts; at most ``lane_capacity`` pairs between the fetch
-   and the merger (pair FIFO, ray-triangle unit and its FIFO);
+   last pair of the current one starts; a pair starts only with a credit (one per pair FIFO
+   entry, back ``fetch_return`` cycles after the pair ``fifo_depth`` ahead reached the
+   ray-triangle unit); at most ``lane_capacity`` pairs between the fetch and the merger
+   (pair FIFO, ray-triangle unit and its FIFO);
 5. **merger and result framing**: with ``results="stream"`` (the RTL as built) every pair
    is a result beat and the merger passes one per cycle, in job order; with
    ``results="lanes"`` each lane's results are consumed in the lane (a reduction per lane:
@@ -57,8 +60,12 @@ class Timing:
 
     ``array_latency`` and ``array_capacity`` are the plane-sphere array's ``latency`` and
     ``fifo_depth``, ``rt_latency`` and ``rt_fifo_depth`` the ray-triangle unit's; the small
-    offsets are the stage registers between them (the stall pipelines of the feeder, the
-    selector, the fetch; the FIFOs' read latency), fixed by the RTL's structure.
+    offsets are the stage registers between them (the credit pipelines of the feeder and
+    the fetch, the selector's stall pipeline, the FIFOs' read latency), fixed by the RTL's
+    structure. Each is checked against the RTL's ``cycles`` counter in ``tests/test_lanes.py``
+    (the credits with runs where they bind), except ``lane_slack``: a lane's capacity behind
+    the fetch's credits binds only when the merger starves, which the one-per-cycle merger
+    never lets happen in a test run.
     """
 
     array_latency: int
@@ -79,6 +86,7 @@ class Timing:
     load_offset: int = 1        # drained -> planes loaded, beyond rows + cols
     drain_offset: int = 2       # the previous run's marker taken by the selector -> drained
     lane_slack: int = -1        # a lane holds fifo_depth + rt_fifo_depth + this many pairs
+    #                             (the fetch's credits come back two cycles late)
 
     @classmethod
     def of(cls, config: UnitConfig, array_latency: int, array_capacity: int,

@@ -27,7 +27,8 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from .board import BOARD, check_lpf, lpf_text, ulx3s_pins
-from .ecp5 import FlowResult, _run_tool, check_device, place_and_route, synthesize_ecp5
+from .ecp5 import (FlowResult, _run_tool, check_device, place_and_route, record_seed,
+                   synthesize_ecp5)
 from .fit import check_fit
 from .report import summarise_seeds
 from .tools import ecppack_command, tool_versions
@@ -125,11 +126,7 @@ def bitstream_unit(unit: str, fmt, options: dict, out_dir, *, device: str = "LFE
         if io != len(ports):
             raise RuntimeError(f"{top}: nextpnr placed {io} I/O of the design's {len(ports)} "
                                f"ports (seed {seed}; log {syn.work})")
-        flow.runs[seed] = {**r.to_dict(), "seconds": secs, "cached": cached}
-        flow.seconds["place_and_route"] = round(flow.seconds["place_and_route"] + secs, 2)
-        if progress:
-            fs = ", ".join(f"{c} {v:.1f} MHz" for c, v in r.fmax.items())
-            progress(f"{top}: seed {seed}: {fs} ({secs:.0f} s{', cached' if cached else ''})")
+        record_seed(flow, seed, r, secs, cached, progress)
     flow.fmax = summarise_seeds({s: r["fmax"] for s, r in flow.runs.items()})
     clock = _clock_net(flow.fmax, CLOCK_PORT)
 

@@ -246,10 +246,16 @@ def run_flow(verilog: str, top: str, *, device: str = "LFE5U-85F", speed: int = 
         r, secs, cached = place_and_route(syn, device=device, speed=speed, freq=freq,
                                           seed=seed, use_cache=use_cache, timeout=timeout,
                                           progress=progress, extra=extra)
-        res.runs[seed] = {**r.to_dict(), "seconds": secs, "cached": cached}
-        res.seconds["place_and_route"] = round(res.seconds["place_and_route"] + secs, 2)
-        if progress:
-            f = ", ".join(f"{c} {v:.1f} MHz" for c, v in r.fmax.items())
-            progress(f"{top}: seed {seed}: {f} ({secs:.0f} s{', cached' if cached else ''})")
+        record_seed(res, seed, r, secs, cached, progress)
     res.fmax = summarise_seeds({s: r["fmax"] for s, r in res.runs.items()})
     return res
+
+
+def record_seed(res: FlowResult, seed: int, r: RouteResult, secs: float, cached: bool,
+                progress: Callable[[str], None] | None = None) -> None:
+    """Add one seed's place and route to ``res`` (its run, the tool time) and say its Fmax."""
+    res.runs[seed] = {**r.to_dict(), "seconds": secs, "cached": cached}
+    res.seconds["place_and_route"] = round(res.seconds["place_and_route"] + secs, 2)
+    if progress:
+        f = ", ".join(f"{c} {v:.1f} MHz" for c, v in r.fmax.items())
+        progress(f"{res.top}: seed {seed}: {f} ({secs:.0f} s{', cached' if cached else ''})")
