@@ -223,7 +223,7 @@ def render(runs: list) -> str:
                     f"({mhz(iu, ' MHz')}); its critical path runs `{cp.get('start', '')}` -> "
                     f"`{cp.get('end', '')}` ({cp.get('total_ns', 0):.1f} ns, "
                     f"{cp.get('routing_ns', 0):.1f} of it routing, {cp.get('cells', 0)} "
-                    "cells)."]
+                    f"cell{'' if cp.get('cells', 0) == 1 else 's'})."]
     out += ["", "## Every run", "",
             "| unit | format | options | speed | Fmax median (min-max) | latency | LUT4 | "
             "carry | FF | MULT18X18D | EBR | critical path | P&R s/seed |",
