@@ -42,16 +42,17 @@ record fetch, pair FIFO, ray-triangle unit) between a
 :class:`~raplas_hdl.rtl.unit.lanes.ResultMerger` (results back in job order): the result
 stream is the K=1 stream beat for beat.
 
-Every boundary is a stall pipeline, a credit pipeline (the record fetch) or a FIFO; no ready
-signal reaches further back than the nearest FIFO's level. The stages' streams and the drain
-rule (when the host may write which memory) are in ``docs/intersection-unit.md``.
+Every boundary is a stall pipeline, a credit pipeline (the sphere feeder, the record fetch)
+or a FIFO; no ready signal reaches further back than the nearest FIFO's level. The stages'
+streams and the drain rule (when the host may write which memory) are in
+``docs/intersection-unit.md``.
 
 Counters (32 bits, wrap around, zeroed by ``clear``): ``cycles`` (cycles while a run is
-outstanding), ``spheres`` and ``plane_tests`` (counted at the array input), ``pairs_issued``
-(at the ray-triangle input), ``pairs_skipped`` (disabled rays), ``hits``, and ``overflow``,
-``underflow``, ``invalid``: the operations that raised the event, summed over the issued
-pairs (the ray-triangle unit counts them per pair, up to 34, beside the ORed ``flags``
-of the result stream).
+outstanding), ``spheres`` and ``plane_tests`` (counted into the feeder's sphere FIFO),
+``pairs_issued`` (at the ray-triangle input), ``pairs_skipped`` (disabled rays), ``hits``,
+and ``overflow``, ``underflow``, ``invalid``: the operations that raised the event, summed
+over the issued pairs (the ray-triangle unit counts them per pair, up to 34, beside the ORed
+``flags`` of the result stream).
 """
 
 from __future__ import annotations
