@@ -16,7 +16,7 @@ from fusesoc.core import Core
 from raplas_hdl.cli import main
 
 BOARD = ["--rows", "1", "--cols", "1", "--tris-per-sphere", "2", "--max-triangles", "8",
-         "--max-spheres", "4", "--fifo-depth", "2"]
+         "--max-spheres", "4", "--fifo-depth", "3"]
 
 
 def _core(path):
