@@ -27,11 +27,9 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from .board import BOARD, check_lpf, lpf_text, ulx3s_pins
-from .ecp5 import (FlowResult, _run_tool, check_device, place_and_route, record_seed,
-                   synthesize_ecp5)
+from .ecp5 import _run_tool, check_device, route_seeds, synthesize_ecp5
 from .fit import check_fit
-from .report import summarise_seeds
-from .tools import ecppack_command, tool_versions
+from .tools import ecppack_command
 from .unit import _command, check_copies, design, flow_record, report_stem
 
 __all__ = ["bitstream_unit", "check_bitstream", "bitstream_summary", "PREAMBLE"]
@@ -108,26 +106,20 @@ def bitstream_unit(unit: str, fmt, options: dict, out_dir, *, device: str = "LFE
     lpf_name = f"{BOARD.lower()}-{tag}.lpf"
     (syn.work / lpf_name).write_text(lpf)
 
-    flow = FlowResult(top=top, device=device, speed=speed, freq=clock_mhz, synth=syn.counts,
-                      tools=tool_versions(), work=str(syn.work))
-    flow.seconds = {"synthesis": syn.seconds, "synthesis_cached": syn.cached,
-                    "place_and_route": 0.0}
-    configs = {}
-    for seed in seeds:
-        configs[seed] = cfg = f"{device}-s{speed}-seed{seed}-{tag}.config"
-        if progress:
-            progress(f"{top}: seed {seed}: place and route on the {BOARD} ({device}, speed "
-                     f"{speed}, every port placed)")
-        r, secs, cached = place_and_route(
-            syn, device=device, speed=speed, freq=clock_mhz, seed=seed, out_of_context=False,
-            use_cache=use_cache and (syn.work / cfg).exists(), timeout=timeout,
-            progress=progress, extra=["--lpf", lpf_name, "--textcfg", cfg])
+    configs = {seed: f"{device}-s{speed}-seed{seed}-{tag}.config" for seed in seeds}
+
+    def all_placed(seed, r):
         io = r.utilisation.get("TRELLIS_IO", {}).get("used")
         if io != len(ports):
             raise RuntimeError(f"{top}: nextpnr placed {io} I/O of the design's {len(ports)} "
                                f"ports (seed {seed}; log {syn.work})")
-        record_seed(flow, seed, r, secs, cached, progress)
-    flow.fmax = summarise_seeds({s: r["fmax"] for s, r in flow.runs.items()})
+
+    flow = route_seeds(syn, device=device, speed=speed, freq=clock_mhz, seeds=seeds,
+                       use_cache=use_cache, timeout=timeout, progress=progress,
+                       out_of_context=False,
+                       extra=lambda seed: ["--lpf", lpf_name, "--textcfg", configs[seed]],
+                       cached=lambda seed: (syn.work / configs[seed]).exists(),
+                       check_run=all_placed, where=f", on the {BOARD}, every port placed")
     clock = _clock_net(flow.fmax, CLOCK_PORT)
 
     med = flow.median_seed()

@@ -33,7 +33,7 @@ from .report import RouteResult, parse_report, summarise_seeds, synth_counts
 from .tools import nextpnr_command, tool_versions, yosys_command
 
 __all__ = ["DEVICES", "SPEEDS", "PACKAGE", "SYNTH_SCRIPT", "EcpSynth", "FlowResult",
-           "synthesize_ecp5", "place_and_route", "run_flow", "default_pnr_dir",
+           "synthesize_ecp5", "place_and_route", "route_seeds", "run_flow", "default_pnr_dir",
            "check_device"]
 
 #: Devices nextpnr-ecp5 places on -> its device flag and LUT4 count.
@@ -234,28 +234,43 @@ def run_flow(verilog: str, top: str, *, device: str = "LFE5U-85F", speed: int = 
                           progress=progress)
     if check is not None:
         check(syn.counts)
-    res = FlowResult(top=top, device=device, speed=speed, freq=freq, synth=syn.counts,
+    extra = () if timing_weight is None else ("--placer-heap-timingweight", str(timing_weight))
+    return route_seeds(syn, device=device, speed=speed, freq=freq, seeds=seeds,
+                       use_cache=use_cache, timeout=timeout, progress=progress,
+                       extra=lambda seed: extra)
+
+
+def route_seeds(syn: EcpSynth, *, device: str, speed: int, freq: float, seeds: Sequence[int],
+                use_cache: bool = True, timeout: float = 7200.0,
+                progress: Callable[[str], None] | None = None, out_of_context: bool = True,
+                extra: Callable[[int], Sequence[str]] = lambda seed: (),
+                cached: Callable[[int], bool] = lambda seed: True,
+                check_run: Callable[[int, RouteResult], None] | None = None,
+                where: str = "") -> FlowResult:
+    """Place and route a synthesised netlist once per seed: the :class:`FlowResult`.
+
+    ``extra(seed)``: more nextpnr arguments for that seed; ``cached(seed)``: whether its
+    cached run may be read (with ``use_cache``); ``check_run(seed, result)`` raises when a run
+    is not what was asked for; ``where`` ends the progress line of each seed."""
+    res = FlowResult(top=syn.top, device=device, speed=speed, freq=freq, synth=syn.counts,
                      tools=tool_versions(), work=str(syn.work))
     res.seconds = {"synthesis": syn.seconds, "synthesis_cached": syn.cached,
                    "place_and_route": 0.0}
     for seed in seeds:
         if progress:
-            progress(f"{top}: seed {seed}: place and route ({device}, speed {speed})")
-        extra = () if timing_weight is None else ("--placer-heap-timingweight",
-                                                   str(timing_weight))
-        r, secs, cached = place_and_route(syn, device=device, speed=speed, freq=freq,
-                                          seed=seed, use_cache=use_cache, timeout=timeout,
-                                          progress=progress, extra=extra)
-        record_seed(res, seed, r, secs, cached, progress)
+            progress(f"{syn.top}: seed {seed}: place and route ({device}, speed {speed}"
+                     f"{where})")
+        r, secs, was_cached = place_and_route(
+            syn, device=device, speed=speed, freq=freq, seed=seed,
+            out_of_context=out_of_context, use_cache=use_cache and cached(seed),
+            timeout=timeout, progress=progress, extra=extra(seed))
+        if check_run is not None:
+            check_run(seed, r)
+        res.runs[seed] = {**r.to_dict(), "seconds": secs, "cached": was_cached}
+        res.seconds["place_and_route"] = round(res.seconds["place_and_route"] + secs, 2)
+        if progress:
+            f = ", ".join(f"{c} {v:.1f} MHz" for c, v in r.fmax.items())
+            progress(f"{syn.top}: seed {seed}: {f} ({secs:.0f} s"
+                     f"{', cached' if was_cached else ''})")
     res.fmax = summarise_seeds({s: r["fmax"] for s, r in res.runs.items()})
     return res
-
-
-def record_seed(res: FlowResult, seed: int, r: RouteResult, secs: float, cached: bool,
-                progress: Callable[[str], None] | None = None) -> None:
-    """Add one seed's place and route to ``res`` (its run, the tool time) and say its Fmax."""
-    res.runs[seed] = {**r.to_dict(), "seconds": secs, "cached": cached}
-    res.seconds["place_and_route"] = round(res.seconds["place_and_route"] + secs, 2)
-    if progress:
-        f = ", ".join(f"{c} {v:.1f} MHz" for c, v in r.fmax.items())
-        progress(f"{res.top}: seed {seed}: {f} ({secs:.0f} s{', cached' if cached else ''})")
