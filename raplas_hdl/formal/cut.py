@@ -27,13 +27,20 @@ def product_function(width: int, name: str = "sigprod") -> z3.FuncDeclRef:
 
 
 def _narrow(term):
-    """The term a zero extension extends, or ``None``."""
+    """The term a zero extension extends, or ``None``: ``ZeroExt(n, x)`` gives ``x``,
+    ``Concat(c, x...)`` with a constant ``c`` gives ``Concat(c', x...)``, ``c'`` being ``c``
+    without its leading zeros."""
     if term.decl().kind() == z3.Z3_OP_ZERO_EXT:
         return term.arg(0)
     if term.decl().kind() == z3.Z3_OP_CONCAT and term.num_args() >= 2:
         head = term.arg(0)
-        if z3.is_bv_value(head) and head.as_long() == 0:
+        if z3.is_bv_value(head):
+            # a constant head is a zero extension of its significant bits (the
+            # multiplier's operands carry a constant hidden 1 under the fraction)
             rest = [term.arg(i) for i in range(1, term.num_args())]
+            bits = head.as_long().bit_length()
+            if bits:
+                rest = [z3.BitVecVal(head.as_long(), bits)] + rest
             return rest[0] if len(rest) == 1 else z3.Concat(*rest)
     return None
 

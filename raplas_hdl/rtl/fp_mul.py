@@ -9,8 +9,9 @@ The five combinational steps, in order:
 ``unpack``
     Classify both operands, the sign of the product (xor), the special results (NaN
     operand, zero times infinity, infinity, zero) and the biased exponent sum
-    ``exp(a) + exp(b) - bias``. Hands on: both significands, the sign, the exponent,
-    the specials.
+    ``exp(a) + exp(b) - bias``. Hands on: both significands (the raw fraction under a
+    hidden 1, not flushed: when an operand is zero, denormal, infinite or NaN the product
+    is not used), the sign, the exponent, the specials.
 ``multiply``
     The ``2M+2``-bit significand product (:class:`SigMul`).
 ``normalise``
@@ -58,7 +59,7 @@ clock enable on ``en``, so a stall holds the whole unit as in the generic one.
 
 from __future__ import annotations
 
-from amaranth.hdl import Module, Mux
+from amaranth.hdl import Cat, Const, Module, Mux
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -250,11 +251,15 @@ class FPMul(wiring.Component):
         ua, ub = unpack(fmt, v["a"]), unpack(fmt, v["b"])
         any_nan = ua.is_nan | ub.is_nan
         zero_inf = (ua.is_zero & ub.is_inf) | (ua.is_inf & ub.is_zero)
+        mb = fmt.man_bits
         return {
             "sign": ua.sign ^ ub.sign,
             "exp": ua.exp + ub.exp - fmt.bias,
-            "sig_a": ua.sig,
-            "sig_b": ub.sig,
+            # Raw significands: a zero, denormal, infinite or NaN operand's product is never
+            # used (``pack`` gives the special result), so no flush; their registers are
+            # then plain, and the ECP5 flow can move them into the multiplier block.
+            "sig_a": Cat(v["a"][:mb], Const(1, 1)),
+            "sig_b": Cat(v["b"][:mb], Const(1, 1)),
             "nan": any_nan | zero_inf,
             "invalid": ~any_nan & zero_inf,
             "inf": ua.is_inf | ub.is_inf,
