@@ -210,11 +210,17 @@ def render(runs: list) -> str:
             "while they hold a credit for the FIFO behind them (their pipelines never "
             "stall), a 3-deep FIFO registers the results before the framing, and the feeder "
             "takes the array's `retired` a cycle late; the cycle model follows each (and is "
-            "checked against the RTL where the credits bind). What is left is the "
+            "checked against the RTL where the credits bind). Next came the "
             "multipliers' DSP paths: register -> MULT18X18D (3.9 ns inside) -> register, "
             "which nextpnr's placer at its default timing weight left up to 29 rows long in "
             "the plane-sphere array; the array and the whole unit are placed with "
-            "`--placer-timing-weight 40` (in each record's command)."]
+            "`--placer-timing-weight 40` (in each record's command), and since "
+            "`synth_ecp5` leaves every register outside the MULT18X18D, the flow moves the "
+            "registers on each side of a multiply into the block "
+            "(`raplas_hdl/pnr/dsp_registers.py`; the multiplier's operand registers hold "
+            "raw significands so that they are plain registers). The packed netlist is "
+            "simulated against the RTL and the golden model "
+            "(`tests/test_pnr_dsp_registers.py`)."]
     iu = find("intersection-unit")
     if iu:
         cp = iu["critical_path"] or {}

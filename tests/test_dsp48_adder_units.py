@@ -114,7 +114,7 @@ def test_cli_adder_option_and_manifest(tmp_path, capsys):
     assert main(["verilog", "plane-sphere-tester", "--adder", V4, "--target", V4,
                  "-o", str(out)]) == 0
     man = json.loads(out.with_suffix(".json").read_text())
-    assert man["latency"] == 19
+    assert man["latency"] == 20
     assert (man["parameters"]["adder"], man["parameters"]["target"]) == (V4, V4)
     assert out.read_text().count("DSP48 ") >= 9
     gen = tmp_path / "g.v"
@@ -230,7 +230,7 @@ def test_intersection_unit_cycles_equal_model_with_bram_fifo():
     unit = IntersectionUnit(dataclasses.replace(cfg), adder=V4, multiplier=V4)
     unit._MustUse__silence = True                     # built only to be inspected
     tm = unit.cycle_timing()
-    assert tm.rt_latency == 47 and tm.rt_fifo_depth == 48
+    assert tm.rt_latency == 49 and tm.rt_fifo_depth == 50
     scene, runs = scene_and_runs(cfg, 40, seed=6)
     kw = dict(build_key="bram-fifo-test", adder=V4, multiplier=V4)
     with UnitSession("icarus", cfg, scene, seed=2, ready_density=0.6, **kw) as s:

@@ -74,9 +74,9 @@ DEVICE_ROWS = DEFAULT_OPTIONS["intersection-unit"]["rows"]
 DEVICE_COLS = DEFAULT_OPTIONS["intersection-unit"]["cols"]
 DEVICE_TESTERS = DEVICE_ROWS + DEVICE_COLS
 #: Pipeline depths of the generic FP multiplier and adder at their defaults in rtz and chop
-#: (:mod:`raplas_hdl.rtl.step_delays`; rne has 4 and 6): the device unit's FP24 rtz.
-LAT_MUL, LAT_ADD = 3, 5
-#: A plane-sphere tester: 3 multiplier, 2 adder stages and the comparator (14).
+#: (:mod:`raplas_hdl.rtl.step_delays`; rne has 5 and 6): the device unit's FP24 rtz.
+LAT_MUL, LAT_ADD = 4, 5
+#: A plane-sphere tester: 4 multiplier, 2 x 5 adder stages and the comparator (15).
 TESTER_LATENCY = LAT_MUL + 2 * LAT_ADD + 1
 #: Clocks of the frame time: the paper's board, and its place-and-route Fmax.
 CLOCKS_MHZ = {"board": PAPER["board_mhz"],
@@ -85,8 +85,8 @@ CLOCKS_MHZ = {"board": PAPER["board_mhz"],
 
 
 def rt_latency(mode: str) -> int:
-    """The ray-triangle unit's latency: ``5 La + 2 Lm + 3`` (paper, 34), one adder more in
-    the conservative mode (39); :attr:`raplas_hdl.rtl.ray_triangle.RayTriangleUnit.latency`."""
+    """The ray-triangle unit's latency: ``5 La + 2 Lm + 3`` (paper, 36), one adder more in
+    the conservative mode (41); :attr:`raplas_hdl.rtl.ray_triangle.RayTriangleUnit.latency`."""
     return 5 * LAT_ADD + 2 * LAT_MUL + 3 + (LAT_ADD if mode == "conservative" else 0)
 
 

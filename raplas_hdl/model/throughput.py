@@ -11,7 +11,9 @@ job (one enabled ray of one sphere) at a time in a compiled loop:
    one sphere per cycle while the feeder holds a credit for its sphere FIFO, then the run's
    marker;
 2. **plane-sphere array**: one sphere every ``G = ceil((rows + cols) / testers)`` cycles,
-   ``array_latency`` cycles to the selector, at most ``array_capacity`` spheres inside;
+   ``array_latency`` cycles to its FIFO's head, at most ``array_capacity`` spheres inside;
+   a sphere leaves it into the sphere slice (a ``slice_depth`` FIFO) when the slice has
+   room, and reaches the selector ``select_offset`` cycles later;
 3. **pair selector**: per sphere, one cycle per ray whose row and column planes both keep
    it (one cycle for a culled sphere or a marker); each enabled ray is a job into the job
    FIFO of lane ``job mod lanes`` (depth 4; a full FIFO stalls the iterator);
@@ -65,7 +67,10 @@ class Timing:
     structure. Each is checked against the RTL's ``cycles`` counter in ``tests/test_lanes.py``
     (the credits with runs where they bind), except ``lane_slack``: a lane's capacity behind
     the fetch's credits binds only when the merger starves, which the one-per-cycle merger
-    never lets happen in a test run.
+    never lets happen in a test run; and ``slice_return`` and ``array_capacity``, which bind
+    only while the selector is the limit, and then the selector's pace, not the array's,
+    sets every run's cycles (in the test runs ``slice_return`` 2 gives other cycles, -1 to
+    1 the same).
     """
 
     array_latency: int
@@ -78,7 +83,10 @@ class Timing:
     #                             starts feed_return cycles after the one this many ahead
     #                             is taken by the array)
     feed_return: int = 2        # a credit's way back: the array's take -> a start
-    select_offset: int = 0      # array output -> selector take
+    select_offset: int = 2      # into the sphere slice -> the selector can take it
+    slice_depth: int = 3        # the FIFO between the array and the selector: an item
+    slice_return: int = 1       # leaves the array slice_return cycles after the item
+    #                             slice_depth ahead was taken by the selector, at best
     job_offset: int = 2         # job into the job FIFO -> fetch can take it
     fetch_offset: int = 6       # pair started -> at the ray-triangle unit's input
     fetch_return: int = 2       # the record fetch's credit back: unit input -> a start
@@ -206,7 +214,7 @@ def profile_runs(config: UnitConfig, scene, runs) -> Profile:
 def _simulate(run_items, run_load, writes, after, item_slots, item_jobs, job_slot, job_pairs,
               lanes, stream, overlap, passes, n_planes, c_array_lat, c_array_cap, c_select,
               c_job, c_fetch, c_back, c_out, c_feed, c_load, c_lane_cap, job_depth,
-              feed_regs, feed_ret, c_drain, depth, fetch_ret):
+              feed_regs, feed_ret, c_drain, depth, fetch_ret, c_slice, c_slice_ret):
     n_runs = run_load.size
     n_items = item_slots.size
     n_jobs = job_pairs.size
@@ -214,6 +222,8 @@ def _simulate(run_items, run_load, writes, after, item_slots, item_jobs, job_slo
     t_last = np.zeros(n_runs, np.int64)
     take = np.zeros(n_items, np.int64)          # selector takes the item
     acc = np.zeros(n_items, np.int64)           # the array takes the item
+    leave = np.zeros(n_items, np.int64)         # the item leaves the array (into the slice)
+    leave_prev = -(1 << 40)
     p = 0
     pop = np.zeros(n_jobs, np.int64)            # a lane's fetch takes the job
     lane_next = np.zeros(lanes, np.int64)       # earliest next pop of each lane
@@ -254,10 +264,16 @@ def _simulate(run_items, run_load, writes, after, item_slots, item_jobs, job_slo
                 p = max(p, acc[s - feed_regs] + feed_ret)
             a = max(p + c_feed - 1, a_prev + passes)
             if s - c_array_cap >= 0:
-                a = max(a, take[s - c_array_cap] + 1)
+                a = max(a, leave[s - c_array_cap] + 1)
             a_prev = a
             acc[s] = a
-            avail = a + c_array_lat + c_select
+            # out of the array's FIFO into the slice when the slice has room
+            lv = max(a + c_array_lat, leave_prev + 1)
+            if s - c_slice >= 0:
+                lv = max(lv, take[s - c_slice] + c_slice_ret)
+            leave[s] = lv
+            leave_prev = lv
+            avail = lv + c_select
             tk = max(avail, x_free)
             take[s] = tk
             # slot k is offered from tk + 1 on; the offer after a job waits until the job
@@ -349,7 +365,8 @@ def simulate(profile: Profile, config: UnitConfig, timing: Timing, *,
                      timing.job_offset, timing.fetch_offset, timing.rt_latency,
                      timing.out_offset, timing.feed_offset, timing.load_offset, lane_cap,
                      JOB_FIFO_DEPTH, timing.feed_registers, timing.feed_return,
-                     timing.drain_offset, timing.fifo_depth, timing.fetch_return)
+                     timing.drain_offset, timing.fifo_depth, timing.fetch_return,
+                     timing.slice_depth, timing.slice_return)
 
 
 def pairs_per_cycle(profile: Profile, config: UnitConfig, timing: Timing, *,

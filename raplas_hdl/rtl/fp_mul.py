@@ -25,15 +25,21 @@ The five combinational steps, in order:
     (:func:`.fp_common.pack`).
 
 Pipeline registers go behind the steps chosen by :func:`.pipeline.place_registers` from
-each step's delay as placed and routed on an ECP5 (:mod:`.step_delays`). The default stage
-count is the fewest whose slowest stage meets the table's target: 3 in ``rtz`` and ``chop``
-(the paper's multiplier depth), 4 in ``rne``. FP24 ``rtz``, 3 stages:
+each step's delay as placed and routed on an ECP5 (:mod:`.step_delays`, which adds to
+``normalise`` the product's route out of the multiplier block). The default stage count is
+the fewest whose slowest stage meets the table's target: 4 in ``rtz`` and ``chop``, 5 in
+``rne``. FP24 ``rtz``, 4 stages:
 
 1. ``unpack``: the operands classified, the exponent sum and the two significands on
-   registers (a DSP48's input registers);
-2. ``multiply``: the product on a register (the DSP48's product register);
-3. ``normalise`` + ``round`` + ``pack``: the result and its flags, on the output registers
-   (in ``rne`` ``pack`` gets a stage of its own).
+   registers (the multiplier block's input registers once the ECP5 flow has moved them in,
+   :mod:`raplas_hdl.pnr.dsp_registers`; a DSP48's input registers);
+2. ``multiply``: the product on a register (the block's output register);
+3. ``normalise`` + ``round``: the product leaves the block, is normalised (and in ``rne``,
+   where ``round`` gets a stage of its own, rounded);
+4. ``pack``: the result and its flags, on the output registers.
+
+(The paper's multiplier has 3 stages, ``normalise`` to ``pack`` in one: on the LFE5U-85F that
+stage, with the route out of the block, was the whole unit's critical path at 96 MHz.)
 
 ``stages`` can be anything from 1 (all five steps in one clock) to 5 (one step each).
 
@@ -51,8 +57,8 @@ in use, and re-plans the pipeline around it:
 4. ``normalise``, ``round``, ``pack`` with the registers that the generic plan of the same
    ``stages`` puts behind the multiply (at least the output register).
 
-So ``latency = multiplier_latency(M+1) + (registers behind the multiply)``: 4 at FP24 with
-the default ``stages=3`` (the generic unit's 3, plus ``PREG``), 5 at FP32;
+So ``latency = multiplier_latency(M+1) + (registers behind the multiply)``: 5 at FP24 with
+the default ``stages=4`` in ``rtz`` (the generic unit's 4, plus ``PREG``), 6 at FP32;
 :func:`fp_mul_latency` gives it without building the unit. Every DSP48 register has its
 clock enable on ``en``, so a stall holds the whole unit as in the generic one.
 """
@@ -97,7 +103,7 @@ def mul_weights(fmt) -> list[int]:
 
 
 def default_mul_stages(fmt) -> int:
-    """The default stage count of ``FPMul(fmt)``: 3 in ``rtz`` and ``chop``, 4 in ``rne``
+    """The default stage count of ``FPMul(fmt)``: 4 in ``rtz`` and ``chop``, 5 in ``rne``
     (:data:`.step_delays.DEFAULT_STAGES`)."""
     return DEFAULT_STAGES["fp_mul"][check_format(fmt).rounding]
 
@@ -168,7 +174,7 @@ class FPMul(wiring.Component):
     fmt : FPFormat
         Format and rounding (``rtz``, ``rne`` or ``chop``, which equals ``rtz`` here).
     stages : int
-        Pipeline depth, 1 to 5 (default: 3, 4 in rne; :func:`default_mul_stages`). With
+        Pipeline depth, 1 to 5 (default: 4, 5 in rne; :func:`default_mul_stages`). With
         ``multiplier="virtex4"`` it places the registers behind the multiply as in the
         generic unit (module docstring).
     multiplier : {"generic", "virtex4"}
@@ -191,7 +197,7 @@ class FPMul(wiring.Component):
         ``o`` and ``flags`` belong to an operation.
     latency : int
         ``stages`` (generic); ``multiplier_latency(M+1)`` plus the registers behind the
-        multiply (virtex4: 4 at FP24 with ``stages=3``).
+        multiply (virtex4: 5 at FP24 rtz with the default ``stages=4``).
 
     Raises
     ------

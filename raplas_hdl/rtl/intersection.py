@@ -15,7 +15,10 @@ The unit is its stages, components of :mod:`raplas_hdl.rtl.unit` joined by strea
    memories' write ports;
 2. :class:`~raplas_hdl.rtl.unit.feeder.SphereFeeder`: the command / plane loader and the
    sphere feeder, ``cmd`` -> spheres (then the run's marker);
-3. :class:`~raplas_hdl.rtl.plane_sphere.PlaneSphereArray`: spheres -> row and column masks;
+3. :class:`~raplas_hdl.rtl.plane_sphere.PlaneSphereArray`: spheres -> row and column masks
+   -> a 3-deep sphere slice (a buffered FIFO: the array's FIFO reads on its registered
+   ``w_rdy``, not through the selector's enable lookup into the array's credit counter, a
+   path of 10.5 ns placed and routed on an ECP5 at speed 6);
 4. :class:`~raplas_hdl.rtl.unit.selector.PairSelector`: the ray iterator and the enable
    lookup, masks -> jobs (one enabled ray of one sphere) -> a 4-deep job FIFO;
 5. :class:`~raplas_hdl.rtl.unit.fetch.RecordFetch`: the triangle expander and the record
@@ -57,6 +60,8 @@ over the issued pairs (the ray-triangle unit counts them per pair, up to 34, bes
 
 from __future__ import annotations
 
+import dataclasses
+
 from amaranth.hdl import Cat, Module, Mux, Signal
 from amaranth.lib import stream, wiring
 from amaranth.lib.fifo import SyncFIFOBuffered
@@ -86,6 +91,10 @@ JOB_FIFO_DEPTH = 4
 #: a registered ``w_rdy`` at one result per cycle (a 2-deep buffered FIFO takes one every
 #: other cycle).
 RESULT_FIFO_DEPTH = 3
+#: The FIFO between the plane-sphere array and the selector: the array's FIFO reads on a
+#: registered ``w_rdy``, so the selector's take (through its enable lookup) no longer reaches
+#: the array's credit counter in one clock (that path held the whole unit at 95.5 MHz).
+SPHERE_SLICE_DEPTH = 3
 #: Width of the run numbers the reducer and the selector compare (runs between them are
 #: fewer than the reducer's run FIFO plus its stages).
 SEQ_BITS = 4
@@ -222,8 +231,9 @@ class IntersectionUnit(wiring.Component):
 
         psa, rtu = self._subunits()
         psa._MustUse__silence = rtu._MustUse__silence = True   # built only to be inspected
-        return Timing.of(self._cfg, psa.latency, psa.fifo_depth, rtu.latency,
-                         rtu.fifo_depth)
+        return dataclasses.replace(
+            Timing.of(self._cfg, psa.latency, psa.fifo_depth, rtu.latency, rtu.fifo_depth),
+            slice_depth=SPHERE_SLICE_DEPTH)
 
     # ------------------------------------------------------------------------------------
     def _subunits(self):
@@ -284,7 +294,10 @@ class IntersectionUnit(wiring.Component):
         else:
             wiring.connect(m, wiring.flipped(self.cmd), feeder.cmd)
         wiring.connect(m, feeder.o, psa.i)
-        wiring.connect(m, psa.o, selector.i)
+        m.submodules.sphere_slice = sphere_slice = SyncFIFOBuffered(
+            width=psa.o.payload.shape().size, depth=SPHERE_SLICE_DEPTH)
+        wiring.connect(m, psa.o, sphere_slice.w_stream)
+        wiring.connect(m, sphere_slice.r_stream, selector.i)
         if cfg.lanes == 1:
             fetches, rtus, pair_fifos = self._lane(m, "", rtu, selector.o)
             results = rtu.o
@@ -320,7 +333,7 @@ class IntersectionUnit(wiring.Component):
         m.d.comb += [writes.wr_en.eq(self.wr_en), writes.wr_addr.eq(self.wr_addr),
                      writes.wr_data.eq(self.wr_data),
                      feeder.plane_written.eq(writes.plane_written),
-                     feeder.retired.eq(psa.o.valid & psa.o.ready),
+                     feeder.retired.eq(selector.i.valid & selector.i.ready),
                      psa.pw_en.eq(feeder.pw_en), psa.pw_addr.eq(feeder.pw_addr),
                      psa.pw_data.eq(feeder.pw_data),
                      self.fifo_level.eq(level),
@@ -342,7 +355,8 @@ class IntersectionUnit(wiring.Component):
         # counters and run book-keeping: runs in flight, at most one marker per pipeline
         # slot between cmd and o
         lane_slots = cfg.fifo_depth + rtu.latency + rtu.fifo_depth + JOB_FIFO_DEPTH
-        outstanding = Signal(range(psa.fifo_depth + psa.latency + cfg.lanes * lane_slots
+        outstanding = Signal(range(psa.fifo_depth + SPHERE_SLICE_DEPTH + psa.latency
+                                   + cfg.lanes * lane_slots
                                    + RESULT_FIFO_DEPTH + OUT_FIFO_DEPTH + RUN_FIFO_DEPTH
                                    + 16))
         started = self.cmd.valid & self.cmd.ready

@@ -2,9 +2,10 @@
 
 :class:`PlaneSphereTester` computes ``d = n . C + p`` for one sphere per clock and flags
 whether the sphere may touch the plane: ``flag = NOT(|d| > r')`` (a NaN keeps the
-sphere). Its stages, with the default FP units (multiplier 3, adder 4 stages), 12 in all
-as in the paper (13 with ``multiplier="virtex4"``, whose multipliers take 4 cycles at FP24:
-the stage numbers below then shift by one after the products):
+sphere). Its stages, numbered for the paper's FP units (multiplier 3, adder 4 stages: 12 in
+all); this project's FP24 ``rtz`` defaults are cut by placed-and-routed delays (multiplier 4,
+adder 5 stages: 15 in all, one more with ``multiplier="virtex4"``), and the stage numbers
+below shift accordingly:
 
 1. stages 1-3, three :class:`~.fp_mul.FPMul`: ``mx = n.x*C.x``, ``my = n.y*C.y``,
    ``mz = n.z*C.z``; the plane comes from the tester's plane registers (slot ``sel``);
@@ -20,9 +21,10 @@ testers. A bundle of ``P = rows + cols`` planes (IDs: rows first, then columns) 
 ``G = ceil(P / testers)`` passes: in pass ``g`` tester ``k`` tests plane ``g*testers + k``
 (each tester holds ``G`` planes and ``sel = g`` picks one). The array's stages:
 
-1. issue register: the accepted sphere, held for ``G`` cycles (pass ``0 .. G-1``); the
-   input is ready when the last pass is being issued (or nothing is) *and* there is room
-   in the output FIFO for every sphere in flight;
+1. issue register: the accepted sphere, held for ``G`` cycles (pass ``0 .. G-1``; it loads
+   whenever it may take one, and is used only once accepted); the input is ready when the
+   last pass is being issued (or nothing is) *and* there is room in the output FIFO for
+   every sphere in flight;
 2. ``latency`` of the testers (12), with the sphere ID and pass number in a shift register;
 3. decoder: passes ``0 .. G-2`` are collected in a mask register; the last pass writes
    (ID, row mask, column mask) into the output FIFO;
@@ -130,7 +132,7 @@ class PlaneSphereTester(wiring.Component):
         Plane slots in the tester's registers (1 for the paper's tester; the array uses
         one per pass when it time-shares).
     mul_stages, add_stages : int
-        Depths of the FP units (default: the format's, 3 and 5 in rtz: latency 14).
+        Depths of the FP units (default: the format's, 4 and 5 in rtz: latency 15).
     multiplier : {"generic", "virtex4"}
         Significand multiplier of the three :class:`~.fp_mul.FPMul` (``virtex4``: DSP48
         primitives, one cycle more at FP24).
@@ -422,8 +424,13 @@ class PlaneSphereArray(wiring.Component):
         can_take = ~busy | last_issue
         m.d.comb += self.i.ready.eq(can_take & (occupied < self._fifo_depth))
         accept = self.i.valid & self.i.ready
+        # The issue register loads whenever it may take a sphere, accepted or not: when
+        # nothing is accepted ``busy`` falls and ``cur`` is not used, and its ~100 enables
+        # stay off the credit counter's path (``occupied`` -> ``ready`` -> ``occupied``).
+        with m.If(can_take):
+            m.d.sync += cur.eq(self.i.payload)
         with m.If(accept):
-            m.d.sync += [cur.eq(self.i.payload), busy.eq(1), pass_.eq(0)]
+            m.d.sync += [busy.eq(1), pass_.eq(0)]
         with m.Elif(busy):
             with m.If(last_issue):
                 m.d.sync += busy.eq(0)

@@ -24,9 +24,9 @@ pair is accepted, is:
    registered into the output register at ``D+2``.
 10. the output register is written into the output FIFO; ``o`` shows the FIFO's head.
 
-``latency`` (``D + 3``: 34 for the FP24 ``rtz`` defaults (``La`` 5, ``Lm`` 3) in paper
-mode, 39 in conservative mode; the paper's unit has 29 stages; with ``adder="virtex4"``
-``La`` is 7, with ``multiplier="virtex4"`` ``Lm`` is 4 at FP24; one more with the output
+``latency`` (``D + 3``: 36 for the FP24 ``rtz`` defaults (``La`` 5, ``Lm`` 4) in paper
+mode, 41 in conservative mode; the paper's unit has 29 stages; with ``adder="virtex4"``
+``La`` is 7, with ``multiplier="virtex4"`` ``Lm`` is 5 at FP24; one more with the output
 FIFO in block RAM, below) is the number of clock edges from the one that accepts a pair on
 ``i`` to the one that can take its result from ``o``, with an empty FIFO.
 

@@ -25,7 +25,8 @@ from collections.abc import Sequence
 
 from .pipeline import place_registers
 
-__all__ = ["STEP_NS", "REGISTER_NS", "TARGET_NS", "MEASURED_ON", "step_weights",
+__all__ = ["STEP_NS", "REGISTER_NS", "TARGET_NS", "PRODUCT_ROUTE_NS", "AFTER_BLOCK",
+           "MEASURED_ON", "step_weights",
            "stage_delays", "default_stages", "DEFAULT_STAGES"]
 
 #: Where and how :data:`STEP_NS` was measured.
@@ -58,11 +59,31 @@ STEP_NS = {
 # -- generated: end --
 
 
+#: The product's way out of a multiplier block, which a step measured alone (logic between
+#: two slice register banks) does not see: once the ECP5 flow has moved the registers around
+#: a multiply into its MULT18X18D (:mod:`raplas_hdl.pnr.dsp_registers`), the step after the
+#: multiply starts at the block's output register (clock-to-out 0.735 ns against a slice
+#: register's 0.525) and crosses from the block's column into the fabric. The routing of that
+#: crossing on the placed designs where it was the critical path (speed 6, FP24, 3-stage
+#: multiplier): 1.95 ns (plane-sphere array rne, seed 2), 2.58 ns (array rtz, seed 1), 3.12 ns
+#: (whole intersection unit, seed 1); this is their median plus the clock-to-out difference,
+#: added to the step named in :data:`AFTER_BLOCK`.
+PRODUCT_ROUTE_NS = 2.79
+
+#: unit -> the step that reads a multiplier block's output.
+AFTER_BLOCK = {"fp_mul": "normalise"}
+
+
 def _table(unit: str, rounding: str) -> dict:
+    """The measured delays of ``unit``'s steps, with :data:`PRODUCT_ROUTE_NS` on the step that
+    reads a multiplier block."""
     try:
-        return STEP_NS[unit][rounding]
+        table = dict(STEP_NS[unit][rounding])
     except KeyError:
         raise ValueError(f"no measured step delays for {unit} in {rounding!r}") from None
+    if unit in AFTER_BLOCK:
+        table[AFTER_BLOCK[unit]] += PRODUCT_ROUTE_NS
+    return table
 
 
 def step_weights(unit: str, rounding: str, names: Sequence[str]) -> list[int]:
