@@ -61,7 +61,8 @@ class SphereFeeder(wiring.Component):
     plane_written : In(2)
         Bit b: the host writes a plane of bank b this cycle (the bank goes stale).
     retired : In(1)
-        A sphere left the array (its ``o`` handshake); taken a cycle late.
+        The selector took a sphere (out of the sphere slice behind the array); taken a cycle
+        late.
     spheres : Out(1)
         A sphere of a run (not a marker) enters the sphere FIFO this cycle (on its way to
         the array: counted once per sphere, as the array tests it).
@@ -111,7 +112,7 @@ class SphereFeeder(wiring.Component):
         # spheres between the array's input and output handshakes: the planes may change
         # only when none is left
         in_array = Signal(range(self._capacity + SPHERE_FIFO_DEPTH))
-        # (``retired`` comes from the selector's take through the array's FIFO: registered
+        # (``retired`` comes from the selector's take out of the sphere slice: registered
         # here, so that the chain selector -> array -> this counter is cut; the count then
         # lags by a cycle, which only delays a drain by one)
         retired = Signal()
