@@ -98,10 +98,11 @@ class Timing:
 
     @classmethod
     def of(cls, config: UnitConfig, array_latency: int, array_capacity: int,
-           rt_latency: int, rt_fifo_depth: int) -> Timing:
-        """The timing of ``config`` with the array's and the ray-triangle unit's figures."""
+           rt_latency: int, rt_fifo_depth: int, slice_depth: int = 3) -> Timing:
+        """The timing of ``config`` with the array's and the ray-triangle unit's figures and
+        the depth of the sphere slice between the array and the selector."""
         return cls(array_latency, array_capacity, rt_latency, rt_fifo_depth,
-                   fifo_depth=config.fifo_depth)
+                   fifo_depth=config.fifo_depth, slice_depth=slice_depth)
 
 
 @dataclass

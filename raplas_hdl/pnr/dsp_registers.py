@@ -108,16 +108,11 @@ def _pack_module(mod: dict) -> dict:
             con[port] = [q]
             loads.pop(old, None)
             driver[q] = (name, port)
-            removed.add(ff)
+            _remove(cells[ff], ff, loads, removed)
         for _, ff in ins:
             q = cells[ff]["connections"]["Q"][0]
             if ff not in removed and not loads[q] and q not in io:
-                removed.add(ff)
-                di = cells[ff]["connections"]["DI"][0]
-                for net, key in ((di, "DI"), (cells[ff]["connections"].get("CE", ["0"])[0], "CE"),
-                                 (clk, "CLK")):
-                    if _is_bit(net) and (ff, key, 0) in loads[net]:
-                        loads[net].remove((ff, key, 0))
+                _remove(cells[ff], ff, loads, removed)
         for reg in ("INPUTA", "INPUTB", "OUTPUT"):
             par[f"REG_{reg}_CLK"] = "CLK0"
             par[f"REG_{reg}_CE"] = "CE0"
@@ -134,6 +129,15 @@ def _pack_module(mod: dict) -> dict:
         del cells[ff]
     stats["ff_removed"] = len(removed)
     return stats
+
+
+def _remove(cell, name, loads, removed):
+    """Mark the flip-flop ``name`` removed and take it off the loads of its input nets."""
+    removed.add(name)
+    for port, bits in cell["connections"].items():
+        if cell["port_directions"].get(port) == "input" and _is_bit(bits[0]):
+            if (name, port, 0) in loads[bits[0]]:
+                loads[bits[0]].remove((name, port, 0))
 
 
 def _plan(c, cells, driver, loads, io, removed):

@@ -60,8 +60,6 @@ over the issued pairs (the ray-triangle unit counts them per pair, up to 34, bes
 
 from __future__ import annotations
 
-import dataclasses
-
 from amaranth.hdl import Cat, Module, Mux, Signal
 from amaranth.lib import stream, wiring
 from amaranth.lib.fifo import SyncFIFOBuffered
@@ -231,9 +229,8 @@ class IntersectionUnit(wiring.Component):
 
         psa, rtu = self._subunits()
         psa._MustUse__silence = rtu._MustUse__silence = True   # built only to be inspected
-        return dataclasses.replace(
-            Timing.of(self._cfg, psa.latency, psa.fifo_depth, rtu.latency, rtu.fifo_depth),
-            slice_depth=SPHERE_SLICE_DEPTH)
+        return Timing.of(self._cfg, psa.latency, psa.fifo_depth, rtu.latency, rtu.fifo_depth,
+                         SPHERE_SLICE_DEPTH)
 
     # ------------------------------------------------------------------------------------
     def _subunits(self):
