@@ -490,7 +490,11 @@ def test_help_is_plain_complete_and_true(cmd, capsys):
     assert "(default None)" not in text and "rows+cols) (default" not in text
     if cmd == "verilog":
         flat = " ".join(text.split())
-        assert "fp-add 1 to 9 (default 5, rne 6), fp-mul 1 to 5 (default 3, rne 4)" in flat
+        from raplas_hdl.rtl.step_delays import DEFAULT_STAGES
+        add, mul = DEFAULT_STAGES["fp_add"], DEFAULT_STAGES["fp_mul"]
+        assert add["rtz"] == add["chop"] and mul["rtz"] == mul["chop"]
+        assert (f"fp-add 1 to 9 (default {add['rtz']}, rne {add['rne']}), "
+                f"fp-mul 1 to 5 (default {mul['rtz']}, rne {mul['rne']})") in flat
         assert "--mode {paper,conservative,certified}" in text and "--target {generic,virtex4}" in text
     if cmd == "cosim":
         flat = " ".join(text.split())

@@ -41,7 +41,10 @@ class ResultFraming(wiring.Component):
     o : Out(stream.Signature(result_layout))
         Beats of the unit's result stream.
     events : Out(EVENTS_LAYOUT)
-        Of the result taken this cycle (zero for a marker or when none is taken).
+        Of the result taken the cycle before (zero for a marker or when none was taken): a
+        register, since the take follows the output FIFO's level, and that level through
+        the take into the counters' adders was the whole unit's critical path at speed 8
+        (7.3 ns placed and routed on an ECP5).
     """
 
     def __init__(self, config: UnitConfig):
@@ -68,6 +71,8 @@ class ResultFraming(wiring.Component):
         if cfg.mode == "certified":
             m.d.comb += fresh.outcome.eq(r.outcome)
         marker = r.ray_id[ray_bits]
+        events = Signal(EVENTS_LAYOUT)
+        m.d.sync += self.events.eq(events)
         m.d.comb += self.i.ready.eq(self.o.ready)
         with m.If(self.i.valid):
             with m.If(marker):
@@ -83,10 +88,9 @@ class ResultFraming(wiring.Component):
                 m.d.sync += held_v.eq(0)
             with m.Else():
                 m.d.sync += [held.eq(fresh), held_v.eq(1)]
-                m.d.comb += [self.events.hits.eq(r.hit),
-                             self.events.overflow.eq(r.n_overflow),
-                             self.events.underflow.eq(r.n_underflow),
-                             self.events.invalid.eq(r.n_invalid)]
+                m.d.comb += [events.hits.eq(r.hit), events.overflow.eq(r.n_overflow),
+                             events.underflow.eq(r.n_underflow),
+                             events.invalid.eq(r.n_invalid)]
         return m
 
 
