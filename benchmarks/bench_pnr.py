@@ -24,6 +24,11 @@ Usage::
     python benchmarks/bench_pnr.py --only intersection-unit --default-options \\
         --roundings rtz --speeds 6 --copies 2
     python benchmarks/bench_pnr.py --steps
+    python benchmarks/bench_pnr.py --prune
+
+``--prune`` rebuilds each recorded configuration's Verilog and drops the records whose
+netlist (the synthesis work key: Verilog, script, Yosys version, flow version) is no longer
+what the RTL emits, so that the table never mixes figures of an older pipeline with today's.
 
 A whole intersection unit takes 3-4 minutes of synthesis and 15-20 minutes of place and
 route per seed on this 2-core machine: run it when the machine is quiet.
@@ -88,8 +93,36 @@ def _machine() -> dict:
     return {"cpus": os.cpu_count(), "load_before": os.getloadavg()[0]}
 
 
+def stale_records(runs: list) -> list:
+    """The records whose work directory is not the netlist today's RTL gives them."""
+    from raplas_hdl.fp.format import parse_format
+    from raplas_hdl.pnr.ecp5 import netlist_key
+    from raplas_hdl.pnr.unit import unit_verilog
+
+    stale = []
+    for rec in runs:
+        fmt = parse_format(rec["format"])
+        text, module, _ = unit_verilog(rec["unit"], fmt, rec["options"], rec.get("copies", 1))
+        if Path(rec["work"]).name != netlist_key(text, module):
+            stale.append(rec)
+    return stale
+
+
+def run_prune() -> int:
+    runs = _load(RESULTS)
+    stale = stale_records(runs)
+    for rec in stale:
+        print(f"stale: {rec['summary']}", flush=True)
+    keep = [r for r in runs if r not in stale]
+    RESULTS.write_text(json.dumps({"machine": _machine(), "runs": keep}, indent=1,
+                                  sort_keys=True) + "\n")
+    REPORT.write_text(render(keep))
+    print(f"{len(stale)} stale of {len(runs)} records dropped", flush=True)
+    return 0
+
+
 def run_matrix(args) -> int:
-    rows = {_key(r): r for r in _load(RESULTS)}
+    rows = {}          # this run's records, merged into the file's after each one
     for unit, options, roundings, speeds in MATRIX:
         if args.only and unit not in args.only:
             continue
@@ -403,9 +436,13 @@ def main(argv=None) -> int:
                         "(default 1)")
     p.add_argument("--steps", action="store_true",
                    help="measure the FP units' step delays and rewrite rtl/step_delays.py")
+    p.add_argument("--prune", action="store_true",
+                   help="drop the records whose netlist is not what today's RTL emits")
     args = p.parse_args(argv)
     if args.copies < 1:
         p.error("--copies must be at least 1")
+    if args.prune:
+        return run_prune()
     return run_steps(args) if args.steps else run_matrix(args)
 
 

@@ -122,15 +122,15 @@ def test_bench_quick_writes_report_and_plots(quick):
 
 def _cycles(passes, mode):
     """The device model of docs/bench.md, written out again: per run P plane loads, G
-    clocks per sphere, the array's latency G + 16 (the tester's 15 and the decoder), one
-    clock per pair, the ray-triangle latency (36 paper, 41 conservative)."""
-    l_rt = 36 if mode == "paper" else 41
+    clocks per sphere, the array's latency G + 18 (the tester's 17 and the decoder), one
+    clock per pair, the ray-triangle latency (41 paper, 47 conservative)."""
+    l_rt = 41 if mode == "paper" else 47
     total = 0
     for q in passes:
         planes = q["rows"] + q["cols"]
         g = -(-planes // q["testers"])
         assert g == q["passes"], f"{q}: passes {q['passes']}, expected {g}"
-        total += q["runs"] * (planes + g + 16 + l_rt) + q["spheres"] * g + q["pairs"]
+        total += q["runs"] * (planes + g + 18 + l_rt) + q["spheres"] * g + q["pairs"]
     return total
 
 

@@ -120,7 +120,7 @@ def test_tester_virtex4_dsp48_model(tmp_path):
     rc, out, err = cosim("plane-sphere-tester", "--sim", "icarus", "--format", "FP24",
                          "--target", "virtex4", "--random", 1500)
     _ok(rc, out, err, 1500)
-    assert "target=virtex4 latency 16" in out
+    assert "target=virtex4 latency 18" in out
 
 
 # -- errors: one line, exit 2, before any simulation -----------------------------------------

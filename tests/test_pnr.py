@@ -158,3 +158,20 @@ def test_step_harness_sees_the_unit_s_own_values():
     text = verilog.convert(StepHarness(unit._steps[1], shapes[1]), name="step_order",
                            emit_src=False)
     assert "module step_order" in text and "in_reg" in text and "out_reg" in text
+
+
+def test_bench_prune_finds_records_of_an_older_netlist(base):
+    """``bench_pnr.py --prune``: a record is stale when its work directory is not the netlist
+    key of what the RTL emits today for its configuration."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_pnr.py"
+    spec = importlib.util.spec_from_file_location("bench_pnr_under_test", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    rec = pnr_unit("fp-mul", FP24, {}, seeds=(1,), base=base)
+    assert bench.stale_records([rec]) == []
+    older = {**rec, "options": {"stages": 2}}          # the netlist of another pipeline
+    moved = {**rec, "work": str(Path(rec["work"]).with_name("0123456789abcdef"))}
+    assert bench.stale_records([rec, older, moved]) == [older, moved]

@@ -36,9 +36,9 @@ leaf spheres, ``N_u`` pairs issued)::
 
     cycles_u = P                      load the bundle's planes into the testers (1/clock)
              + S_u * G                spheres through the array, G = ceil(P / testers)
-             + (G + 12 + 1)           the array's latency (passes, tester, decoder)
+             + (G + 17 + 1)           the array's latency (passes, tester, decoder)
              + N_u                    pairs into the ray-triangle unit, one per clock
-             + L_rt                   its pipeline latency: 28 (paper), 32 (conservative)
+             + L_rt                   its pipeline latency: 41 (paper), 47 (conservative)
 
 summed over the runs of the frame. The stages are taken one after the other (no overlap
 between the array and the pair issue, nor between runs), so this is an upper bound on the
@@ -73,10 +73,11 @@ TESTER_MULS, TESTER_ADDS = 3, 3
 DEVICE_ROWS = DEFAULT_OPTIONS["intersection-unit"]["rows"]
 DEVICE_COLS = DEFAULT_OPTIONS["intersection-unit"]["cols"]
 DEVICE_TESTERS = DEVICE_ROWS + DEVICE_COLS
-#: Pipeline depths of the generic FP multiplier and adder at their defaults in rtz and chop
-#: (:mod:`raplas_hdl.rtl.step_delays`; rne has 5 and 6): the device unit's FP24 rtz.
-LAT_MUL, LAT_ADD = 4, 5
-#: A plane-sphere tester: 4 multiplier, 2 x 5 adder stages and the comparator (15).
+#: Pipeline depths of the generic FP multiplier and adder at their defaults in rtz
+#: (:data:`raplas_hdl.rtl.step_delays.DEFAULT_STAGES`, which a test compares): the device
+#: unit's FP24 rtz.
+LAT_MUL, LAT_ADD = 4, 6
+#: A plane-sphere tester: 4 multiplier, 2 x 6 adder stages and the comparator (17).
 TESTER_LATENCY = LAT_MUL + 2 * LAT_ADD + 1
 #: Clocks of the frame time: the paper's board, and its place-and-route Fmax.
 CLOCKS_MHZ = {"board": PAPER["board_mhz"],
@@ -85,8 +86,8 @@ CLOCKS_MHZ = {"board": PAPER["board_mhz"],
 
 
 def rt_latency(mode: str) -> int:
-    """The ray-triangle unit's latency: ``5 La + 2 Lm + 3`` (paper, 36), one adder more in
-    the conservative mode (41); :attr:`raplas_hdl.rtl.ray_triangle.RayTriangleUnit.latency`."""
+    """The ray-triangle unit's latency: ``5 La + 2 Lm + 3`` (paper, 41), one adder more in
+    the conservative mode (47); :attr:`raplas_hdl.rtl.ray_triangle.RayTriangleUnit.latency`."""
     return 5 * LAT_ADD + 2 * LAT_MUL + 3 + (LAT_ADD if mode == "conservative" else 0)
 
 

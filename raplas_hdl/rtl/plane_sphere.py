@@ -4,7 +4,7 @@
 whether the sphere may touch the plane: ``flag = NOT(|d| > r')`` (a NaN keeps the
 sphere). Its stages, numbered for the paper's FP units (multiplier 3, adder 4 stages: 12 in
 all); this project's FP24 ``rtz`` defaults are cut by placed-and-routed delays (multiplier 4,
-adder 5 stages: 15 in all, one more with ``multiplier="virtex4"``), and the stage numbers
+adder 6 stages: 17 in all, one more with ``multiplier="virtex4"``), and the stage numbers
 below shift accordingly:
 
 1. stages 1-3, three :class:`~.fp_mul.FPMul`: ``mx = n.x*C.x``, ``my = n.y*C.y``,
@@ -132,7 +132,7 @@ class PlaneSphereTester(wiring.Component):
         Plane slots in the tester's registers (1 for the paper's tester; the array uses
         one per pass when it time-shares).
     mul_stages, add_stages : int
-        Depths of the FP units (default: the format's, 4 and 5 in rtz: latency 15).
+        Depths of the FP units (default: the format's, 4 and 6 in rtz: latency 17).
     multiplier : {"generic", "virtex4"}
         Significand multiplier of the three :class:`~.fp_mul.FPMul` (``virtex4``: DSP48
         primitives, one cycle more at FP24).
