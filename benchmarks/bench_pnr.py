@@ -265,7 +265,23 @@ def render(runs: list) -> str:
             "classify -> the order compare's carry chain -> the swap muxes: 9.6-10.0 ns "
             "against 6.45 predicted): `step_delays` adds the operands' measured first hop "
             "to the adder's first step, which moves `order` behind the first register "
-            "(same latency), and the unit reaches 101.8 / 101.5 / 100.4 MHz."]
+            "(same latency), and the unit reaches 101.8 / 101.5 / 100.4 MHz.", "",
+            "At speed 8 (target 140 MHz, 7.14 ns) the unit then placed at 136.3 / 129.7 / "
+            "136.3 MHz over seeds 1-3, held by three paths of about 7.3-7.7 ns: the output "
+            "FIFO's level through the framing's take into the event counters' adders "
+            "(seeds 1 and 2), the ray-triangle unit's comparisons (seed 3: an adder's "
+            "output register -> the zero test of the ordering key -> a sign mux -> the "
+            "magnitude compare's carry chain, two carry chains in series), and the "
+            "adders' `lzc` + `normalise` stage (9.8 ns in situ at speed 6, predicted 8.38). "
+            "The framing's event counts became a register (the counters lag the take by "
+            "one cycle, which no result or cycle count sees); the comparisons run both raw "
+            "magnitude orders side by side from the registers and choose by the zero flags "
+            "and signs after the chains (the same function for every operand pair, checked "
+            "with z3); and `step_delays.TARGET_NS` is now derived from the speed-8 target "
+            "(1000 / 140 MHz x 1.33, speed 8 over 6, / 1.17, in situ over predicted: "
+            "8.12 ns), which gives the adder 6 stages in rtz (`lzc` and `normalise` apart), "
+            "7 in rne and 5 in chop, and the ray-triangle unit a latency of 41 (47 "
+            "conservative)."]
     iu = find("intersection-unit")
     if iu:
         cp = iu["critical_path"] or {}
@@ -275,6 +291,15 @@ def render(runs: list) -> str:
                     f"`{cp.get('end', '')}` ({cp.get('total_ns', 0):.1f} ns, "
                     f"{cp.get('routing_ns', 0):.1f} of it routing, {cp.get('cells', 0)} "
                     f"cell{'' if cp.get('cells', 0) == 1 else 's'})."]
+    iu8 = find("intersection-unit", speed=8)
+    if iu8:
+        cp = iu8["critical_path"] or {}
+        met = iu8["fmax"]["clk"]["median"] >= 140.0
+        out += ["", f"At speed 8 it {'meets' if met else 'does not meet'} 140 MHz "
+                    f"({mhz(iu8, ' MHz')}); the median seed's critical path runs "
+                    f"`{cp.get('start', '')}` -> `{cp.get('end', '')}` "
+                    f"({cp.get('total_ns', 0):.1f} ns, {cp.get('routing_ns', 0):.1f} of it "
+                    f"routing)."]
     out += ["", "## Every run", "",
             "| unit | format | options | speed | Fmax median (min-max) | latency | LUT4 | "
             "carry | FF | MULT18X18D | EBR | critical path | P&R s/seed |",

@@ -1,7 +1,9 @@
 """Proof table of issue 23: every FP unit proved against the contract, with times.
 
 Runs :func:`raplas_hdl.formal.prove` on ``fp-add`` and ``fp-mul`` at FP16, FP20, FP24 and
-FP32 in rtz, rne and chop at the registry's default stage count, then every stage count
+FP32 in rtz, rne and chop at the registry's default stage count, the comparisons and
+negation (``fp-le``, ``fp-lt``, ``fp-neg``: one stage, no rounding) at each format, then
+every stage count
 of both units at FP24 rtz, the multiplier's chain at every format (rtz), and the
 multiplier's direct proof against the FloatingPoint contract at FP24 rtz, 1 stage (the
 one the cut replaces; expected: unknown), and the stall/reset properties (``control``, and
@@ -36,6 +38,7 @@ if str(ROOT) not in sys.path:
 
 from raplas_hdl.fp import PRESETS, ROUNDINGS, parse_format  # noqa: E402
 from raplas_hdl.formal import default_stages, prove  # noqa: E402
+from raplas_hdl.formal.prove import ONE_STAGE, UNITS  # noqa: E402
 from raplas_hdl.rtl.fp_add import ADD_STEPS  # noqa: E402
 from raplas_hdl.rtl.fp_mul import MUL_STEPS  # noqa: E402
 
@@ -57,6 +60,7 @@ def plan(formats):
             for rnd in ROUNDINGS:
                 jobs.append((unit, name, rnd, _default(unit, name, rnd), None))
         jobs.append(("fp-mul", name, "rtz", _default("fp-mul", name, "rtz"), "chain"))
+        jobs += [(unit, name, "rtz", 1, None) for unit in ONE_STAGE]
         for unit in ("fp-mul", "fp-add"):
             jobs.append((unit, name, "rtz", _default(unit, name, "rtz"), "control"))
             jobs.append((unit, name, "rtz", _default(unit, name, "rtz"), "sby"))
@@ -115,7 +119,7 @@ def main(argv=None) -> int:
     rows = {key(r): r for r in load()}
     for unit, name, rnd, stages, method in plan(args.formats):
         fmt = PRESETS[name].with_rounding(rnd)
-        k = (unit, name, rnd, stages, method or ("direct" if unit == "fp-add" else "cut"))
+        k = (unit, name, rnd, stages, method or UNITS[unit][1])
         if args.only_missing and k in rows:
             continue
         before = os.getloadavg()[0]

@@ -336,3 +336,63 @@ def test_model_and_host_never_import_the_prover():
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=120, env=env, cwd=root)
     assert res.returncode == 0, res.stderr[-2000:]
+
+
+# -- the comparisons and neg (the ray-triangle unit's decision) ----------------------------
+@pytest.mark.parametrize("fmt", [FP16, FP24, FPFormat(8, 23)], ids=["FP16", "FP24", "FP32"])
+@pytest.mark.parametrize("unit", ["fp-le", "fp-lt", "fp-neg"])
+def test_comparisons_and_neg_proved(unit, fmt, work):
+    res = check_proof(unit, fmt, work)
+    assert res.result == "proved", (res.result, res.reason, res.counterexample)
+    assert res.stages == 1 == default_stages(unit, fmt)
+
+
+@pytest.mark.parametrize("op", ["le", "lt", "neg"])
+def test_comparison_and_neg_references_match_golden_on_every_pair(op):
+    """The references of le, lt (the FloatingPoint theory's ordered comparisons of the
+    decoded values) and neg, folded by z3 for every operand pair of e3m2, against the
+    golden model."""
+    fmt = FPFormat(3, 2)
+    w = fmt.width
+    a, b = z3.BitVec("a", w), z3.BitVec("b", w)
+    term = reference(fmt, op, a, b)[0]
+    pa, pb = _all_pairs(fmt)
+    pa, pb = pa.astype(np.uint32), pb.astype(np.uint32)
+    golden = (model.neg(pa, fmt) if op == "neg" else
+              (model.le if op == "le" else model.lt)(pa, pb, fmt).astype(np.uint32))
+    bad = []
+    for i in range(pa.size):
+        got = z3.simplify(z3.substitute(term, (a, z3.BitVecVal(int(pa[i]), w)),
+                                        (b, z3.BitVecVal(int(pb[i]), w)))).as_long()
+        if got != int(golden[i]):
+            bad.append((int(pa[i]), int(pb[i]), got, int(golden[i])))
+    assert not bad, bad[:5]
+
+
+def test_le_unit_against_the_lt_contract_differs_where_equal(work):
+    """A negative control: fp-le's netlist against lt's contract gives a counterexample,
+    two operands with equal values (the golden model says le and not lt)."""
+    from raplas_hdl.formal.miter import contract_miter, unroll
+    from raplas_hdl.formal.netlist import netlist
+    from raplas_hdl.formal.solve import solve
+
+    goal, watch = contract_miter(unroll(netlist("fp-le", FP24, 1, cwd=work)), "lt")
+    run = solve(goal, TIMEOUT, watch)
+    assert run.result == "counterexample", (run.result, run.reason)
+    c = run.values
+    a, b = c["in.a"], c["in.b"]
+    assert model.le(a, b, FP24) and not model.lt(a, b, FP24)
+    assert (c["rtl.o"], c["ref.o"]) == (1, 0)
+
+
+def test_mutated_neg_nan_gives_real_counterexample(work):
+    """fp-neg with its canonical NaN changed: the counterexample is a NaN operand, where
+    the golden model agrees with the contract and not with the RTL."""
+    res = check_proof("fp-neg", FP24, work,
+                      mutate=lambda t: t.replace("24'h7f8000", "24'h7f8001"))
+    assert res.result == "counterexample", (res.result, res.reason)
+    c = res.counterexample
+    golden = int(model.neg(c["in.a"], FP24))
+    assert golden == FP24.nan == c["ref.o"] != c["rtl.o"]
+    text = "\n".join(describe(res, FP24))
+    assert "neg(a)" in text and "golden" in text and f"0x{FP24.nan:06x}" in text

@@ -11,7 +11,7 @@ import sys
 from . import grammar as g
 
 #: Units that can be proved so far.
-PROVE_UNITS = ("fp-add", "fp-mul")
+PROVE_UNITS = ("fp-add", "fp-mul", "fp-le", "fp-lt", "fp-neg")
 
 #: Exit code of an unknown result (0 proved, 1 counterexample, 2 usage).
 EXIT_UNKNOWN = 3
@@ -24,7 +24,9 @@ def add_parser(subparsers):
         description="Emit the unit's Verilog, turn it into an SMT-LIB model with Yosys, "
                     "unroll it over its latency with en=1 and rst=0, and prove with z3 that "
                     "o, flags and o_valid equal the contract of docs/fp-format.md for every "
-                    "input. fp-add proves add and sub (sub is a free input). fp-mul is "
+                    "input. fp-add proves add and sub (sub is a free input); fp-le, fp-lt "
+                    "and fp-neg are the ordered comparisons and the negation the "
+                    "ray-triangle unit decides with (one register stage). fp-mul is "
                     "proved with the significand product cut to one uninterpreted function "
                     "on both sides (--method cut, the default) or as a chain: the N-stage "
                     "unit equals its 1-stage form, which equals the contract (--method "
@@ -69,7 +71,12 @@ def check(args) -> None:
     if args.target != "generic":
         raise g.UsageError(f"--target {args.target} is not proved yet (docs/formal.md: only "
                            "the generic target is); leave --target out")
-    lo, hi, _ = UNIT_LIMITS["stages"][args.unit]
+    if args.unit not in UNIT_LIMITS["stages"]:
+        if args.stages not in (None, 1):
+            raise g.UsageError(f"{args.unit} has one register stage: leave --stages out")
+        lo = hi = 1
+    else:
+        lo, hi, _ = UNIT_LIMITS["stages"][args.unit]
     if args.stages is not None and not lo <= args.stages <= hi:
         raise g.UsageError(f"--stages of {args.unit} must be {lo} to {hi}, not {args.stages}")
     if args.method is not None and args.method not in METHODS[args.unit]:

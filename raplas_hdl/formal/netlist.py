@@ -67,11 +67,14 @@ class Netlist:
 
 
 def unit_verilog(unit: str, fmt: FPFormat, stages: int, top: str) -> tuple[str, int]:
-    """The generic-target Verilog of a registry unit as module ``top``, and its latency."""
+    """The generic-target Verilog of a registry unit as module ``top``, and its latency
+    (``stages`` goes to the units that take it; the others have one stage)."""
     from ..rtl.emit import emit_verilog
-    from ..rtl.units import build_unit
+    from ..rtl.units import UNITS, build_unit
 
-    spec, comp, opts = build_unit(unit, check_format(fmt), stages=stages)
+    takes = "stages" in UNITS[unit].options
+    spec, comp, opts = build_unit(unit, check_format(fmt), **({"stages": stages} if takes
+                                                                else {}))
     params = {"exp_bits": fmt.exp_bits, "man_bits": fmt.man_bits,
               "rounding": fmt.rounding, **opts}
     text, _ = emit_verilog(comp, top, params)

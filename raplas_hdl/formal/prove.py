@@ -53,15 +53,20 @@ from .miter import contract_miter, equivalence_miter, unroll, violation
 from .netlist import netlist
 from .solve import SOLVER, solve
 
-__all__ = ["ProofResult", "prove", "describe", "UNITS", "METHODS", "default_stages",
-           "format_label"]
+__all__ = ["ProofResult", "prove", "describe", "UNITS", "METHODS", "ONE_STAGE",
+           "default_stages", "format_label"]
 
 #: unit -> (operation of the reference, default method).
-UNITS = {"fp-add": ("add", "direct"), "fp-mul": ("mul", "cut")}
+UNITS = {"fp-add": ("add", "direct"), "fp-mul": ("mul", "cut"), "fp-le": ("le", "direct"),
+         "fp-lt": ("lt", "direct"), "fp-neg": ("neg", "direct")}
 
 #: Methods each unit takes.
 METHODS = {"fp-add": ("direct", "control", "sby"),
-           "fp-mul": ("cut", "chain", "direct", "control", "sby")}
+           "fp-mul": ("cut", "chain", "direct", "control", "sby"),
+           "fp-le": ("direct",), "fp-lt": ("direct",), "fp-neg": ("direct",)}
+
+#: The units of one register stage (no ``stages`` option).
+ONE_STAGE = ("fp-le", "fp-lt", "fp-neg")
 
 
 @dataclass
@@ -116,10 +121,13 @@ def format_label(fmt: FPFormat) -> str:
 
 def default_stages(unit: str, fmt: FPFormat) -> int:
     """The default stage count of ``unit`` in ``fmt`` (the RTL's own, from its measured step
-    delays: :mod:`raplas_hdl.rtl.step_delays`; never a copy of it)."""
+    delays: :mod:`raplas_hdl.rtl.step_delays`; never a copy of it); 1 for the comparisons
+    and ``neg``."""
     from ..rtl.fp_add import default_add_stages
     from ..rtl.fp_mul import default_mul_stages
 
+    if unit in ONE_STAGE:
+        return 1
     return (default_add_stages if unit == "fp-add" else default_mul_stages)(fmt)
 
 
@@ -156,7 +164,8 @@ def _confirm(u, op, values, timeout):
 
 def prove(unit: str, fmt: FPFormat, stages: int | None = None, *, method: str | None = None,
           timeout: float = 300, cwd: Path | str = ".", mutate=None) -> ProofResult:
-    """Prove ``unit`` (``fp-add`` or ``fp-mul``, generic target) against the contract.
+    """Prove ``unit`` (``fp-add``, ``fp-mul``, ``fp-le``, ``fp-lt`` or ``fp-neg``, generic
+    target) against the contract.
 
     Parameters
     ----------
@@ -183,6 +192,8 @@ def prove(unit: str, fmt: FPFormat, stages: int | None = None, *, method: str | 
     """
     fmt = check_format(fmt)
     method = _check(unit, method)
+    if unit in ONE_STAGE and stages not in (None, 1):
+        raise ValueError(f"{unit} has one register stage, not {stages}")
     stages = default_stages(unit, fmt) if stages is None else stages
     op = UNITS[unit][0]
     t0 = time.monotonic()
@@ -222,7 +233,9 @@ def prove(unit: str, fmt: FPFormat, stages: int | None = None, *, method: str | 
         described = ("cut: product as one uninterpreted function, bit-vector contract"
                      if method == "cut" else
                      "direct: " + ("bit-vector chop contract" if fmt.rounding == "chop" and
-                                   op == "add" else "FloatingPoint contract (fpa2bv)"))
+                                   op == "add" else
+                                   "bit-vector contract (rule 6)" if op == "neg" else
+                                   "FloatingPoint contract (fpa2bv)"))
         links = [(described, goal, watch)]
     result, reason, cex = "proved", "", None
     for name, goal, watch in links:
@@ -268,6 +281,8 @@ def describe(res: ProofResult, fmt: FPFormat) -> list[str]:
     c = res.counterexample
     if not c:
         return []
+    if res.unit in ONE_STAGE:
+        return _describe_one_stage(res, fmt, c)
     a, b = c["in.a"], c["in.b"]
     sub = c.get("in.sub", 0)
     op = "-" if sub else ("+" if res.unit == "fp-add" else "*")
@@ -281,4 +296,29 @@ def describe(res: ProofResult, fmt: FPFormat) -> list[str]:
     fn = model.mul if res.unit == "fp-mul" else model.sub if sub else model.add
     gb, gf = fn(a, b, fmt, flags=True)
     lines.append(f"  golden   = {_show(fmt, int(gb))} flags {_flags(int(gf))}")
+    return lines
+
+
+def _describe_one_stage(res: ProofResult, fmt: FPFormat, c: dict) -> list[str]:
+    """A counterexample of ``fp-le``, ``fp-lt`` or ``fp-neg`` as lines."""
+    from ..fp import model
+
+    a = c["in.a"]
+    lines = [f"  a        = {_show(fmt, a)}"]
+    if res.unit == "fp-neg":
+        lines.append(f"  op       = neg(a), i_valid={c.get('in.i_valid', 0)}")
+        show = (lambda v: _show(fmt, v))
+        golden = int(model.neg(a, fmt))
+    else:
+        b = c["in.b"]
+        op = res.unit[3:]
+        lines += [f"  b        = {_show(fmt, b)}",
+                  f"  op       = {op}(a, b), i_valid={c.get('in.i_valid', 0)}"]
+        show = str
+        golden = int(bool((model.le if op == "le" else model.lt)(a, b, fmt)))
+    if "rtl.o" in c:
+        lines.append(f"  RTL      = {show(c['rtl.o'])} o_valid={c['rtl.o_valid']}")
+    if "ref.o" in c:
+        lines.append(f"  contract = {show(c['ref.o'])}")
+    lines.append(f"  golden   = {show(golden)}")
     return lines

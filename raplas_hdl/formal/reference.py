@@ -39,8 +39,9 @@ from ..fp.format import FPFormat, check_format
 
 __all__ = ["OPS", "reference", "fields"]
 
-#: The operations :func:`reference` knows (``add`` takes a ``sub`` bit).
-OPS = ("add", "mul")
+#: The operations :func:`reference` knows (``add`` takes a ``sub`` bit; ``neg`` one
+#: operand).
+OPS = ("add", "mul", "le", "lt", "neg")
 
 
 def fields(fmt: FPFormat, bits):
@@ -220,6 +221,21 @@ def _bv_mul(fmt, ca, cb):
         normal=z3.Concat(sign, z3.Extract(e - 1, 0, exp), z3.Extract(m - 1, 0, sig)))
 
 
+def _ordered(fmt, op, ca, cb, a, b):
+    """``le``/``lt``: IEEE's ordered comparison of the decoded values (a denormal pattern
+    is a signed zero, +0 equals -0, a NaN compares false), as one bit."""
+    x, y = _to_wide(fmt, a, ca), _to_wide(fmt, b, cb)
+    holds = z3.fpLEQ(x, y) if op == "le" else z3.fpLT(x, y)
+    return z3.If(holds, _bv(1, 1), _bv(0, 1)), None
+
+
+def _neg(fmt, ca, a):
+    """``neg``: the sign bit flipped, the canonical NaN for a NaN (the contract's rule 6,
+    which is about patterns: a denormal pattern keeps its fraction)."""
+    w = fmt.width
+    return z3.If(ca.nan, _bv(fmt.nan, w), a ^ _bv(1 << (w - 1), w)), None
+
+
 def reference(fmt: FPFormat, op: str, a, b, sub=None, *, bitvector: bool = False):
     """The contract's result of ``a op b`` as z3 terms.
 
@@ -227,8 +243,9 @@ def reference(fmt: FPFormat, op: str, a, b, sub=None, *, bitvector: bool = False
     ----------
     fmt : FPFormat
         Format and rounding.
-    op : {"add", "mul"}
-        ``add`` is ``a + b``, or ``a - b`` where ``sub`` is 1.
+    op : {"add", "mul", "le", "lt", "neg"}
+        ``add`` is ``a + b``, or ``a - b`` where ``sub`` is 1; ``le`` and ``lt`` the
+        ordered comparisons (one bit, no flags); ``neg`` ignores ``b`` (no flags).
     a, b : z3.BitVecRef
         ``W``-bit operand patterns (variables or constants).
     sub : z3.BitVecRef, optional
@@ -242,8 +259,9 @@ def reference(fmt: FPFormat, op: str, a, b, sub=None, *, bitvector: bool = False
     Returns
     -------
     (bits, flags)
-        ``W``-bit result pattern and 3-bit flags (``overflow`` bit 0, ``underflow`` bit 1,
-        ``invalid`` bit 2, as ``FLAG_*``).
+        ``W``-bit result pattern (one bit for a comparison) and 3-bit flags (``overflow``
+        bit 0, ``underflow`` bit 1, ``invalid`` bit 2, as ``FLAG_*``; ``None`` for the
+        operations that raise none: ``le``, ``lt``, ``neg``).
 
     Raises
     ------
@@ -256,11 +274,16 @@ def reference(fmt: FPFormat, op: str, a, b, sub=None, *, bitvector: bool = False
         raise ValueError(f"op must be one of {', '.join(OPS)}, not {op!r}")
     if fmt.man_bits < 2:
         raise ValueError(f"the reference needs at least 2 fraction bits, not {fmt.man_bits}")
-    if op == "mul" and sub is not None:
+    if op != "add" and sub is not None:
         raise ValueError("sub applies to add only")
-    if op == "add" and bitvector:
+    if op != "mul" and bitvector:
         raise ValueError("bitvector applies to mul only (the chop adder is always bit vectors)")
-    ca, cb = _Class(fmt, a), _Class(fmt, b)
+    ca = _Class(fmt, a)
+    if op == "neg":
+        return _neg(fmt, ca, a)
+    cb = _Class(fmt, b)
+    if op in ("le", "lt"):
+        return _ordered(fmt, op, ca, cb, a, b)
     if op == "mul" and bitvector:
         return _bv_mul(fmt, ca, cb)
     if op == "add" and fmt.rounding == "chop":

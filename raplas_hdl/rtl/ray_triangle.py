@@ -73,6 +73,7 @@ from ..model.certified import certified_constants, check_certified_format
 from ..model.records import EVENT_COUNT_BITS, PAIR, RT_RESULT
 from .certified_bound import RTL_VARIANTS, BoundOps
 from .fp_add import FPAdd, check_adder, default_add_stages, fp_add_latency
+from .fp_compare import is_nan, le as fp_le, lt as fp_lt, neg as fp_neg
 from .fp_mul import FPMul, check_multiplier, default_mul_stages, fp_mul_latency
 from .pipeline import SRL_STAGES, check_srl, delay
 from .ram import BlockRAMFIFO
@@ -386,43 +387,9 @@ class RayTriangleUnit(wiring.Component):
         return self._bound_add(m, s01, g01, p2, q[2], dot)
 
     def _neg(self, m, x: _Timed):
-        f = self._fmt
-        v = x.value
-        nan = (v[f.man_bits:f.width - 1] == f.exp_max_field) & (v[:f.man_bits] != 0)
-        r = Signal(f.width, name=f"neg{self._n_ops}")
-        m.d.comb += r.eq(Mux(nan, f.nan, v ^ f.sign_bit))
+        r = Signal(self._fmt.width, name=f"neg{self._n_ops}")
+        m.d.comb += r.eq(fp_neg(x.value, self._fmt))
         return _Timed(r, x.time)
-
-    def _nan(self, v):
-        f = self._fmt
-        return (v[f.man_bits:f.width - 1] == f.exp_max_field) & (v[:f.man_bits] != 0)
-
-    def _compare(self, m, a, b, strict):
-        """``key(a) <= key(b)`` (``<`` if ``strict``) of the contract's ordering key, where a
-        zero or denormal pattern (exponent field 0) is +0 and the key is ``0``, ``-mag`` or
-        ``+mag``.
-
-        Both raw magnitude comparisons run straight from the operands' registers, side by
-        side; the zero flags, the signs and the choice between them follow in one small
-        function of six bits. (A zero test and a sign mux in front of one comparison put
-        two carry chains in series: the whole unit's critical path at speed 8.)"""
-        f = self._fmt
-        za, zb = (v[f.man_bits:f.width - 1] == 0 for v in (a, b))
-        sa, sb = a[f.width - 1] & ~za, b[f.width - 1] & ~zb
-        a_le_b, b_le_a = Signal(), Signal()
-        m.d.comb += [a_le_b.eq(a[:f.width - 1] <= b[:f.width - 1]),
-                     b_le_a.eq(b[:f.width - 1] <= a[:f.width - 1])]
-        # both nonzero with one sign: the magnitudes' order, flipped when both are negative
-        mag = Mux(sa, ~a_le_b, ~b_le_a) if strict else Mux(sa, b_le_a, a_le_b)
-        return Mux(za & zb, Const(int(not strict), 1),
-                   Mux(za, ~sb, Mux(zb, sa, Mux(sa ^ sb, sa, mag))))
-
-    def _le(self, m, a, b):
-        """The contract's ``le(a, b)`` as a combinational value."""
-        return ~self._nan(a) & ~self._nan(b) & self._compare(m, a, b, strict=False)
-
-    def _lt(self, m, a, b):
-        return ~self._nan(a) & ~self._nan(b) & self._compare(m, a, b, strict=True)
 
     def _margin_fields(self, m, p):
         """Exponent fields of the five margins (plus an infinity bit), from the inputs."""
@@ -613,8 +580,8 @@ class RayTriangleUnit(wiring.Component):
                 hit.eq(outcome == 1),
             ]
         elif self._mode == "paper":
-            le, lt = (lambda a, b, n: reg(self._le(m, a, b), n),
-                      lambda a, b, n: reg(self._lt(m, a, b), n))
+            le, lt = (lambda a, b, n: reg(fp_le(m, a, b, f), n),
+                      lambda a, b, n: reg(fp_lt(m, a, b, f), n))
             pos = (le(zero, up_d, "pos_u") & le(zero, vp_d, "pos_v") & le(s_d, det_d, "pos_s")
                    & le(zero, tp_d, "pos_t"))
             neg = (le(up_d, zero, "neg_u") & le(vp_d, zero, "neg_v") & le(det_d, s_d, "neg_s")
@@ -628,10 +595,10 @@ class RayTriangleUnit(wiring.Component):
             sign = f.sign_bit
 
             def le(a, b, n):
-                return reg(self._le(m, a, b), n)
+                return reg(fp_le(m, a, b, f), n)
 
-            bad = (reg(self._nan(det_d) | self._nan(tp_d) | self._nan(up_d) | self._nan(vp_d)
-                       | self._nan(w_d), "nan") | (flags & FLAG_OVERFLOW).any())
+            bad = (reg(is_nan(det_d, f) | is_nan(tp_d, f) | is_nan(up_d, f) | is_nan(vp_d, f)
+                       | is_nan(w_d, f), "nan") | (flags & FLAG_OVERFLOW).any())
             pos = (le(mg["u"] ^ sign, up_d, "pos_u") & le(mg["v"] ^ sign, vp_d, "pos_v")
                    & le(mg["w"] ^ sign, w_d, "pos_w") & le(mg["t"] ^ sign, tp_d, "pos_t"))
             neg = (le(up_d, mg["u"], "neg_u") & le(vp_d, mg["v"], "neg_v")

@@ -56,13 +56,19 @@ class Unit:
 UNITS = {u.name: u for u in [
     Unit("fp-add", "fp_add", "pipelined FP adder/subtractor",
          "raplas_hdl.rtl.fp_add:FPAdd", {"stages": (int, None, "pipeline stages (default: "
-                                                    "5, 6 in rne)"),
+                                                    "6, 7 in rne, 5 in chop)"),
                                          "target": (str, "generic", "adder target: generic "
                                                     "| virtex4 (two DSP48)")}),
     Unit("fp-mul", "fp_mul", "pipelined FP multiplier (one (M+1)x(M+1) multiply)",
          "raplas_hdl.rtl.fp_mul:FPMul", {"stages": (int, None, "pipeline stages (default: "
-                                                    "3, 4 in rne)"),
+                                                    "4, 5 in rne)"),
                                          **TARGET_OPTION}),
+    Unit("fp-le", "fp_le", "the contract's ordered a <= b, registered",
+         "raplas_hdl.rtl.fp_compare:build_fp_le"),
+    Unit("fp-lt", "fp_lt", "the contract's ordered a < b, registered",
+         "raplas_hdl.rtl.fp_compare:build_fp_lt"),
+    Unit("fp-neg", "fp_neg", "the contract's neg(a), registered",
+         "raplas_hdl.rtl.fp_compare:FPNeg"),
     Unit("plane-sphere-tester", "plane_sphere_tester", "one plane-sphere tester",
          "raplas_hdl.rtl.plane_sphere:PlaneSphereTester", {**TARGET_OPTION, **ADDER_OPTION}),
     Unit("plane-sphere", "plane_sphere", "plane-sphere tester array with decoder",
