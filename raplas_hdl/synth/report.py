@@ -568,6 +568,30 @@ def write_report(report: dict, md_path=None, json_path=None, *, command=None) ->
     if md_path is not None:
         p = Path(md_path)
         p.parent.mkdir(parents=True, exist_ok=True)
-        p.write_text(render_markdown(report, command=command))
+        text = render_markdown(report, command=command)
+        if p.exists():
+            text = carry_block(p.read_text(), text)
+        p.write_text(text)
         written.append(p)
     return written
+
+
+#: The block of the page that ``benchmarks/bench_pnr.py`` writes (the clock beside the
+#: paper's, from place and route): kept when the page is rewritten.
+PNR_BEGIN, PNR_END = "<!-- pnr-clock:begin -->", "<!-- pnr-clock:end -->"
+
+
+def carry_block(old: str, new: str) -> str:
+    """``new`` with ``old``'s :data:`PNR_BEGIN` .. :data:`PNR_END` block, in place of
+    ``new``'s own or else before its "Against the paper" section."""
+    if PNR_BEGIN not in old or PNR_END not in old:
+        return new
+    block = PNR_BEGIN + old.split(PNR_BEGIN, 1)[1].split(PNR_END, 1)[0] + PNR_END
+    if PNR_BEGIN in new and PNR_END in new:
+        head, rest = new.split(PNR_BEGIN, 1)
+        return head + block + rest.split(PNR_END, 1)[1]
+    anchor = "## Against the paper"
+    if anchor in new:
+        head, rest = new.split(anchor, 1)
+        return head + block + "\n\n" + anchor + rest
+    return new.rstrip("\n") + "\n\n" + block + "\n"
