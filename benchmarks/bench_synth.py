@@ -22,6 +22,7 @@ Usage::
     python benchmarks/bench_synth.py [--big-formats FP24 FP16 ...] [--roundings rtz ...]
                                      [--units ...] [--no-cache]
     python benchmarks/bench_synth.py --capacity [--cached-only] [--throughput FILE]
+    python benchmarks/bench_synth.py --capacity --ecp5-only
 """
 
 from __future__ import annotations
@@ -64,6 +65,9 @@ def main(argv=None) -> int:
                         "point 4, issue 15 point 1)")
     p.add_argument("--md", default=str(ROOT / "docs" / "synthesis.md"))
     p.add_argument("--json", default=str(ROOT / "docs" / "results" / "synthesis.json"))
+    p.add_argument("--ecp5-only", action="store_true",
+                   help="with --capacity: only the ECP5 rows again, from docs/results/pnr.json "
+                        "(the Xilinx rows of capacity.json as they are; no Yosys run)")
     p.add_argument("--capacity", action="store_true",
                    help="the capacity per configuration (issue 15) only")
     p.add_argument("--throughput", default=str(ROOT / "docs" / "results" / "throughput.json"))
@@ -100,6 +104,19 @@ def main(argv=None) -> int:
     return 0
 
 
+def _write_capacity_section(md: Path, lines: list) -> None:
+    """Replace the section "Capacity per configuration" of ``md`` by ``lines``."""
+    text = md.read_text()
+    head = "## Capacity per configuration (issue 15)"
+    if head in text:
+        before, rest = text.split(head, 1)
+        i = rest.find("\n## ")
+        after = rest[i + 1:] if i >= 0 else ""
+    else:
+        before, after = text.rstrip("\n") + "\n\n", ""
+    md.write_text(before + "\n".join(lines) + "\n" + ("\n" + after if after else ""))
+
+
 def capacity_main(args) -> int:
     """``--capacity``: gather the parts, compose, validate, write JSON and the md section."""
     import json
@@ -111,15 +128,25 @@ def capacity_main(args) -> int:
     from raplas_hdl.synth.capacity import (build_capacity, gather, load_throughput,
                                            render_capacity)
 
+    from raplas_hdl.synth.capacity_ecp5 import ecp5_rows, load_pnr_runs
+
     t0, c0 = time.monotonic(), time.process_time()
-    earlier = json.loads(Path(args.json).read_text())["rows"] if Path(args.json).exists() else []
     fmt = FP24
+    tp = load_throughput(args.throughput)
+    pnr = ROOT / "docs" / "results" / "pnr.json"
+    if args.ecp5_only:
+        # the Xilinx rows as they are; the ECP5 rows again from the place-and-route results
+        cap = json.loads(Path(args.capacity_json).read_text())
+        cap.update(ecp5=ecp5_rows(load_pnr_runs(pnr), tp, fmt),
+                   ecp5_source=os.path.relpath(pnr, ROOT))
+        Path(args.capacity_json).write_text(json.dumps(cap, indent=1, sort_keys=True,
+                                                       default=str) + "\n")
+        _write_capacity_section(Path(args.md), render_capacity(cap, worst_path=WORST_PATH_CELLS))
+        print(f"wrote the ECP5 rows into {args.capacity_json} and {args.md}")
+        return 0
+    earlier = json.loads(Path(args.json).read_text())["rows"] if Path(args.json).exists() else []
     found = gather(fmt, rows=earlier, cached_only=args.cached_only,
                    progress=lambda line: print(line, flush=True))
-    tp = load_throughput(args.throughput)
-    from raplas_hdl.synth.capacity_ecp5 import load_pnr_runs
-
-    pnr = ROOT / "docs" / "results" / "pnr.json"
     cap = build_capacity(fmt, found["rows"], tp, CAPACITY_TRIANGLES,
                          pnr_runs=load_pnr_runs(pnr) if pnr.exists() else None,
                          pnr_source=os.path.relpath(pnr, ROOT))
@@ -134,17 +161,8 @@ def capacity_main(args) -> int:
                               for (u, o, f), r in found["rows"].items()})
     Path(args.capacity_json).write_text(json.dumps(cap, indent=1, sort_keys=True,
                                                    default=str) + "\n")
-    lines = render_capacity(cap, worst_path=WORST_PATH_CELLS)
     md = Path(args.md)
-    text = md.read_text()
-    head = "## Capacity per configuration (issue 15)"
-    if head in text:
-        before, rest = text.split(head, 1)
-        i = rest.find("\n## ")
-        after = rest[i + 1:] if i >= 0 else ""
-    else:
-        before, after = text.rstrip("\n") + "\n\n", ""
-    md.write_text(before + "\n".join(lines) + "\n" + ("\n" + after if after else ""))
+    _write_capacity_section(md, render_capacity(cap, worst_path=WORST_PATH_CELLS))
     print(f"wrote {args.capacity_json} and {md}")
     for m in found["missing"]:
         print(f"missing: {m}")
