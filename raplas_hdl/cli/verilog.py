@@ -11,8 +11,7 @@ from . import grammar as g
 #: type, metavar, help without the default). Per-unit defaults and ranges come from
 #: UNIT_LIMITS; the builders in raplas_hdl.rtl.units check the same ranges again.
 UNIT_NAMES = ("fp-add", "fp-mul", "fp-le", "fp-lt", "fp-neg", "plane-sphere-tester",
-              "plane-sphere", "ray-triangle",
-              "intersection-unit", "board-top")
+              "plane-sphere", "ray-triangle", "intersection-unit", "board-top")
 
 #: option -> {unit: (lo, hi, default)} for the integer options; choices for the others.
 UNIT_LIMITS = {

@@ -105,9 +105,9 @@ def unroll(net: Netlist, cycles: int | None = None) -> Unrolled:
 
 def violation(u: Unrolled, op: str, *, bitvector: bool = False) -> tuple[z3.BoolRef, dict]:
     """``(differs, watch)``: ``differs`` holds exactly when ``o``, ``flags`` (where the
-    operation has them) or ``o_valid`` differ from the contract (:func:`.reference.reference`, ``bitvector`` as there);
-    ``watch`` names the terms a counterexample reports (``in.*``, ``rtl.*``, ``ref.o``,
-    ``ref.flags``)."""
+    operation has them) or ``o_valid`` differ from the contract
+    (:func:`.reference.reference`, ``bitvector`` as there); ``watch`` names the terms a
+    counterexample reports (``in.*``, ``rtl.*``, ``ref.o``, ``ref.flags``)."""
     i, o = u.inputs, u.outputs
     bits, flags = reference(u.net.fmt, op, i["a"], i.get("b"), i.get("sub"),
                             bitvector=bitvector)

@@ -123,7 +123,7 @@ def add_weights(fmt) -> list[int]:
 
 
 def default_add_stages(fmt) -> int:
-    """The default stage count of ``FPAdd(fmt)``: 5 in ``rtz`` and ``chop``, 6 in ``rne``
+    """The default stage count of ``FPAdd(fmt)``: 6 in ``rtz``, 7 in ``rne``, 5 in ``chop``
     (:data:`.step_delays.DEFAULT_STAGES`)."""
     return DEFAULT_STAGES["fp_add"][check_format(fmt).rounding]
 
