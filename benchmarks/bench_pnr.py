@@ -100,11 +100,16 @@ def stale_records(runs: list) -> list:
     from raplas_hdl.pnr.ecp5 import netlist_key
     from raplas_hdl.pnr.unit import unit_verilog
 
+    keys = {}           # one emission per design (its speeds share the netlist)
     stale = []
     for rec in runs:
-        fmt = parse_format(rec["format"])
-        text, module, _ = unit_verilog(rec["unit"], fmt, rec["options"], rec.get("copies", 1))
-        if Path(rec["work"]).name != netlist_key(text, module):
+        design = (rec["unit"], rec["format"], json.dumps(rec["options"], sort_keys=True),
+                  rec.get("copies", 1))
+        if design not in keys:
+            text, module, _ = unit_verilog(rec["unit"], parse_format(rec["format"]),
+                                           rec["options"], rec.get("copies", 1))
+            keys[design] = netlist_key(text, module)
+        if Path(rec["work"]).name != keys[design]:
             stale.append(rec)
     return stale
 
