@@ -11,7 +11,18 @@ partial products (a few LUTs), the rest is exponent arithmetic.
 
 Only the ``exp`` variant (``j = 0``: ``U(x) = 2**(ex+1)``) has a gateware form so far.
 
-Every function returns a combinational value; the caller places the registers.
+Every function returns a combinational value; the caller places the registers. The two
+operators and chop's rounding term come in two halves, so that a caller can put a register
+between them (each half a few short carry chains, to meet the FP units' clock):
+
+- ``add = add_sum(align(a, b))``: exponent difference, the shift of the smaller operand and
+  the larger exponent plus 0, 1 and 2 | significand sum, rounding up, the exponent chosen;
+- ``mul = mul_round(mul_product(a, b))``: the partial-product sum and the exponent sum
+  plus 0, 1 and 2 | rounding up, the exponent chosen;
+- ``rnd_add = rnd_add_finish(rnd_add_top(rnd_add_operands(a, b), s))``: what the term
+  needs of the operands, taken as they enter the adder | what it needs of the sum |
+  the term (:attr:`BoundOps.rnd_add_stages`: the last two want a register between them
+  in chop, which takes the largest of three exponents and adds two powers of two).
 """
 
 from __future__ import annotations
@@ -98,51 +109,126 @@ class BoundOps:
         """Rounding error bound of a product ``p``: ulp (rne: ulp/2), eta when zero."""
         return self.pow2(m, "rm", Mux(self.is_zero(p), 1 - self.fmt.bias, self._ulp_exp(p)))
 
+    @property
+    def rnd_add_stages(self) -> int:
+        """Cycles the rounding term of an add wants (chop: a register between
+        :meth:`rnd_add_top` and :meth:`rnd_add_finish`)."""
+        return 2 if self.fmt.rounding == "chop" else 1
+
+    @property
+    def operand_layout(self):
+        """What :meth:`rnd_add_operands` hands to :meth:`rnd_add_top`: whether an operand is
+        zero (``opz``), and in chop the larger operand exponent field ``f``."""
+        fields = {"opz": 1}
+        if self.fmt.rounding == "chop":
+            fields["f"] = self.fmt.exp_bits
+        return data.StructLayout(fields)
+
+    @property
+    def top_layout(self):
+        """What :meth:`rnd_add_top` hands to :meth:`rnd_add_finish`."""
+        return data.StructLayout({"e": signed(self.ew), "sz": 1, "opz": 1})
+
+    def rnd_add_operands(self, m, a, b):
+        """What the rounding term of ``a + b`` needs of the operands (taken when they enter
+        the adder, so that only these few bits wait for the sum)."""
+        self._n += 1
+        r = Signal(self.operand_layout, name=f"bopd{self._n}")
+        m.d.comb += r.opz.eq(self.is_zero(a) | self.is_zero(b))
+        if self.fmt.rounding == "chop":          # the larger field is the larger exponent
+            fa, fb = self._field(a), self._field(b)
+            m.d.comb += r.f.eq(Mux(fa > fb, fa, fb))
+        return r
+
+    def rnd_add_top(self, m, opnd, s):
+        """First half of the rounding term, from :meth:`rnd_add_operands`' record ``opnd``
+        and the sum ``s``: zero bits, and the exponent the term is built on (chop: the
+        largest of the operands' and, unless zero, the sum's, less the fraction bits; else
+        the ulp exponent of ``s``)."""
+        f = self.fmt
+        self._n += 1
+        r = Signal(self.top_layout, name=f"btop{self._n}")
+        sz = self.is_zero(s)
+        if f.rounding == "chop":
+            fs = self._field(s)
+            top = Mux(~sz & (fs > opnd.f), fs, opnd.f)
+            e = Cat(top, Const(0, 2)).as_signed() - f.bias - f.man_bits
+        else:
+            e = self._ulp_exp(s)
+        m.d.comb += [r.e.eq(e), r.sz.eq(sz), r.opz.eq(opnd.opz)]
+        return r
+
+    def rnd_add_finish(self, m, top):
+        """Second half of :meth:`rnd_add`, from :meth:`rnd_add_top`'s record ``top``."""
+        f = self.fmt
+        if f.rounding == "chop":
+            ulp = self.pow2(m, "ct", top.e)
+            zero_case = self.add_pow2(m, top.e, 1 - f.bias)
+            r = Signal(self.layout, name=f"brc{self._n}")
+            m.d.comb += r.eq(Mux(top.sz, zero_case, ulp))
+            return self._new(m, "ra", top.opz | r.z, r.e, r.f)
+        return self._new(m, "ra", top.opz, Mux(top.sz, 1 - f.bias, top.e), 0)
+
     def rnd_add(self, m, a, b, s):
         """Rounding error bound of ``s = a + b`` (operand patterns as the adder sees them;
         signs do not matter)."""
-        f = self.fmt
-        opz = self.is_zero(a) | self.is_zero(b)
-        sz = self.is_zero(s)
-        if f.rounding == "chop":
-            ea, eb, es = self._exp(a), self._exp(b), self._exp(s)
-            top = Signal(signed(self.ew), name=f"top{self._n}")
-            tab = Mux(ea > eb, ea, eb)
-            m.d.comb += top.eq(Mux(~sz & (es > tab), es, tab))
-            ulp = self.pow2(m, "ct", top - f.man_bits)
-            zero_case = self.add_pow2(m, top - f.man_bits, 1 - f.bias)
-            r = Signal(self.layout, name=f"brc{self._n}")
-            m.d.comb += r.eq(Mux(sz, zero_case, ulp))
-            return self._new(m, "ra", opz | r.z, r.e, r.f)
-        e = Mux(sz, 1 - f.bias, self._ulp_exp(s))
-        return self._new(m, "ra", opz, e, 0)
+        return self.rnd_add_finish(m, self.rnd_add_top(m, self.rnd_add_operands(m, a, b), s))
 
     # -- arithmetic, rounding up ---------------------------------------------------------
-    def add(self, m, a, b):
-        """``a + b`` rounded up to ``k + 1`` significant bits."""
+    @property
+    def align_layout(self):
+        """What :meth:`align` hands to :meth:`add_sum`: the larger operand's ``f`` and
+        ``e`` (with ``e + 1`` and ``e + 2``: the sum's exponent is one of them), the
+        smaller's shifted significand ``lo`` and ``sticky``, and, when an operand is zero
+        (``zero``), the other (``pass_``), which is the sum."""
         k = self.k
-        swap = b.e > a.e
+        e = signed(self.ew)
+        return data.StructLayout({"f": k, "e": e, "e1": e, "e2": e, "lo": k + 1,
+                                  "sticky": 1, "zero": 1, "pass_": self.layout})
+
+    def align(self, m, a, b):
+        """First half of :meth:`add`: order the operands by exponent and shift the smaller
+        one's significand (its bits beyond ``k + 1`` ORed into ``sticky``)."""
+        k = self.k
+        ew = self.ew
+        self._n += 1
+        dab = Signal(signed(ew + 1), name=f"bdab{self._n}")
+        dba = Signal(signed(ew + 1), name=f"bdba{self._n}")
+        m.d.comb += [dab.eq(a.e - b.e), dba.eq(b.e - a.e)]
+        swap = dab[-1]                             # b.e > a.e
         hi = Signal(self.layout, name=f"bhi{self._n}")
         lo = Signal(self.layout, name=f"blo{self._n}")
-        m.d.comb += [hi.eq(Mux(swap, b, a)), lo.eq(Mux(swap, a, b))]
-        d = Signal(self.ew + 1, name=f"bd{self._n}")
-        m.d.comb += d.eq(hi.e - lo.e)
+        d = Signal(ew + 1, name=f"bd{self._n}")
+        m.d.comb += [hi.eq(Mux(swap, b, a)), lo.eq(Mux(swap, a, b)),
+                     d.eq(Mux(swap, dba, dab))]
         dd = Mux(d > k + 1, k + 1, d)
         ext = Cat(Const(0, k + 1), lo.f, Const(1, 1)) >> dd      # lo's significand, shifted
-        bpart = ext[k + 1:]
-        sticky = ext[:k + 1] != 0
+        r = Signal(self.align_layout, name=f"bal{self._n}")
+        m.d.comb += [r.f.eq(hi.f), r.e.eq(hi.e), r.e1.eq(Mux(swap, b.e + 1, a.e + 1)),
+                     r.e2.eq(Mux(swap, b.e + 2, a.e + 2)), r.lo.eq(ext[k + 1:]),
+                     r.sticky.eq(ext[:k + 1] != 0), r.zero.eq(a.z | b.z),
+                     r.pass_.eq(Mux(a.z, b, a))]
+        return r
+
+    def add_sum(self, m, x):
+        """Second half of :meth:`add`, from :meth:`align`'s record ``x``."""
+        k = self.k
         s = Signal(k + 2, name=f"bs{self._n}")
-        m.d.comb += s.eq(Cat(hi.f, Const(1, 1)) + bpart)
+        m.d.comb += s.eq(Cat(x.f, Const(1, 1)) + x.lo)
         big = s[k + 1]
         mant = Mux(big, s[1:], s[:k + 1])
-        rup = Mux(big, s[0] | sticky, sticky)
+        rup = Mux(big, s[0] | x.sticky, x.sticky)
         mr = Signal(k + 2, name=f"bmr{self._n}")
         m.d.comb += mr.eq(mant + rup)
         carry = mr[k + 1]
-        both = self._new(m, "add", 0, hi.e + big + carry, Mux(carry, 0, mr[:k]))
+        both = self._new(m, "add", 0, self._bump(x, big, carry), Mux(carry, 0, mr[:k]))
         r = Signal(self.layout, name=f"bsum{self._n}")
-        m.d.comb += r.eq(Mux(a.z, b, Mux(b.z, a, both)))
+        m.d.comb += r.eq(Mux(x.zero, x.pass_, both))
         return r
+
+    def add(self, m, a, b):
+        """``a + b`` rounded up to ``k + 1`` significant bits."""
+        return self.add_sum(m, self.align(m, a, b))
 
     def add_pow2(self, m, ea, eb):
         """``2**ea + 2**eb`` rounded up (what :meth:`add` gives, without its adders):
@@ -157,21 +243,46 @@ class BoundOps:
             frac = Mux(d == i, 1 << (k - i), frac)
         return self._new(m, "p2", 0, hi + (d == 0), Mux(d == 0, 0, frac))
 
-    def mul(self, m, a, b):
-        """``a * b`` rounded up to ``k + 1`` significant bits (the significand product as
-        shifted partial products: no multiplier cell)."""
+    @property
+    def product_layout(self):
+        """What :meth:`mul_product` hands to :meth:`mul_round` (the exponent sum ``e`` with
+        ``e + 1`` and ``e + 2``, as :meth:`align_layout`)."""
+        e = signed(self.ew)
+        return data.StructLayout({"p": 2 * self.k + 2, "e": e, "e1": e, "e2": e, "z": 1})
+
+    def mul_product(self, m, a, b):
+        """First half of :meth:`mul`: the significand product (shifted partial products: no
+        multiplier cell) and the exponent sum."""
         k = self.k
         ma = Cat(a.f, Const(1, 1))
         pp = [Mux(b.f[i], ma << i, 0) for i in range(k)] + [ma << k]
-        prod = Signal(2 * k + 2, name=f"bp{self._n}")
-        m.d.comb += prod.eq(sum(pp[1:], pp[0]))
+        self._n += 1
+        r = Signal(self.product_layout, name=f"bpr{self._n}")
+        m.d.comb += [r.p.eq(sum(pp[1:], pp[0])), r.e.eq(a.e + b.e), r.e1.eq(a.e + b.e + 1),
+                     r.e2.eq(a.e + b.e + 2), r.z.eq(a.z | b.z)]
+        return r
+
+    def mul_round(self, m, x):
+        """Second half of :meth:`mul`, from :meth:`mul_product`'s record ``x``."""
+        k = self.k
+        prod = x.p
         big = prod[2 * k + 1]
         mant = Mux(big, prod[k + 1:], prod[k:2 * k + 1])
         rup = Mux(big, prod[:k + 1] != 0, prod[:k] != 0)
         mr = Signal(k + 2, name=f"bmr{self._n}")
         m.d.comb += mr.eq(mant + rup)
         carry = mr[k + 1]
-        return self._new(m, "mul", a.z | b.z, a.e + b.e + big + carry, Mux(carry, 0, mr[:k]))
+        return self._new(m, "mul", x.z, self._bump(x, big, carry), Mux(carry, 0, mr[:k]))
+
+    @staticmethod
+    def _bump(x, big, carry):
+        """``x.e + big + carry`` from the first half's ``e``, ``e1``, ``e2``: a choice, not
+        an add, after the significand's carry chains."""
+        return Mux(big & carry, x.e2, Mux(big | carry, x.e1, x.e))
+
+    def mul(self, m, a, b):
+        """``a * b`` rounded up to ``k + 1`` significant bits."""
+        return self.mul_round(m, self.mul_product(m, a, b))
 
     # -- the outcome's comparisons -------------------------------------------------------
     def classify(self, x, g):

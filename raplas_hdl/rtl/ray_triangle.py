@@ -3,7 +3,7 @@
 The datapath is the golden model's (:mod:`raplas_hdl.model.ray_triangle`) operation for
 operation: 33 operations (18 :class:`FPMul`, 15 :class:`FPAdd`), 34 in the conservative
 mode, which adds ``w = det - s``. With adder latency ``La`` and multiplier latency ``Lm``
-(5 and 3 by default at FP24 ``rtz``, :mod:`.step_delays`) the schedule, in cycles after a
+(6 and 4 by default at FP24 ``rtz``, :mod:`.step_delays`) the schedule, in cycles after a
 pair is accepted, is:
 
 1. cycle 0: ``T = V0 - O`` (3 subs) and the products ``N*D`` of ``det`` (3 muls) start;
@@ -15,19 +15,22 @@ pair is accepted, is:
 5. ``2La+Lm``: the products ``Q*E2`` and ``Q*E1`` start (E1, E2 delayed to meet Q).
 6. ``4La+2Lm``: ``u' = neg(Q.E2)`` (a sign flip), ``v' = Q.E1``; ``s = u' + v'`` starts.
 7. ``5La+2Lm``: ``s`` ready. Conservative mode: ``w = det - s`` ready at ``6La+2Lm``.
-8. decision cycle ``D`` (``5La+2Lm`` or ``6La+2Lm``): the contract comparisons, each on
-   a register of its own (a comparison and the logic that combines them do not fit one
-   100 MHz cycle on an ECP5 at speed 6: 11.3 ns placed and routed).
+8. decision cycle ``D`` (``5La+2Lm``, ``6La+2Lm``; certified ``6La+2Lm+3``): the
+   contract comparisons, each on a register of its own (a comparison and the logic that
+   combines them do not fit one 100 MHz cycle on an ECP5 at speed 6: 11.3 ns placed and
+   routed).
 9. ``D+1``: the hit decision from the registered comparisons, the per-event operation
    counts (summed along the pipeline as the operations finish: one adder per event per
    finishing time) and their OR, the event flags; the IDs from their delay line: all
    registered into the output register at ``D+2``.
 10. the output register is written into the output FIFO; ``o`` shows the FIFO's head.
 
-``latency`` (``D + 3``: 36 for the FP24 ``rtz`` defaults (``La`` 5, ``Lm`` 4) in paper
-mode, 41 in conservative mode; the paper's unit has 29 stages; with ``adder="virtex4"``
-``La`` is 7, with ``multiplier="virtex4"`` ``Lm`` is 5 at FP24; one more with the output
-FIFO in block RAM, below) is the number of clock edges from the one that accepts a pair on
+``latency`` (``D + 3``: 41 for the FP24 ``rtz`` defaults (``La`` 6, ``Lm`` 4) in paper
+mode, 47 in conservative mode, 50 in certified mode, whose decision waits three cycles
+after ``w`` for the last bound, :mod:`.certified_bound`; the paper's unit has 29 stages;
+with ``adder="virtex4"`` ``La`` is 7, with ``multiplier="virtex4"`` ``Lm`` is 5 at FP24; one
+more with the output FIFO in block RAM, below) is the number of clock edges from the one
+that accepts a pair on
 ``i`` to the one that can take its result from ``o``, with an empty FIFO.
 
 Back-pressure: the pipeline never stalls (its clock enable is tied high). Every accepted
@@ -332,51 +335,61 @@ class RayTriangleUnit(wiring.Component):
         return out
 
     # -- the certified mode's bounds (model.certified, operand order as there) -----------
-    def _breg(self, m, value, time):
-        """Register a bound value computed at ``time``."""
+    def _breg(self, m, value, time, layout=None):
+        """Register a bound value (or, given its ``layout``, a half-way record) computed at
+        ``time``."""
         self._n_bound += 1
-        r = Signal(self._bo.width, name=f"bound{self._n_bound}")
+        r = Signal(self._bo.width if layout is None else layout, name=f"bound{self._n_bound}")
         m.d.sync += r.eq(value)
         return _Timed(r, time + 1)
 
     def _bv(self, m, tv, time):
         return self._bo.view(self._at(m, tv, time))
 
+    def _bop(self, m, kind, a, b):
+        """``a + b`` or ``a * b`` of two registered bounds, in two stages: each half of the
+        operator (:mod:`.certified_bound`) into a register of its own."""
+        ops = self._bo
+        t = max(a.time, b.time)
+        av, bv = self._bv(m, a, t), self._bv(m, b, t)
+        if kind == "add":
+            first, layout, second = ops.align(m, av, bv), ops.align_layout, ops.add_sum
+        else:
+            first, layout, second = (ops.mul_product(m, av, bv), ops.product_layout,
+                                     ops.mul_round)
+        mid = self._breg(m, first, t, layout)
+        return self._breg(m, second(m, mid.value), t + 1)
+
+    def _upper(self, m, x):
+        """``U(x)`` of a pattern, registered."""
+        return self._breg(m, self._bo.upper(m, x.value), x.time)
+
     def _bound_mul(self, m, x, bx, y, by, p):
         """Bound of ``p = x*y``: ``U(x) B_y + (U(y) + B_y) B_x + rnd`` (``by`` None: y
         exact, then ``U(y) B_x + rnd``)."""
         ops = self._bo
-        t = max(p.start, bx.time, 0 if by is None else by.time)
         if by is None:
-            acc = self._breg(m, ops.mul(m, ops.upper(m, self._at(m, y, t)),
-                                        self._bv(m, bx, t)), t)
+            acc = self._bop(m, "mul", self._upper(m, y), bx)
         else:
-            byv = self._bv(m, by, t)
-            t1 = self._breg(m, ops.mul(m, ops.upper(m, self._at(m, x, t)), byv), t)
-            u2 = self._breg(m, ops.add(m, ops.upper(m, self._at(m, y, t)), byv), t)
-            t2 = self._breg(m, ops.mul(m, self._bv(m, u2, t + 1), self._bv(m, bx, t + 1)),
-                            t + 1)
-            acc = self._breg(m, ops.add(m, self._bv(m, t1, t + 2), self._bv(m, t2, t + 2)),
-                             t + 2)
-        tf = max(acc.time, p.time)
-        return self._breg(m, ops.add(m, self._bv(m, acc, tf),
-                                     ops.rnd_mul(m, self._at(m, p, tf))), tf)
+            t1 = self._bop(m, "mul", self._upper(m, x), by)
+            t2 = self._bop(m, "mul", self._bop(m, "add", self._upper(m, y), by), bx)
+            acc = self._bop(m, "add", t1, t2)
+        return self._bop(m, "add", acc, self._breg(m, ops.rnd_mul(m, p.value), p.time))
 
     def _bound_add(self, m, a, ba, b, bb, s):
         """Bound of ``s = a + b`` (or ``a - b``): ``B_a + B_b + rnd`` (``bb`` None: b
         exact)."""
         ops = self._bo
-        if bb is None:
-            acc = ba
-        else:
-            t = max(ba.time, bb.time)
-            acc = self._breg(m, ops.add(m, self._bv(m, ba, t), self._bv(m, bb, t)), t)
-        tf = max(acc.time, s.time)
-        rnd = ops.rnd_add(m, self._at(m, a, tf), self._at(m, b, tf), self._at(m, s, tf))
-        if self._fmt.rounding == "chop":        # chop's max of three exponents: own stage
-            rnd = self._bv(m, self._breg(m, rnd, tf), tf + 1)
+        acc = ba if bb is None else self._bop(m, "add", ba, bb)
+        opnd = ops.rnd_add_operands(m, self._at(m, a, s.start), self._at(m, b, s.start))
+        opnd = _Timed(opnd.as_value(), s.start)
+        top = ops.rnd_add_top(m, data.View(ops.operand_layout, self._at(m, opnd, s.time)),
+                              s.value)
+        tf = s.time
+        if ops.rnd_add_stages == 2:
+            top = self._breg(m, top, tf, ops.top_layout).value
             tf += 1
-        return self._breg(m, ops.add(m, self._bv(m, acc, tf), rnd), tf)
+        return self._bop(m, "add", acc, self._breg(m, ops.rnd_add_finish(m, top), tf))
 
     def _bound_dot(self, m, x, bx, y, by, dot):
         """Bound of the dot product ``dot`` of ``x`` and ``y`` (``by`` None: y exact)."""
@@ -469,7 +482,7 @@ class RayTriangleUnit(wiring.Component):
         w = res["w"]
 
         def inputs(vals, slack):
-            return [_Timed(ops.input_bound(m, x.value, slack).as_value(), 0) for x in vals]
+            return [self._breg(m, ops.input_bound(m, x.value, slack), 0) for x in vals]
 
         bv, b1, b2, bn = inputs(v0, False), inputs(e1, True), inputs(e2, True), inputs(n, True)
         gt_ = [self._bound_add(m, v0[c], bv[c], o[c], None, t[c]) for c in range(3)]

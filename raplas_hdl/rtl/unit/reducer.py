@@ -9,23 +9,34 @@ Stages (a pipeline that moves as a whole, ``en``, while no run's answers are bei
 1. **take** a beat of ``RESULT`` (its run's bank from the run-bank FIFO, filled by the top
    when it accepts a command); read the ray's ``tmax`` (a RAM of ``2 * rows * cols``
    patterns, written by snooping the host's writes to RAY field 7).
-2. **qualify**: the beat is a *candidate* when ``hit``, ``t'`` finite, ``det`` finite and
-   not zero, ``tmin * |det| <= t' * sign(det) <= tmax * |det|`` and ``tri_id + 1 !=
-   exclude`` (``tmin``, ``exclude`` and the any-hit bit per bank, snooped from the WINDOW
-   region). The products are exact: :func:`product_key` multiplies the significands (an
-   integer multiply, one DSP48 per 17-bit significand pair at FP24) and give the sign and a
-   magnitude key (exponent sum above the normalised product) that orders as the product's
-   value (:func:`key_lt`). Read the ray's current answer (a RAM of ``rows * cols``
-   answers).
-3. **fold**: the ray's answer (the RAM's word, or the one written in the cycle the read was
-   made) and a *valid* bit per ray (registers). A candidate replaces the answer when the
-   ray has none or, in a nearest-hit bundle, ``t'_n * |det_a| < t'_a * |det_n|`` (signs of
-   ``det`` on the numerators), equal ratios going to the lower triangle ID. On the run's
-   ``last`` (or ``empty``) beat the unit stops taking beats and
+2. **qualify**, in two stages (``a2``: the products, from ``tmax`` registered as it leaves
+   the RAM, into registers; ``b``: their comparisons). The beat is a *candidate* when
+   ``hit``, ``t'`` finite, ``det`` finite and not zero, ``tmin * |det| <= t' * sign(det)
+   <= tmax * |det|`` and ``tri_id + 1 != exclude`` (``tmin``, ``exclude`` and the any-hit
+   bit per bank, snooped from the WINDOW region). The products are exact:
+   :func:`product_key` multiplies the significands (an integer multiply, one DSP48 per
+   17-bit significand pair at FP24) and gives the sign and a magnitude key (exponent sum
+   above the normalised product) that orders as the product's value (:func:`key_lt`). The
+   ray's current answer is read from a RAM of ``rows * cols`` answers as the beat leaves
+   ``a2``.
+3. **fold**, in three stages (``p``, ``q``, ``r``). A candidate replaces the ray's answer
+   when the ray has none (a *valid* bit per ray, registers) or, in a nearest-hit bundle,
+   ``t'_n * |det_a| < t'_a * |det_n|`` (signs of ``det`` on the numerators), equal ratios
+   going to the lower triangle ID. The answer it must beat is the word of the last beat
+   before it that wrote the ray: one of the three beats ahead of it in the fold (the
+   third has just left it), or else the RAM's word or the word written in the cycle of
+   that read (a write history of three entries). ``p`` multiplies the candidate against
+   all four, from registers into registers, ``q`` compares, and ``r``, by then knowing
+   which beat wrote last, takes that comparison, writes the answer and sets the valid bit:
+   the loop through the answer has neither a multiply nor a compare in it, and a beat a
+   cycle costs no stall. On the run's ``last`` (or ``empty``) beat, in ``r``, the unit
+   stops taking beats and
 4. **sends** the answers: the lowest ray with an answer each cycle (a tree of priority
    encoders on the valid bits, :func:`lowest_set_tree`; the answer RAM read a cycle ahead),
    the last marked ``last``, or one ``empty`` beat; then clears the valid bits and counts
-   the run (``seq``).
+   the run (``seq``). The next run's beats wait in the stages where they are; a write
+   history or a read of the previous run cannot matter to them, as the valid bits are
+   clear.
 
 Early-out: in an any-hit bundle a ray with an answer is *blocked*; ``blocked`` is the
 valid-bit vector of the run being reduced while that run is any-hit (else 0) and ``seq``
@@ -37,10 +48,10 @@ depend on when the bit arrives; only ``pairs_issued`` does.
 Certified mode (``config.mode == "certified"``, :data:`~raplas_hdl.model.records.ANSWER_CERTIFIED`):
 only a certain hit (``outcome`` 1) can be a candidate. An uncertain pair (``outcome`` 2) of
 another triangle than the excluded one is qualified as *passed on* in stage 2 and, in stage
-3, unless its ray is blocked (an any-hit bundle whose ray already has an answer), loaded
+``r``, unless its ray is blocked (an any-hit bundle whose ray already has an answer), loaded
 into the output register as its own beat (``outcome`` 2, the fields of the pair, not
 ``last``) instead of being folded; while the output register holds a beat not yet taken,
-a passed-on pair waits in stage 3 and the pipeline stalls (``en``). So a run's uncertain
+a passed-on pair waits in stage ``r`` and the pipeline stalls (``en``). So a run's uncertain
 pairs leave in stream order before its answers (``outcome`` 1); a run without answers ends
 with the ``empty`` beat (``outcome`` 0) after them.
 """
@@ -59,8 +70,8 @@ from ..records import struct_layout
 from .selector import lowest_set
 from .streams import result_layout
 
-__all__ = ["Reducer", "answer_layout", "product_key", "key_lt", "key_eq", "lowest_set_tree",
-           "RUN_FIFO_DEPTH", "SEQ_BITS"]
+__all__ = ["Reducer", "answer_layout", "product_key", "product_raw", "key_of", "key_lt",
+           "key_eq", "lowest_set_tree", "RUN_FIFO_DEPTH", "SEQ_BITS"]
 
 #: Runs accepted but not yet reduced that the run-bank FIFO holds (the top stalls ``cmd``
 #: when it is full).
@@ -73,23 +84,44 @@ def answer_layout(cfg: UnitConfig) -> data.StructLayout:
     return struct_layout(answer_record(cfg), cfg)
 
 
+def raw_layout(fmt) -> data.StructLayout:
+    """What :func:`product_raw` gives: the significand product ``p``, the exponent sum
+    ``e`` and ``e + 1`` (``e1``), a zero bit and the sign."""
+    M, E = fmt.man_bits, fmt.exp_bits
+    return data.StructLayout({"p": 2 * M + 2, "e": E + 2, "e1": E + 2, "zero": 1, "s": 1})
+
+
+def product_raw(m: Module, x, y, sign, fmt, name: str):
+    """First half of :func:`product_key`: the multiply (and, beside it, the exponent sums),
+    to be registered before :func:`key_of`."""
+    M, E = fmt.man_bits, fmt.exp_bits
+    ex, ey = x[M:M + E], y[M:M + E]
+    r = Signal(raw_layout(fmt), name=f"{name}_raw")
+    zero = (ex == 0) | (ey == 0)
+    m.d.comb += [r.p.eq(Cat(x[:M], 1) * Cat(y[:M], 1)), r.e.eq(ex + ey), r.e1.eq(ex + ey + 1),
+                 r.zero.eq(zero), r.s.eq(sign & ~zero)]
+    return r
+
+
+def key_of(m: Module, raw, fmt, name: str):
+    """Second half of :func:`product_key`, from :func:`product_raw`'s record."""
+    M = fmt.man_bits
+    p = raw.p
+    top = p[2 * M + 1]
+    sig = Signal(2 * M + 1, name=f"{name}_sig")      # the product without its leading one
+    m.d.comb += sig.eq(Mux(top, p[:2 * M + 1], Cat(0, p[:2 * M])))
+    mag = Signal(2 * M + 1 + fmt.exp_bits + 2, name=f"{name}_mag")
+    m.d.comb += mag.eq(Mux(raw.zero, 0, Cat(sig, Mux(top, raw.e1, raw.e))))
+    return raw.s, mag
+
+
 def product_key(m: Module, x, y, sign, fmt, name: str):
     """``(s, mag)``: the sign and the magnitude key of ``(-1)**sign * |x| * |y|`` (``x``,
     ``y`` finite patterns of ``fmt``): ``mag`` is the exponent sum above the normalised
     significand product (it orders as ``|x| * |y|``), 0 when either is zero, and ``s`` is 0
-    for a zero. :func:`key_lt` and :func:`key_eq` compare two keys."""
-    M, E = fmt.man_bits, fmt.exp_bits
-    ex, ey = x[M:M + E], y[M:M + E]
-    p = Signal(2 * M + 2, name=f"{name}_p")
-    m.d.comb += p.eq(Cat(x[:M], 1) * Cat(y[:M], 1))
-    top = p[2 * M + 1]
-    sig = Signal(2 * M + 1, name=f"{name}_sig")      # the product without its leading one
-    m.d.comb += sig.eq(Mux(top, p[:2 * M + 1], Cat(0, p[:2 * M])))
-    mag = Signal(2 * M + 1 + E + 2, name=f"{name}_mag")
-    s = Signal(name=f"{name}_s")
-    zero = (ex == 0) | (ey == 0)
-    m.d.comb += [mag.eq(Mux(zero, 0, Cat(sig, ex + ey + top))), s.eq(sign & ~zero)]
-    return s, mag
+    for a zero. :func:`key_lt` and :func:`key_eq` compare two keys. In two halves,
+    :func:`product_raw` and :func:`key_of`, for a register between them."""
+    return key_of(m, product_raw(m, x, y, sign, fmt, name), fmt, name)
 
 
 def key_lt(a, b):
@@ -229,66 +261,116 @@ class Reducer(wiring.Component):
                 m.d.sync += a.uncertain.eq(r.outcome == OUTCOME_UNCERTAIN)
             m.d.sync += [a[k].eq(r[k]) for k in ans_fields]
 
-        # -- 2. qualify
+        # -- 2. qualify: the bounds' products (tmax from its RAM's read register), then
+        # their comparisons; the ray's answer is read on the way
         def exp_of(x):
             return x[M:M + E]
 
         def sign_of(x):
             return x[W - 1]
 
+        def stage(src_v, src, name, extra=None):
+            """The next pipeline register of a beat: its valid bit, and a record of the
+            beat's fields and ``extra`` ones, where those ``src`` has are copied."""
+            layout = data.StructLayout({**beat_l.members, **(extra or {})})
+            v = Signal(name=f"{name}_v")
+            r = Signal(layout, name=name)
+            have = src.shape().members
+            with m.If(en):
+                m.d.sync += [v.eq(src_v)] + [r[k].eq(src[k]) for k in layout.members
+                                             if k in have]
+            return v, r
+
+        raw_l = raw_layout(fmt)
+
+        def raw_reg(x, y, sign, name):
+            """A product's first half (:func:`product_raw`) on a register; its key."""
+            r = Signal(raw_l, name=f"{name}_r")
+            with m.If(en):
+                m.d.sync += r.eq(product_raw(m, x, y, sign, fmt, name))
+            return key_of(m, r, fmt, name)
+
         one = Const(((1 << (E - 1)) - 1) << M, W)
-        tmax = tr.data
-        s_num = sign_of(a.t) ^ sign_of(a.det)
-        k_num = product_key(m, a.t, one, s_num, fmt, "k_num")
-        k_lo = product_key(m, tmin[a.bank], a.det, sign_of(tmin[a.bank]), fmt, "k_lo")
-        k_hi = product_key(m, tmax, a.det, sign_of(tmax), fmt, "k_hi")
-        tmax_inf = (exp_of(tmax) == e_max) & ~sign_of(tmax)
+        a2_v, a2 = stage(a_v, a, "a2", {"tmax": W})
+        with m.If(en):
+            m.d.sync += a2.tmax.eq(tr.data)
+        s_num = sign_of(a2.t) ^ sign_of(a2.det)
+        tmin_a2 = tmin[a2.bank]
+        k_num = raw_reg(a2.t, one, s_num, "k_num")
+        k_lo = raw_reg(tmin_a2, a2.det, sign_of(tmin_a2), "k_lo")
+        k_hi = raw_reg(a2.tmax, a2.det, sign_of(a2.tmax), "k_hi")
+        b_v, b = stage(a2_v, a2, "b", {"tmax_inf": 1})
+        with m.If(en):
+            m.d.sync += b.tmax_inf.eq((exp_of(a2.tmax) == e_max) & ~sign_of(a2.tmax))
         ok = Signal()
-        m.d.comb += ok.eq(a.hit & ~a.empty & (exp_of(a.t) != e_max)
-                          & (exp_of(a.det) != e_max) & (exp_of(a.det) != 0)
-                          & ~key_lt(k_num, k_lo) & (tmax_inf | ~key_lt(k_hi, k_num))
-                          & (excl[a.bank] != a.tri_id + 1))
+        m.d.comb += ok.eq(b.hit & ~b.empty & (exp_of(b.t) != e_max)
+                          & (exp_of(b.det) != e_max) & (exp_of(b.det) != 0)
+                          & ~key_lt(k_num, k_lo) & (b.tmax_inf | ~key_lt(k_hi, k_num))
+                          & (excl[b.bank] != b.tri_id + 1))
         ans_ram = SyncRAM(ans.size, R, impl=self._ram, name="answer_mem")
         aw = ans_ram.write_port()
         ar = ans_ram.read_port()
-        b_v = Signal()
-        b = Signal(beat_l)
-        b_ok = Signal()
-        b_any = Signal()
-        with m.If(en):
-            m.d.sync += [b_v.eq(a_v), b.eq(a), b_ok.eq(ok), b_any.eq(anyh.bit_select(a.bank, 1))]
-        if certified:
-            # an uncertain pair of another triangle than the excluded one is passed on
-            b_pass = Signal()
-            with m.If(en):
-                m.d.sync += b_pass.eq(a.uncertain & ~a.empty & (excl[a.bank] != a.tri_id + 1))
 
-        # -- 3. fold
+        # -- 3. fold, in three stages. A candidate replaces the ray's answer when it is
+        # better than the answer left by the beats before it: the word of the last of them
+        # that wrote the ray. That is one of the three beats ahead of it (``q``, ``r`` and
+        # the one that has just left ``r``: its word is the write history's first entry),
+        # or else the answer read from the RAM as the beat entered ``b`` (or written by
+        # the beat that wrote in the cycle of that read, the history's first entry then),
+        # ``p.cur``. Stage p multiplies the candidate's fields against all four, each a
+        # register, q compares, and r, knowing by then which beat wrote last (the history,
+        # three deep), takes that comparison and writes: no multiply or compare in the loop
+        # through the answer.
+        cmp_l = data.StructLayout({"t": W, "det": W, "tri_id": tb})
+        hist_l = data.StructLayout({"v": 1, "ray": cfg.ray_id_bits, "w": cmp_l})
+        hist = [Signal(hist_l, name=f"hist{k}") for k in (1, 2, 3)]  # last en-cycle first
+        tags = {"ok": 1, "any": 1, **({"pass_": 1} if certified else {})}
+        p_v, p = stage(b_v, b, "p", {**tags, "cur": cmp_l})
+        read = data.View(ans, ar.data)
+        with m.If(en):
+            m.d.sync += [p.ok.eq(ok), p.any.eq(anyh.bit_select(b.bank, 1)),
+                         p.cur.eq(Mux(hist[0].v & (hist[0].ray == b.ray), hist[0].w,
+                                      Cat(*[read[k] for k in cmp_l.members])))]
+            if certified:
+                # an uncertain pair of another triangle than the excluded one is passed on
+                m.d.sync += p.pass_.eq(b.uncertain & ~b.empty
+                                       & (excl[b.bank] != b.tri_id + 1))
+        q_v, q = stage(p_v, p, "q", tags)
+        r_v, r3 = stage(q_v, q, "r", {**tags, "better": 4})
+        s_new = sign_of(p.t) ^ sign_of(p.det)
+        better = []
+        for n, x in enumerate((p.cur, q, r3, hist[0].w)):
+            k_new = raw_reg(p.t, x.det, s_new, f"k_new{n}")
+            k_cur = raw_reg(x.t, p.det, sign_of(x.t) ^ sign_of(x.det), f"k_cur{n}")
+            lower = Signal(name=f"lower{n}")
+            with m.If(en):
+                m.d.sync += lower.eq(p.tri_id < x.tri_id)
+            better.append(key_lt(k_new, k_cur) | (key_eq(k_new, k_cur) & lower))
+        with m.If(en):
+            m.d.sync += r3.better.eq(Cat(*better))
+
         valid = Signal(R)
         cur_any = Signal()
-        fwd_v = Signal()
-        fwd = Signal(ans)
-        cur = Signal(ans)
-        m.d.comb += cur.eq(Mux(fwd_v, fwd, ar.data))
         new = Signal(ans)
-        m.d.comb += new.eq(Cat(*[b[k] for k in ans_fields]))
-        has = valid.bit_select(b.ray, 1)
-        k_new = product_key(m, b.t, cur.det, sign_of(b.t) ^ sign_of(b.det), fmt, "k_new")
-        k_cur = product_key(m, cur.t, b.det, sign_of(cur.t) ^ sign_of(cur.det), fmt, "k_cur")
-        better = Signal()
-        m.d.comb += better.eq(~has | (~b_any & (key_lt(k_new, k_cur)
-                                                | (key_eq(k_new, k_cur)
-                                                   & (b.tri_id < cur.tri_id)))))
+        m.d.comb += new.eq(Cat(*[r3[k] for k in ans_fields]))
+        has = valid.bit_select(r3.ray, 1)
+        wins = Signal()
+        m.d.comb += wins.eq(Mux(hist[0].v & (hist[0].ray == r3.ray), r3.better[1],
+                                Mux(hist[1].v & (hist[1].ray == r3.ray), r3.better[2],
+                                    Mux(hist[2].v & (hist[2].ray == r3.ray), r3.better[3],
+                                        r3.better[0]))))
         write = Signal()
-        m.d.comb += [write.eq(en & b_v & b_ok & better),
-                     aw.addr.eq(b.ray), aw.data.eq(new), aw.en.eq(write)]
+        m.d.comb += [write.eq(en & r_v & r3.ok & (~has | (~r3.any & wins))),
+                     aw.addr.eq(r3.ray), aw.data.eq(new), aw.en.eq(write)]
         with m.If(en):
-            m.d.sync += [fwd_v.eq(write & (b.ray == a.ray)), fwd.eq(new)]
+            m.d.sync += [hist[0].v.eq(write), hist[0].ray.eq(r3.ray),
+                         hist[0].w.eq(Cat(*[r3[k] for k in cmp_l.members])),
+                         hist[1].eq(hist[0]), hist[2].eq(hist[1])]
         with m.If(write):
-            m.d.sync += valid.bit_select(b.ray, 1).eq(1)
-        with m.If(en & b_v):
-            m.d.sync += cur_any.eq(b_any)
-            with m.If(b.last):
+            m.d.sync += valid.bit_select(r3.ray, 1).eq(1)
+        with m.If(en & r_v):
+            m.d.sync += cur_any.eq(r3.any)
+            with m.If(r3.last):
                 m.d.sync += scanning.eq(1)
         m.d.comb += self.blocked.eq(Mux(cur_any, valid, 0))
 
@@ -298,21 +380,21 @@ class Reducer(wiring.Component):
         o_empty = Signal()
         o_ray = Signal(cfg.ray_id_bits)
         if certified:
-            # passed-on uncertain pairs leave from stage 3 through the output register
+            # passed-on uncertain pairs leave from stage r through the output register
             o_unc = Signal()
             u_word = Signal(ans)
             emit = Signal()
-            m.d.comb += [emit.eq(b_v & b_pass & ~(b_any & has)),
+            m.d.comb += [emit.eq(r_v & r3.pass_ & ~(r3.any & has)),
                          en.eq(~scanning & ~(emit & o_v))]
             with m.If(~scanning):
                 with m.If(o_v & self.o.ready):
                     m.d.sync += o_v.eq(0)
                 with m.If(en & emit):
                     m.d.sync += [o_v.eq(1), o_unc.eq(1), o_last.eq(0), o_empty.eq(0),
-                                 o_ray.eq(b.ray), u_word.eq(new)]
+                                 o_ray.eq(r3.ray), u_word.eq(new)]
         idx, only = lowest_set_tree(m, valid, R, "next")
         step = scanning & (~o_v | self.o.ready)
-        m.d.comb += [ar.addr.eq(Mux(scanning, idx, a.ray)),
+        m.d.comb += [ar.addr.eq(Mux(scanning, idx, a2.ray)),
                      ar.en.eq(Mux(scanning, step & (valid != 0), en))]
         with m.If(step):
             with m.If(o_v & o_last):
