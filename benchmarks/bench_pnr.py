@@ -345,9 +345,13 @@ def render(runs: list) -> str:
             "the second half of a bound add (sum, round-up increment, exponent add: "
             "9.9 ns). Choosing the exponent among `e`, `e + 1`, `e + 2` formed in the "
             "first half, instead of adding after the significand's chains, gave 102.4 MHz "
-            "(97.4-103.9) for 2,800 LUT4 and 1,500 FF more: within the seeds' spread, "
-            "kept as measured here (the paths are now the first half's shift into the "
-            "sticky bit).", "",
+            "(97.4-103.9) for 2,800 LUT4 and 1,500 FF more, within the seeds' spread; rne "
+            "placed at 98.2 MHz (97.2-98.8), its paths the first half (a bound register "
+            "-> the exponent difference's chain -> the swap mux -> the clamp compare -> "
+            "the shift -> sticky: 10.1-10.2 ns). Now both orders are shifted side by side "
+            "and the swap chooses after the shift, and the clamp (a shift beyond k + 1) "
+            "is read from the difference's bits without a carry chain: rtz 108.1 MHz "
+            "(107.9-109.9), rne 104.5 MHz (97.7-105.6).", "",
             "**The on-chip reduction (`--reduce`).** Its read-modify-write of a ray's kept "
             "hit compared the new and the kept hit's `t'/det` by cross products in one "
             "cycle: the kept record (forwarded or read) -> a MULT18X18D without registers "

@@ -15,8 +15,9 @@ Every function returns a combinational value; the caller places the registers. T
 operators and chop's rounding term come in two halves, so that a caller can put a register
 between them (each half a few short carry chains, to meet the FP units' clock):
 
-- ``add = add_sum(align(a, b))``: exponent difference, the shift of the smaller operand and
-  the larger exponent plus 0, 1 and 2 | significand sum, rounding up, the exponent chosen;
+- ``add = add_sum(align(a, b))``: exponent differences, both orders' shifts side by side,
+  and the larger exponent plus 0, 1 and 2 | significand sum, rounding up, the exponent
+  chosen;
 - ``mul = mul_round(mul_product(a, b))``: the partial-product sum and the exponent sum
   plus 0, 1 and 2 | rounding up, the exponent chosen;
 - ``rnd_add = rnd_add_finish(rnd_add_top(rnd_add_operands(a, b), s))``: what the term
@@ -188,26 +189,36 @@ class BoundOps:
 
     def align(self, m, a, b):
         """First half of :meth:`add`: order the operands by exponent and shift the smaller
-        one's significand (its bits beyond ``k + 1`` ORed into ``sticky``)."""
+        one's significand (its bits beyond ``k + 1`` ORed into ``sticky``). Both orders are
+        shifted side by side and the exponent compare chooses after the shift; a shift
+        beyond ``k + 1`` is found from the difference's bits, without a carry chain."""
         k = self.k
         ew = self.ew
+        top = k + 1                                # the largest shift that keeps a bit
+        nb = top.bit_length()
         self._n += 1
-        dab = Signal(signed(ew + 1), name=f"bdab{self._n}")
-        dba = Signal(signed(ew + 1), name=f"bdba{self._n}")
+        n = self._n
+
+        def shifted(f, d, name):
+            """``f``'s significand shifted right by ``d`` (when ``d >= 0``): ``(lo,
+            sticky)``."""
+            over = Signal(name=f"bov{name}{n}")
+            m.d.comb += over.eq((d[nb:] != 0)
+                                | Cat(*[d[:nb] == v for v in range(top + 1, 1 << nb)]).any())
+            ext = Cat(Const(0, k + 1), f, Const(1, 1)) >> Mux(over, top, d[:nb])
+            return ext[k + 1:], ext[:k + 1] != 0
+
+        dab = Signal(signed(ew + 1), name=f"bdab{n}")
+        dba = Signal(signed(ew + 1), name=f"bdba{n}")
         m.d.comb += [dab.eq(a.e - b.e), dba.eq(b.e - a.e)]
-        swap = dab[-1]                             # b.e > a.e
-        hi = Signal(self.layout, name=f"bhi{self._n}")
-        lo = Signal(self.layout, name=f"blo{self._n}")
-        d = Signal(ew + 1, name=f"bd{self._n}")
-        m.d.comb += [hi.eq(Mux(swap, b, a)), lo.eq(Mux(swap, a, b)),
-                     d.eq(Mux(swap, dba, dab))]
-        dd = Mux(d > k + 1, k + 1, d)
-        ext = Cat(Const(0, k + 1), lo.f, Const(1, 1)) >> dd      # lo's significand, shifted
-        r = Signal(self.align_layout, name=f"bal{self._n}")
-        m.d.comb += [r.f.eq(hi.f), r.e.eq(hi.e), r.e1.eq(Mux(swap, b.e + 1, a.e + 1)),
-                     r.e2.eq(Mux(swap, b.e + 2, a.e + 2)), r.lo.eq(ext[k + 1:]),
-                     r.sticky.eq(ext[:k + 1] != 0), r.zero.eq(a.z | b.z),
-                     r.pass_.eq(Mux(a.z, b, a))]
+        swap = dab[-1]                             # b.e > a.e: b is the larger
+        lo_a, st_a = shifted(b.f, dab, "a")        # a the larger
+        lo_b, st_b = shifted(a.f, dba, "b")
+        r = Signal(self.align_layout, name=f"bal{n}")
+        m.d.comb += [r.f.eq(Mux(swap, b.f, a.f)), r.e.eq(Mux(swap, b.e, a.e)),
+                     r.e1.eq(Mux(swap, b.e + 1, a.e + 1)), r.e2.eq(Mux(swap, b.e + 2, a.e + 2)),
+                     r.lo.eq(Mux(swap, lo_b, lo_a)), r.sticky.eq(Mux(swap, st_b, st_a)),
+                     r.zero.eq(a.z | b.z), r.pass_.eq(Mux(a.z, b, a))]
         return r
 
     def add_sum(self, m, x):
