@@ -160,7 +160,8 @@ class BoundOps:
         return r
 
     def rnd_add_finish(self, m, top):
-        """Second half of :meth:`rnd_add`, from :meth:`rnd_add_top`'s record ``top``."""
+        """The rounding error bound of ``s = a + b`` (operand patterns as the adder sees them;
+        signs do not matter), from :meth:`rnd_add_top`'s record ``top``."""
         f = self.fmt
         if f.rounding == "chop":
             ulp = self.pow2(m, "ct", top.e)
@@ -169,11 +170,6 @@ class BoundOps:
             m.d.comb += r.eq(Mux(top.sz, zero_case, ulp))
             return self._new(m, "ra", top.opz | r.z, r.e, r.f)
         return self._new(m, "ra", top.opz, Mux(top.sz, 1 - f.bias, top.e), 0)
-
-    def rnd_add(self, m, a, b, s):
-        """Rounding error bound of ``s = a + b`` (operand patterns as the adder sees them;
-        signs do not matter)."""
-        return self.rnd_add_finish(m, self.rnd_add_top(m, self.rnd_add_operands(m, a, b), s))
 
     # -- arithmetic, rounding up ---------------------------------------------------------
     @property
@@ -188,7 +184,8 @@ class BoundOps:
                                   "sticky": 1, "zero": 1, "pass_": self.layout})
 
     def align(self, m, a, b):
-        """First half of :meth:`add`: order the operands by exponent and shift the smaller
+        """First half of a bound sum ``a + b``, rounded up to ``k + 1`` significant bits:
+        order the operands by exponent and shift the smaller
         one's significand (its bits beyond ``k + 1`` ORed into ``sticky``). Both orders are
         shifted side by side and the exponent compare chooses after the shift; a shift
         beyond ``k + 1`` is found from the difference's bits, without a carry chain."""
@@ -222,7 +219,7 @@ class BoundOps:
         return r
 
     def add_sum(self, m, x):
-        """Second half of :meth:`add`, from :meth:`align`'s record ``x``."""
+        """Second half of a bound sum, from :meth:`align`'s record ``x``."""
         k = self.k
         s = Signal(k + 2, name=f"bs{self._n}")
         m.d.comb += s.eq(Cat(x.f, Const(1, 1)) + x.lo)
@@ -237,12 +234,9 @@ class BoundOps:
         m.d.comb += r.eq(Mux(x.zero, x.pass_, both))
         return r
 
-    def add(self, m, a, b):
-        """``a + b`` rounded up to ``k + 1`` significant bits."""
-        return self.add_sum(m, self.align(m, a, b))
-
     def add_pow2(self, m, ea, eb):
-        """``2**ea + 2**eb`` rounded up (what :meth:`add` gives, without its adders):
+        """``2**ea + 2**eb`` rounded up (what :meth:`align` and :meth:`add_sum` give, without
+        their adders):
         ``2**(hi+1)`` if equal, else ``2**hi (1 + 2**-d)`` with ``d = |ea - eb|``, the
         fraction rounded up to ``2**-k`` beyond ``k``."""
         k = self.k
@@ -262,7 +256,8 @@ class BoundOps:
         return data.StructLayout({"p": 2 * self.k + 2, "e": e, "e1": e, "e2": e, "z": 1})
 
     def mul_product(self, m, a, b):
-        """First half of :meth:`mul`: the significand product (shifted partial products: no
+        """First half of a bound product ``a * b``, rounded up to ``k + 1`` significant bits:
+        the significand product (shifted partial products: no
         multiplier cell) and the exponent sum."""
         k = self.k
         ma = Cat(a.f, Const(1, 1))
@@ -274,7 +269,7 @@ class BoundOps:
         return r
 
     def mul_round(self, m, x):
-        """Second half of :meth:`mul`, from :meth:`mul_product`'s record ``x``."""
+        """Second half of a bound product, from :meth:`mul_product`'s record ``x``."""
         k = self.k
         prod = x.p
         big = prod[2 * k + 1]
@@ -290,10 +285,6 @@ class BoundOps:
         """``x.e + big + carry`` from the first half's ``e``, ``e1``, ``e2``: a choice, not
         an add, after the significand's carry chains."""
         return Mux(big & carry, x.e2, Mux(big | carry, x.e1, x.e))
-
-    def mul(self, m, a, b):
-        """``a * b`` rounded up to ``k + 1`` significant bits."""
-        return self.mul_round(m, self.mul_product(m, a, b))
 
     # -- the outcome's comparisons -------------------------------------------------------
     def classify(self, x, g):

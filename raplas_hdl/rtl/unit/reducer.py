@@ -14,9 +14,10 @@ Stages (a pipeline that moves as a whole, ``en``, while no run's answers are bei
    ``hit``, ``t'`` finite, ``det`` finite and not zero, ``tmin * |det| <= t' * sign(det)
    <= tmax * |det|`` and ``tri_id + 1 != exclude`` (``tmin``, ``exclude`` and the any-hit
    bit per bank, snooped from the WINDOW region). The products are exact:
-   :func:`product_key` multiplies the significands (an integer multiply, one DSP48 per
-   17-bit significand pair at FP24) and gives the sign and a magnitude key (exponent sum
-   above the normalised product) that orders as the product's value (:func:`key_lt`). The
+   :func:`product_raw` multiplies the significands (an integer multiply, one DSP48 per
+   17-bit significand pair at FP24) and :func:`key_of` gives the sign and a magnitude key
+   (exponent sum above the normalised product) that orders as the product's value
+   (:func:`key_lt`). The
    ray's current answer is read from a RAM of ``rows * cols`` answers as the beat leaves
    ``a2``.
 3. **fold**, in three stages (``p``, ``q``, ``r``). A candidate replaces the ray's answer
@@ -70,8 +71,8 @@ from ..records import struct_layout
 from .selector import lowest_set
 from .streams import result_layout
 
-__all__ = ["Reducer", "answer_layout", "product_key", "product_raw", "key_of", "key_lt",
-           "key_eq", "lowest_set_tree", "RUN_FIFO_DEPTH", "SEQ_BITS"]
+__all__ = ["Reducer", "answer_layout", "product_raw", "key_of", "key_lt", "key_eq",
+           "lowest_set_tree", "RUN_FIFO_DEPTH", "SEQ_BITS"]
 
 #: Runs accepted but not yet reduced that the run-bank FIFO holds (the top stalls ``cmd``
 #: when it is full).
@@ -92,8 +93,9 @@ def raw_layout(fmt) -> data.StructLayout:
 
 
 def product_raw(m: Module, x, y, sign, fmt, name: str):
-    """First half of :func:`product_key`: the multiply (and, beside it, the exponent sums),
-    to be registered before :func:`key_of`."""
+    """The multiply of ``(-1)**sign * |x| * |y|`` (``x``, ``y`` finite patterns of ``fmt``)
+    and, beside it, the exponent sums: the first half of a product's key, to be
+    registered before :func:`key_of`."""
     M, E = fmt.man_bits, fmt.exp_bits
     ex, ey = x[M:M + E], y[M:M + E]
     r = Signal(raw_layout(fmt), name=f"{name}_raw")
@@ -104,7 +106,10 @@ def product_raw(m: Module, x, y, sign, fmt, name: str):
 
 
 def key_of(m: Module, raw, fmt, name: str):
-    """Second half of :func:`product_key`, from :func:`product_raw`'s record."""
+    """``(s, mag)``: the sign and the magnitude key of a product, from :func:`product_raw`'s
+    record: ``mag`` is the exponent sum above the normalised significand product (it
+    orders as ``|x| * |y|``), 0 when either is zero, and ``s`` is 0 for a zero.
+    :func:`key_lt` and :func:`key_eq` compare two keys."""
     M = fmt.man_bits
     p = raw.p
     top = p[2 * M + 1]
@@ -115,17 +120,8 @@ def key_of(m: Module, raw, fmt, name: str):
     return raw.s, mag
 
 
-def product_key(m: Module, x, y, sign, fmt, name: str):
-    """``(s, mag)``: the sign and the magnitude key of ``(-1)**sign * |x| * |y|`` (``x``,
-    ``y`` finite patterns of ``fmt``): ``mag`` is the exponent sum above the normalised
-    significand product (it orders as ``|x| * |y|``), 0 when either is zero, and ``s`` is 0
-    for a zero. :func:`key_lt` and :func:`key_eq` compare two keys. In two halves,
-    :func:`product_raw` and :func:`key_of`, for a register between them."""
-    return key_of(m, product_raw(m, x, y, sign, fmt, name), fmt, name)
-
-
 def key_lt(a, b):
-    """``a < b`` for two :func:`product_key` keys (two magnitude compares side by side, no
+    """``a < b`` for two :func:`key_of` keys (two magnitude compares side by side, no
     negation in series)."""
     (sa, ma), (sb, mb) = a, b
     return (sa & ~sb) | (~sa & ~sb & (ma < mb)) | (sa & sb & (mb < ma))
