@@ -8,7 +8,11 @@ of both units at FP24 rtz, the multiplier's chain at every format (rtz), and the
 multiplier's direct proof against the FloatingPoint contract at FP24 rtz, 1 stage (the
 one the cut replaces; expected: unknown), and the stall/reset properties (``control``, and
 their port-level form with SymbiYosys, ``sby``) of both units at every format (rtz,
-default stages). One solver call at a time, each bounded by
+default stages), and every unit's synthesised netlists (``netlist-ecp5``, ``netlist-xc4v``:
+``synth_ecp5`` with the DSP register packing, ``synth_xilinx -family xc4v``) against its RTL
+at every format and rounding, and the ``virtex4`` target of both units (DSP48 through Yosys's
+model of it) at every format and rounding it takes (significands of at most 17 bits).
+One solver call at a time, each bounded by
 ``--timeout``. Each record notes the 1-minute load average before and after it (the
 machine is shared).
 
@@ -38,7 +42,7 @@ if str(ROOT) not in sys.path:
 
 from raplas_hdl.fp import PRESETS, ROUNDINGS, parse_format  # noqa: E402
 from raplas_hdl.formal import default_stages, prove  # noqa: E402
-from raplas_hdl.formal.prove import ONE_STAGE, UNITS  # noqa: E402
+from raplas_hdl.formal.prove import NETLIST_METHODS, ONE_STAGE, UNITS  # noqa: E402
 from raplas_hdl.rtl.fp_add import ADD_STEPS  # noqa: E402
 from raplas_hdl.rtl.fp_mul import MUL_STEPS  # noqa: E402
 
@@ -53,7 +57,8 @@ def _default(unit, name, rounding):
 
 
 def plan(formats):
-    """``(unit, format name, rounding, stages, method)`` in run order, cheap ones first."""
+    """``(unit, format name, rounding, stages, method, target)`` in run order, cheap ones
+    first."""
     jobs = []
     for name in formats:
         for unit in ("fp-mul", "fp-add"):
@@ -64,17 +69,28 @@ def plan(formats):
         for unit in ("fp-mul", "fp-add"):
             jobs.append((unit, name, "rtz", _default(unit, name, "rtz"), "control"))
             jobs.append((unit, name, "rtz", _default(unit, name, "rtz"), "sby"))
+        for method in NETLIST_METHODS:
+            for unit in ("fp-mul", "fp-add"):
+                jobs += [(unit, name, rnd, _default(unit, name, rnd), method)
+                         for rnd in ROUNDINGS]
+            jobs += [(unit, name, "rtz", 1, method) for unit in ONE_STAGE]
+        if PRESETS[name].man_bits <= 16:
+            for unit in ("fp-mul", "fp-add"):
+                jobs += [(unit, name, rnd, _default(unit, name, rnd), None, "virtex4")
+                         for rnd in ROUNDINGS]
     for unit in ("fp-mul", "fp-add"):
         for n in range(1, MAX_STAGES[unit] + 1):
             if n != _default(unit, "FP24", "rtz"):
                 jobs.append((unit, "FP24", "rtz", n, None))
     jobs.append(("fp-mul", "FP24", "rtz", 1, "direct"))
+    jobs = [j if len(j) == 6 else (*j, "generic") for j in jobs]
     # the slow ones last
     return sorted(jobs, key=lambda j: (j[1] == "FP32", j[4] == "direct"))
 
 
 def key(r):
-    return (r["unit"], r["format"], r["rounding"], r["stages"], r["method"].split(":")[0])
+    return (r["unit"], r["format"], r["rounding"], r["stages"], r["method"].split(":")[0],
+            r.get("target", "generic"))
 
 
 def load():
@@ -82,13 +98,15 @@ def load():
 
 
 def table(rows):
-    lines = ["| unit | format | rounding | stages | method | result | seconds | solver s | "
-             "load |", "|---|---|---|---|---|---|---:|---:|---|"]
+    lines = ["| unit | target | format | rounding | stages | method | result | seconds | "
+             "solver s | load |", "|---|---|---|---|---|---|---|---:|---:|---|"]
     order = {n: i for i, n in enumerate(PRESETS)}
-    for r in sorted(rows, key=lambda r: (r["unit"], order.get(r["format"], 9), r["rounding"],
+    for r in sorted(rows, key=lambda r: (r["unit"], r.get("target", "generic"),
+                                         order.get(r["format"], 9), r["rounding"],
                                          r["stages"], r["method"])):
         solver = sum(s["seconds"] for s in r["steps"])
-        lines.append(f"| {r['unit']} | {r['format']} | {r['rounding']} | {r['stages']} | "
+        lines.append(f"| {r['unit']} | {r.get('target', 'generic')} | {r['format']} | "
+                     f"{r['rounding']} | {r['stages']} | "
                      f"{r['method'].split(':')[0]} | {r['result']} | {r['seconds']:.1f} | "
                      f"{solver:.1f} | {r['load'][0]:.1f} / {r['load'][1]:.1f} |")
     return "\n".join(lines)
@@ -117,16 +135,17 @@ def main(argv=None) -> int:
                    help="skip the rows proofs.json already has")
     args = p.parse_args(argv)
     rows = {key(r): r for r in load()}
-    for unit, name, rnd, stages, method in plan(args.formats):
+    for unit, name, rnd, stages, method, target in plan(args.formats):
         fmt = PRESETS[name].with_rounding(rnd)
-        k = (unit, name, rnd, stages, method or UNITS[unit][1])
+        k = (unit, name, rnd, stages, method or UNITS[unit][1], target)
         if args.only_missing and k in rows:
             continue
         before = os.getloadavg()[0]
-        res = prove(unit, fmt, stages, method=method, timeout=args.timeout, cwd=ROOT)
+        res = prove(unit, fmt, stages, method=method, timeout=args.timeout, cwd=ROOT,
+                    target=target)
         rec = {**res.as_dict(), "load": [round(before, 2), round(os.getloadavg()[0], 2)]}
         rows[key(rec)] = rec
-        print(f"{unit:7} {name:5} {rnd:4} s{stages} {k[4]:6} {res.result:14} "
+        print(f"{unit:7} {target:7} {name:5} {rnd:4} s{stages} {k[4]:6} {res.result:14} "
               f"{res.seconds:7.1f} s  load {rec['load']}", flush=True)
         write(list(rows.values()))
     return 0

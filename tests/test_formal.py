@@ -14,6 +14,9 @@ What is checked here, and why each can fail:
   the alignment or the rounding sticky bit dropped while building) must give a
   counterexample, and it must be a real one: the golden model agrees with the contract's
   result there and not with the RTL's;
+- synthesis: the netlists of ``synth_ecp5`` (with the DSP register packing) and of
+  ``synth_xilinx -family xc4v`` proved equal to the RTL, and a netlist synthesised from
+  mutated Verilog caught, with the RTL's side agreeing with the golden model;
 - the command line: exit codes 0, 1, 3 and 2.
 
 Each proof takes seconds (about 60 s in all on a quiet 2-core machine); the durations are
@@ -298,7 +301,8 @@ def test_cli_unknown_exits_3(capsys, monkeypatch, work):
     (["fp-div"], "unit must be one of fp-add, fp-mul"),
     (["fp-mul", "--stages", "6"], "--stages of fp-mul must be 1 to 5"),
     (["fp-add", "--method", "cut"], "--method of fp-add must be direct"),
-    (["fp-add", "--target", "virtex4"], "not proved yet"),
+    (["fp-le", "--target", "virtex4"], "fp-le has no --target"),
+    (["fp-mul", "--target", "virtex4", "--method", "chain"], "proved by --method cut"),
     (["fp-add", "--timeout", "-1"], "--timeout"),
     (["fp-add", "--format", "FP48"], "FP48"),
     (["fp-add", "--json", "out.txt"], ".json"),
@@ -317,7 +321,7 @@ def test_cli_help_is_plain(capsys):
     assert exc.value.code == 0
     text = capsys.readouterr().out
     assert "``" not in text and ":mod:" not in text and "(default None)" not in text
-    assert "--method {direct,cut,chain,control,sby}" in text
+    assert "--method {direct,cut,chain,control,sby,netlist-ecp5,netlist-xc4v}" in text
 
 
 def test_model_and_host_never_import_the_prover():
@@ -396,3 +400,49 @@ def test_mutated_neg_nan_gives_real_counterexample(work):
     assert golden == FP24.nan == c["ref.o"] != c["rtl.o"]
     text = "\n".join(describe(res, FP24))
     assert "neg(a)" in text and "golden" in text and f"0x{FP24.nan:06x}" in text
+
+
+# -- synthesised netlists against the RTL ---------------------------------------------------
+@pytest.mark.parametrize("unit, flow", [("fp-add", "ecp5"), ("fp-mul", "xc4v")])
+def test_synthesised_netlist_proved_equal_to_the_rtl(unit, flow, work):
+    """The other pairs (and every format and rounding) are in benchmarks/bench_prove.py; the
+    controls below run them the other way round."""
+    fmt = FP24.with_rounding("rne")
+    res = check_proof(unit, fmt, work, method=f"netlist-{flow}")
+    assert res.result == "proved", (res.result, res.reason, res.steps)
+    assert res.stages == default_stages(unit, fmt)
+    assert res.method.startswith(f"netlist-{flow}: the {flow} netlist == the RTL")
+    assert ("product cut" in res.method) == (unit == "fp-mul")
+
+
+@pytest.mark.parametrize("unit, flow", [("fp-add", "xc4v"), ("fp-mul", "ecp5")])
+def test_netlist_of_a_mutated_verilog_gives_a_real_counterexample(unit, flow, work):
+    """A synthesis that did not do what the RTL says (here: it was given Verilog whose rtz
+    overflow saturates one ulp low) is caught, and the RTL is the side that is right."""
+    res = check_proof(unit, FP24, work, method=f"netlist-{flow}", mutate=_saturate_wrong)
+    assert res.result == "counterexample", (res.result, res.reason)
+    c = res.counterexample
+    op = model.mul if unit == "fp-mul" else model.sub if c.get("in.sub") else model.add
+    gb, gf = op(c["in.a"], c["in.b"], FP24, flags=True)
+    assert (c["rtl.o"], c["rtl.flags"]) == (int(gb), int(gf))
+    assert c["net.o"] == FP24.max_finite - 1 and c["net.flags"] & 1
+    text = "\n".join(describe(res, FP24))
+    assert "netlist" in text and "golden" in text
+
+
+# -- the virtex4 target (DSP48 through Yosys's model of it) --------------------------------
+@pytest.mark.parametrize("unit, fmt", [("fp-mul", FP24.with_rounding("rne")),
+                                       ("fp-add", FP16)], ids=["fp-mul-FP24-rne", "fp-add-FP16"])
+def test_virtex4_target_proved(unit, fmt, work):
+    res = check_proof(unit, fmt, work, target="virtex4")
+    assert res.result == "proved", (res.result, res.reason, res.steps)
+    assert res.target == "virtex4"
+    assert ("guarded" in res.method) == (unit == "fp-mul")
+    top = unit.replace("-", "_")
+    dirs = list((work / "build" / "formal").glob(f"{top}-{fmt.name}-s{res.stages}-virtex4-*"))
+    assert dirs and all("DSP48" in (d / "top.v").read_text() for d in dirs)
+
+
+def test_virtex4_multiplier_mutant_gives_real_counterexample(work):
+    res = check_proof("fp-mul", FP24, work, target="virtex4", mutate=_saturate_wrong)
+    check_real_counterexample(res, FP24)

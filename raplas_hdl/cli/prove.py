@@ -33,11 +33,16 @@ def add_parser(subparsers):
                     "chain); --method control proves the stall and reset properties "
                     "instead (a stall holds every register, rst clears every valid, the "
                     "outputs depend on the registers alone), --method sby their port-level "
-                    "form with SymbiYosys. Prints proved, a "
-                    "counterexample (operands, RTL, contract and golden model results) or "
+                    "form with SymbiYosys; --method netlist-ecp5 or netlist-xc4v (every unit) "
+                    "proves the unit's synthesised netlist (synth_ecp5 as `pnr` places it, "
+                    "synth_xilinx -family xc4v as `synth` counts it) equal to its RTL. "
+                    "Prints proved, a "
+                    "counterexample (operands, RTL, netlist, contract and golden model "
+                    "results) or "
                     "'unknown after S s'; exit 0, 1 or 3. Work "
-                    "files go to build/formal/ under the current directory. The virtex4 "
-                    "target is not proved yet (docs/formal.md).")
+                    "files go to build/formal/ under the current directory. --target "
+                    "virtex4 proves the DSP48 forms of fp-add (direct) and fp-mul (cut) "
+                    "with Yosys's DSP48 model.")
     p.add_argument("unit", type=g.choice(*PROVE_UNITS, what="unit"), metavar="UNIT",
                    help="unit to prove: " + ", ".join(PROVE_UNITS))
     g.add_format_option(p)
@@ -47,30 +52,38 @@ def add_parser(subparsers):
     p.add_argument("--timeout", type=g.float_range(0, 86400, lo_open=True), default=300.0,
                    metavar="S", help="seconds for each solver call (default 300)")
     p.add_argument("--method", type=g.choice("direct", "cut", "chain", "control", "sby",
-                                             what="method"),
-                   default=None, metavar="{direct,cut,chain,control,sby}",
+                                             "netlist-ecp5", "netlist-xc4v", what="method"),
+                   default=None,
+                   metavar="{direct,cut,chain,control,sby,netlist-ecp5,netlist-xc4v}",
                    help="fp-add: direct; fp-mul: cut (default), chain or direct (the "
                         "FloatingPoint contract with real multipliers: does not close at "
                         "FP24); control (both units): the stall and reset properties "
                         "instead of the datapath; sby (both units): their port-level form "
-                        "checked by SymbiYosys")
+                        "checked by SymbiYosys; netlist-ecp5, netlist-xc4v (every unit): "
+                        "the synthesised netlist equals the RTL")
     p.add_argument("--target", type=g.choice("generic", "virtex4", what="target"),
                    default="generic", metavar="{generic,virtex4}",
-                   help="unit target (only generic is proved so far)")
+                   help="unit target: virtex4 (fp-add, fp-mul) instantiates DSP48, proved "
+                        "with Yosys's simulation model of it (default generic)")
     p.add_argument("--json", default=None, metavar="FILE.json",
                    help="also write the result record as JSON")
     return p
 
 
 def check(args) -> None:
-    from ..formal.prove import METHODS, default_stages
+    from ..formal.prove import METHODS, TARGET_METHODS, default_stages
     from ..synth.yosys import yosys_command
     from .verilog import UNIT_LIMITS
 
     args.fmt = g.format_from_args(args)
     if args.target != "generic":
-        raise g.UsageError(f"--target {args.target} is not proved yet (docs/formal.md: only "
-                           "the generic target is); leave --target out")
+        allowed = TARGET_METHODS.get(args.unit, ())
+        if not allowed:
+            raise g.UsageError(f"{args.unit} has no --target (only fp-add and fp-mul have a "
+                               "virtex4 form)")
+        if args.method is not None and args.method not in allowed:
+            raise g.UsageError(f"--target {args.target} of {args.unit} is proved by --method "
+                               f"{' or '.join(allowed)}, not {args.method}")
     if args.unit not in UNIT_LIMITS["stages"]:
         if args.stages not in (None, 1):
             raise g.UsageError(f"{args.unit} has one register stage: leave --stages out")
@@ -105,7 +118,8 @@ def run(args) -> int:
 
     from ..formal.prove import describe, prove
 
-    res = prove(args.unit, args.fmt, args.stages, method=args.method, timeout=args.timeout)
+    res = prove(args.unit, args.fmt, args.stages, method=args.method, timeout=args.timeout,
+                target=args.target)
     plural = "" if res.stages == 1 else "s"
     head = f"{args.unit} {args.fmt}, {res.stages} stage{plural}, {res.target}"
     if res.result == "proved":

@@ -11,6 +11,15 @@ consistency), which is all an equivalence needs.
 A ``bvmul`` whose operands are not visibly zero-extended from at most ``M+1`` bits is
 refused (``ValueError``): cutting it would not be sound in this form. Products with a
 constant operand (none in the FP units) are left alone.
+
+A synthesised netlist multiplies in its DSP block's own width (``MULT18X18D``: two 18-bit
+operands, sign- or zero-extended by a mode register, into 36 bits), so its operands are not
+visibly narrow: they are the block's input registers. With ``guarded``,
+:func:`cut_products` cuts such a product too, as
+``if (higher bits of both operands zero) then f(low bits) else x * y``: exact for the real
+product whatever the guard, so still sound, and where the guard holds (every reachable
+state of the netlist, which the solver sees from the registers' inputs) the product is the
+shared ``f`` and needs no multiplier reasoning.
 """
 
 from __future__ import annotations
@@ -50,8 +59,21 @@ def _fit(term, width):
     return term if size == width else z3.ZeroExt(width - size, term)
 
 
-def cut_products(formula: z3.BoolRef, f: z3.FuncDeclRef) -> tuple[z3.BoolRef, int]:
+def _low(term, width, guards):
+    """``term``'s low ``width`` bits; that its higher bits are zero goes to ``guards``."""
+    size = term.size()
+    if size <= width:
+        return term
+    guards.append(z3.Extract(size - 1, width, term) == 0)
+    return z3.Extract(width - 1, 0, term)
+
+
+def cut_products(formula: z3.BoolRef, f: z3.FuncDeclRef,
+                 guarded: bool = False) -> tuple[z3.BoolRef, int]:
     """Replace every non-constant ``bvmul`` in ``formula`` by ``f`` of its operands.
+
+    With ``guarded``, a product whose operands are not visibly zero-extended is cut too,
+    under the guard that their higher bits are zero (module docstring).
 
     Returns
     -------
@@ -76,7 +98,10 @@ def cut_products(formula: z3.BoolRef, f: z3.FuncDeclRef) -> tuple[z3.BoolRef, in
             if any(z3.is_bv_value(x) for x in args):
                 stack.extend(args)
                 continue
-            narrow = [_narrow(x) for x in args]
+            narrow, guards = [_narrow(x) for x in args], []
+            if guarded and len(args) == 2:
+                narrow = [_low(x if n is None or n.size() > width else n, width, guards)
+                          for x, n in zip(args, narrow)]
             if len(args) != 2 or any(n is None or n.size() > width for n in narrow):
                 raise ValueError(f"cannot cut the product {t.sexpr()[:200]}: its operands are "
                                  f"not zero-extended from at most {width} bits")
@@ -84,6 +109,8 @@ def cut_products(formula: z3.BoolRef, f: z3.FuncDeclRef) -> tuple[z3.BoolRef, in
             size = t.size()
             prod = z3.ZeroExt(size - 2 * width, prod) if size >= 2 * width else \
                 z3.Extract(size - 1, 0, prod)
+            if guards:
+                prod = z3.If(z3.And(*guards), prod, t)
             pairs.append((t, prod))
             stack.extend(narrow)   # a product inside an operand is cut too
             continue

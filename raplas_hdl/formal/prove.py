@@ -22,6 +22,16 @@
     Two proofs, both with the product cut: the ``stages``-stage unit equals its
     1-stage form (the same datapath with the inner registers as wires), and the 1-stage
     form equals the contract. Proved only if both are.
+``netlist-ecp5``, ``netlist-xc4v`` (every unit)
+    Not the contract but synthesis: the unit's netlist after ``synth_ecp5`` (and the DSP
+    register packing: what ``raplas-hdl pnr`` places) or ``synth_xilinx -family xc4v``
+    equals its RTL, for every input (:mod:`.synthesized`; the multiplier's product cut on
+    both sides). With the RTL's own proof, the netlist meets the contract.
+
+The ``virtex4`` target (``fp-add``: shifts and add in two ``DSP48``; ``fp-mul``: the product
+in one) is proved the same way, ``direct`` and ``cut`` (:data:`TARGET_METHODS`), with the
+primitives replaced by Yosys's simulation models (:data:`.netlist.SCRIPTS`); the DSP48
+multiplies in its own 18-bit width, so its product is cut *guarded* (:mod:`.cut`).
 
 What every method assumes: ``en`` = 1 and ``rst`` = 0 on every cycle of the unrolling,
 any register contents before it (:mod:`.miter`). The proof covers ``o``, ``flags`` and
@@ -53,17 +63,25 @@ from .miter import contract_miter, equivalence_miter, unroll, violation
 from .netlist import netlist
 from .solve import SOLVER, solve
 
-__all__ = ["ProofResult", "prove", "describe", "UNITS", "METHODS", "ONE_STAGE",
-           "default_stages", "format_label"]
+__all__ = ["ProofResult", "prove", "describe", "UNITS", "METHODS", "NETLIST_METHODS",
+           "TARGETS", "TARGET_METHODS", "ONE_STAGE", "default_stages", "format_label"]
 
 #: unit -> (operation of the reference, default method).
 UNITS = {"fp-add": ("add", "direct"), "fp-mul": ("mul", "cut"), "fp-le": ("le", "direct"),
          "fp-lt": ("lt", "direct"), "fp-neg": ("neg", "direct")}
 
 #: Methods each unit takes.
-METHODS = {"fp-add": ("direct", "control", "sby"),
-           "fp-mul": ("cut", "chain", "direct", "control", "sby"),
-           "fp-le": ("direct",), "fp-lt": ("direct",), "fp-neg": ("direct",)}
+NETLIST_METHODS = ("netlist-ecp5", "netlist-xc4v")
+METHODS = {"fp-add": ("direct", "control", "sby", *NETLIST_METHODS),
+           "fp-mul": ("cut", "chain", "direct", "control", "sby", *NETLIST_METHODS),
+           "fp-le": ("direct", *NETLIST_METHODS), "fp-lt": ("direct", *NETLIST_METHODS),
+           "fp-neg": ("direct", *NETLIST_METHODS)}
+
+#: The methods of the ``virtex4`` target, per unit (the units without one take no target).
+TARGET_METHODS = {"fp-add": ("direct",), "fp-mul": ("cut",)}
+
+#: Unit targets.
+TARGETS = ("generic", "virtex4")
 
 #: The units of one register stage (no ``stages`` option).
 ONE_STAGE = ("fp-le", "fp-lt", "fp-neg")
@@ -79,7 +97,7 @@ class ProofResult:
         ``format`` is the preset name (``FP24``) or ``eXmY``.
     stages : int
     target : str
-        ``generic`` (the only target proved so far).
+        ``generic`` or ``virtex4``.
     result : str
         ``proved``, ``counterexample`` or ``unknown``.
     solver : str
@@ -141,9 +159,9 @@ def _check(unit, method):
     return method
 
 
-def _cut(goal, fmt, f=None):
+def _cut(goal, fmt, f=None, guarded=False):
     f = product_function(fmt.man_bits + 1) if f is None else f
-    goal, count = cut_products(goal, f)
+    goal, count = cut_products(goal, f, guarded)
     if count == 0:
         raise RuntimeError("no significand product found to cut")
     return goal
@@ -163,9 +181,10 @@ def _confirm(u, op, values, timeout):
 
 
 def prove(unit: str, fmt: FPFormat, stages: int | None = None, *, method: str | None = None,
-          timeout: float = 300, cwd: Path | str = ".", mutate=None) -> ProofResult:
-    """Prove ``unit`` (``fp-add``, ``fp-mul``, ``fp-le``, ``fp-lt`` or ``fp-neg``, generic
-    target) against the contract.
+          timeout: float = 300, cwd: Path | str = ".", mutate=None,
+          target: str = "generic") -> ProofResult:
+    """Prove ``unit`` (``fp-add``, ``fp-mul``, ``fp-le``, ``fp-lt`` or ``fp-neg``) against
+    the contract.
 
     Parameters
     ----------
@@ -184,14 +203,23 @@ def prove(unit: str, fmt: FPFormat, stages: int | None = None, *, method: str | 
     mutate : callable, optional
         ``str -> str`` applied to the unit's Verilog (negative controls; for a chain, to
         the ``stages``-stage unit only).
+    target : str
+        ``generic`` or ``virtex4`` (``fp-add`` and ``fp-mul``, methods
+        :data:`TARGET_METHODS`).
 
     Raises
     ------
     ValueError
-        For an unknown unit, method or a stage count the unit does not take.
+        For an unknown unit, method or target, or a stage count the unit does not take.
     """
     fmt = check_format(fmt)
     method = _check(unit, method)
+    if target not in TARGETS:
+        raise ValueError(f"target must be one of {', '.join(TARGETS)}, not {target!r}")
+    if target != "generic" and method not in TARGET_METHODS.get(unit, ()):
+        raise ValueError(f"{unit} --target {target} is proved by method "
+                         f"{' or '.join(TARGET_METHODS.get(unit, ())) or 'none'}, "
+                         f"not {method!r}")
     if unit in ONE_STAGE and stages not in (None, 1):
         raise ValueError(f"{unit} has one register stage, not {stages}")
     stages = default_stages(unit, fmt) if stages is None else stages
@@ -210,7 +238,9 @@ def prove(unit: str, fmt: FPFormat, stages: int | None = None, *, method: str | 
             steps=[{"proves": "sby: stall and reset at the ports", "result": result,
                     "seconds": round(seconds, 3)}],
             reason="" if result == "proved" else detail)
-    net = netlist(unit, fmt, stages, cwd=cwd, mutate=mutate)
+    if method in NETLIST_METHODS:
+        return _prove_netlist(unit, fmt, stages, method, timeout, cwd, mutate, t0)
+    net = netlist(unit, fmt, stages, cwd=cwd, mutate=mutate, target=target)
     u = unroll(net) if method != "control" else None
     steps = []
     if method == "control":
@@ -229,8 +259,10 @@ def prove(unit: str, fmt: FPFormat, stages: int | None = None, *, method: str | 
     else:
         goal, watch = contract_miter(u, op, bitvector=method == "cut")
         if method == "cut":
-            goal = _cut(goal, fmt)
+            goal = _cut(goal, fmt, guarded=target != "generic")
         described = ("cut: product as one uninterpreted function, bit-vector contract"
+                     + (" (guarded: the DSP48's 18-bit operands)" if target != "generic"
+                        else "")
                      if method == "cut" else
                      "direct: " + ("bit-vector chop contract" if fmt.rounding == "chop" and
                                    op == "add" else
@@ -257,6 +289,46 @@ def prove(unit: str, fmt: FPFormat, stages: int | None = None, *, method: str | 
             elif run.result == "counterexample" and method != "control":
                 cex = run.values
             break
+    return ProofResult(unit=unit, format=format_label(fmt), rounding=fmt.rounding,
+                       stages=stages, target=target, result=result, solver=SOLVER,
+                       seconds=round(time.monotonic() - t0, 3), method=described, steps=steps,
+                       counterexample=cex, reason=reason)
+
+
+def _prove_netlist(unit, fmt, stages, method, timeout, cwd, mutate, t0) -> ProofResult:
+    """The synthesised netlist equals the RTL (:mod:`.synthesized`). ``mutate`` changes the
+    Verilog that is synthesised, not the RTL it is compared with: a synthesis that did not
+    do what the RTL says."""
+    from .synthesized import synthesized
+
+    flow = method.split("-", 1)[1]
+    rtl = unroll(netlist(unit, fmt, stages, cwd=cwd))
+    src = netlist(unit, fmt, stages, cwd=cwd, mutate=mutate, tag="src") if mutate else rtl.net
+    gate = unroll(synthesized(src, flow, timeout=timeout))
+    goal = equivalence_miter(rtl, gate)
+    described = f"netlist-{flow}: the {flow} netlist == the RTL"
+    if unit == "fp-mul":
+        goal, count = cut_products(goal, product_function(fmt.man_bits + 1), guarded=True)
+        if count == 0:
+            raise RuntimeError("no significand product found to cut")
+        described += " (product cut)"
+    watch = {**{f"in.{k}": v for k, v in rtl.inputs.items()},
+             **{f"rtl.{k}": v for k, v in rtl.outputs.items()},
+             **{f"net.{k}": v for k, v in gate.outputs.items()}}
+    run = solve(goal, timeout, watch)
+    steps = [{"proves": described, "result": run.result, "seconds": round(run.seconds, 3)}]
+    result, reason, cex = run.result, run.reason, run.values or None
+    if run.result == "counterexample" and unit == "fp-mul":
+        # the cut product may be no product: the same inputs with the real one
+        pins = [v == run.values[f"in.{k}"] for k, v in rtl.inputs.items()]
+        again = solve(z3.And(equivalence_miter(rtl, gate), *pins), timeout, watch)
+        steps.append({"proves": "the same inputs with the real product", "result":
+                      again.result, "seconds": round(again.seconds, 3)})
+        if again.result != "counterexample":
+            result, reason, cex = "unknown", ("the cut's counterexample needs a product that "
+                                              "is not one"), None
+        else:
+            cex = again.values
     return ProofResult(unit=unit, format=format_label(fmt), rounding=fmt.rounding,
                        stages=stages, target="generic", result=result, solver=SOLVER,
                        seconds=round(time.monotonic() - t0, 3), method=described, steps=steps,
@@ -291,6 +363,9 @@ def describe(res: ProofResult, fmt: FPFormat) -> list[str]:
     if "rtl.o" in c:
         lines.append(f"  RTL      = {_show(fmt, c['rtl.o'])} flags {_flags(c['rtl.flags'])}"
                      f" o_valid={c['rtl.o_valid']}")
+    if "net.o" in c:
+        lines.append(f"  netlist  = {_show(fmt, c['net.o'])} flags {_flags(c['net.flags'])}"
+                     f" o_valid={c['net.o_valid']}")
     if "ref.o" in c:
         lines.append(f"  contract = {_show(fmt, c['ref.o'])} flags {_flags(c['ref.flags'])}")
     fn = model.mul if res.unit == "fp-mul" else model.sub if sub else model.add
@@ -318,6 +393,8 @@ def _describe_one_stage(res: ProofResult, fmt: FPFormat, c: dict) -> list[str]:
         golden = int(bool((model.le if op == "le" else model.lt)(a, b, fmt)))
     if "rtl.o" in c:
         lines.append(f"  RTL      = {show(c['rtl.o'])} o_valid={c['rtl.o_valid']}")
+    if "net.o" in c:
+        lines.append(f"  netlist  = {show(c['net.o'])} o_valid={c['net.o_valid']}")
     if "ref.o" in c:
         lines.append(f"  contract = {show(c['ref.o'])}")
     lines.append(f"  golden   = {show(golden)}")
