@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import z3
 
-__all__ = ["product_function", "cut_products"]
+__all__ = ["product_function", "cut_products", "count_products"]
 
 
 def product_function(width: int, name: str = "sigprod") -> z3.FuncDeclRef:
@@ -52,6 +52,21 @@ def _narrow(term):
                 rest = [z3.BitVecVal(head.as_long(), bits)] + rest
             return rest[0] if len(rest) == 1 else z3.Concat(*rest)
     return None
+
+
+def count_products(formula: z3.BoolRef) -> int:
+    """The number of distinct non-constant ``bvmul`` terms in ``formula``."""
+    seen, count, stack = set(), 0, [formula]
+    while stack:
+        t = stack.pop()
+        if t.get_id() in seen or not z3.is_app(t):
+            continue
+        seen.add(t.get_id())
+        if t.decl().kind() == z3.Z3_OP_BMUL and not any(
+                z3.is_bv_value(t.arg(i)) for i in range(t.num_args())):
+            count += 1
+        stack.extend(t.children())
+    return count
 
 
 def _fit(term, width):

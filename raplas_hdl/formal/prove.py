@@ -58,7 +58,7 @@ import z3
 
 from ..fp.format import FLAG_NAMES, PRESETS, FPFormat, check_format
 from .control import PROPERTIES, control_goal
-from .cut import cut_products, product_function
+from .cut import count_products, cut_products, product_function
 from .miter import contract_miter, equivalence_miter, unroll, violation
 from .netlist import netlist
 from .solve import SOLVER, solve
@@ -325,8 +325,12 @@ def _prove_netlist(unit, fmt, stages, method, timeout, cwd, mutate, t0) -> Proof
         steps.append({"proves": "the same inputs with the real product", "result":
                       again.result, "seconds": round(again.seconds, 3)})
         if again.result != "counterexample":
-            result, reason, cex = "unknown", ("the cut's counterexample needs a product that "
-                                              "is not one"), None
+            result, cex = "unknown", None
+            reason = "the cut's counterexample needs a product that is not one"
+            per = [count_products(z3.And(*side.assumptions)) for side in (rtl, gate)]
+            if per[1] > per[0]:
+                reason += (f" (the netlist forms each product from {per[1] // per[0]} "
+                           "DSP partial products, which the cut does not join into one)")
         else:
             cex = again.values
     return ProofResult(unit=unit, format=format_label(fmt), rounding=fmt.rounding,
