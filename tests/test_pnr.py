@@ -9,6 +9,7 @@ afterwards). The big units' runs are a benchmark (``benchmarks/bench_pnr.py``).
 """
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -116,12 +117,19 @@ def test_cli_pnr_writes_json_markdown_and_a_summary(tmp_path, capsys, monkeypatc
     assert main(["pnr", "fp-mul", "--stages", "2", "--seeds", "2", "--speed", "8",
                  "-o", str(out)]) == 0
     assert json.loads((out / "fp-mul.json").read_text())["cached_seeds"] == [1, 2]
-    # the placer's timing weight reaches nextpnr (a run of its own) and the record
+    assert rec["router"] == "router1"
+    # the placer's timing weight and the router reach nextpnr (a run of their own) and the
+    # record
     assert main(["pnr", "fp-mul", "--stages", "2", "--seeds", "1", "--speed", "8",
-                 "--placer-timing-weight", "40", "-o", str(out)]) == 0
+                 "--placer-timing-weight", "40", "--router", "router2", "-o", str(out)]) == 0
     rec = json.loads((out / "fp-mul.json").read_text())
     assert rec["placer_timing_weight"] == 40 and rec["cached_seeds"] == []
-    assert "--placer-timing-weight 40" in rec["command"]
+    assert rec["router"] == "router2"
+    assert "--placer-timing-weight 40 --router router2" in rec["command"]
+    metas = list(Path(rec["work"]).glob("*-seed1-ooc-*.meta.json"))
+    assert len(metas) == 1
+    cmd = json.loads(metas[0].read_text())["command"]
+    assert cmd[-4:] == ["--placer-heap-timingweight", "40", "--router", "router2"]
 
 
 @pytest.mark.parametrize("args,message", [
@@ -133,6 +141,8 @@ def test_cli_pnr_writes_json_markdown_and_a_summary(tmp_path, capsys, monkeypatc
     (["fp-add", "--rows", "2"], "--rows does not apply to unit fp-add"),
     (["fp-add", "--placer-timing-weight", "0"], "--placer-timing-weight"),
     (["fp-add", "--bitstream", "--placer-timing-weight", "40"], "--placer-timing-weight"),
+    (["fp-add", "--router", "router3"], "--router"),
+    (["fp-add", "--bitstream", "--router", "router2"], "--router applies"),
 ])
 def test_cli_pnr_bad_input_is_one_line(args, message, capsys, tmp_path):
     assert main(["pnr", *args, "-o", str(tmp_path / "o")]) == 2

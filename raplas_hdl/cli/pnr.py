@@ -30,7 +30,7 @@ OWN_CLOCK_UNITS = ("board-top",)
 
 
 def add_parser(subparsers):
-    from ..pnr.ecp5 import DEVICES, SPEEDS
+    from ..pnr.ecp5 import DEVICES, ROUTERS, SPEEDS
     from ..rtl.copies import MAX_COPIES
 
     p = subparsers.add_parser(
@@ -74,6 +74,10 @@ def add_parser(subparsers):
                         "cells of critical paths together (default: nextpnr's own); the "
                         "benchmark uses 40 for the units whose multipliers' DSP paths decide "
                         "the clock (docs/pnr.md)")
+    p.add_argument("--router", choices=ROUTERS, default=None,
+                   help="nextpnr's router (default: nextpnr's own, router1); router2 "
+                        "converges on the certified whole unit, where router1 does not "
+                        "(docs/pnr.md)")
     p.add_argument("--bitstream", action="store_true",
                    help="the unit behind a serial wrapper on the ULX3S, every port placed by "
                         "an .lpf, routed in context and packed into a .bit (yowasp-ecppack)")
@@ -99,6 +103,9 @@ def check(args) -> None:
         if args.timing_weight is not None:
             raise g.UsageError("--placer-timing-weight applies to the out-of-context runs, not "
                                "to --bitstream")
+        if args.router is not None:
+            raise g.UsageError("--router applies to the out-of-context runs, not to "
+                               "--bitstream")
         if args.unit in OWN_CLOCK_UNITS:
             raise g.UsageError(f"--bitstream: {args.unit} has its own clock and reset ports "
                                "(clk, rst); the serial wrapper clocks a unit and drives its "
@@ -139,7 +146,7 @@ def run(args) -> int:
         result = pnr_unit(args.unit, args.fmt, args.options, device=args.device,
                           speed=args.speed, freq=args.freq, seeds=seeds, copies=args.copies,
                           use_cache=not args.no_cache, progress=progress, command=command,
-                          timing_weight=args.timing_weight)
+                          timing_weight=args.timing_weight, router=args.router)
         extra = []
     paths = write_pnr_report(result, args.out_dir) + extra
     print(result["summary"])

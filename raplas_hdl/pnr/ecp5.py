@@ -37,7 +37,7 @@ from .dsp_registers import pack_netlist_file
 from .report import RouteResult, parse_report, summarise_seeds, synth_counts
 from .tools import nextpnr_command, tool_versions, yosys_command
 
-__all__ = ["DEVICES", "SPEEDS", "PACKAGE", "SYNTH_SCRIPT", "EcpSynth", "FlowResult",
+__all__ = ["DEVICES", "SPEEDS", "ROUTERS", "PACKAGE", "SYNTH_SCRIPT", "EcpSynth", "FlowResult",
            "synthesize_ecp5", "place_and_route", "route_seeds", "run_flow", "default_pnr_dir",
            "check_device", "netlist_key"]
 
@@ -46,6 +46,11 @@ DEVICES = {"LFE5U-25F": "--25k", "LFE5U-45F": "--45k", "LFE5U-85F": "--85k"}
 
 #: Speed grades (6 is the ULX3S's own, 8 the fastest).
 SPEEDS = (6, 7, 8)
+
+#: nextpnr's routers: ``router1`` (its default) rips up and reroutes one net at a time;
+#: ``router2`` routes all nets at once with negotiated congestion, and converges where
+#: ``router1`` circles round a few hundred overused wires in a large, dense design.
+ROUTERS = ("router1", "router2")
 
 #: The package of every device here (the ULX3S's).
 PACKAGE = "CABGA381"
@@ -234,11 +239,12 @@ def run_flow(verilog: str, top: str, *, device: str = "LFE5U-85F", speed: int = 
              base: Path | None = None, progress: Callable[[str], None] | None = None,
              timeout: float = 7200.0,
              check: Callable[[dict], object] | None = None,
-             timing_weight: int | None = None) -> FlowResult:
+             timing_weight: int | None = None, router: str | None = None) -> FlowResult:
     """Synthesis, then out-of-context place and route for each seed.
 
     ``timing_weight``: nextpnr's ``--placer-heap-timingweight`` (its default when None): how
-    hard the analytic placer pulls the cells of critical paths together.
+    hard the analytic placer pulls the cells of critical paths together. ``router``: one of
+    :data:`ROUTERS` (nextpnr's default, ``router1``, when None).
 
     ``check`` is called with the synthesised resource columns before any place and route
     (:func:`.fit.check_fit`: it raises when the design cannot fit the device)."""
@@ -248,6 +254,10 @@ def run_flow(verilog: str, top: str, *, device: str = "LFE5U-85F", speed: int = 
     if check is not None:
         check(syn.counts)
     extra = () if timing_weight is None else ("--placer-heap-timingweight", str(timing_weight))
+    if router is not None:
+        if router not in ROUTERS:
+            raise ValueError(f"unknown router {router!r}: one of {', '.join(ROUTERS)}")
+        extra += ("--router", router)
     return route_seeds(syn, device=device, speed=speed, freq=freq, seeds=seeds,
                        use_cache=use_cache, timeout=timeout, progress=progress,
                        extra=lambda seed: extra)

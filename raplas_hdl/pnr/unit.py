@@ -110,10 +110,11 @@ def pnr_unit(unit: str, fmt, options: dict, *, device: str = "LFE5U-85F", speed:
              freq: float = 100.0, seeds: Iterable[int] = (1, 2, 3), use_cache: bool = True,
              progress: Callable[[str], None] | None = None, command: str | None = None,
              base: Path | None = None, copies: int = 1,
-             timing_weight: int | None = None) -> dict:
+             timing_weight: int | None = None, router: str | None = None) -> dict:
     """Place and route ``unit`` (``copies`` of it side by side) and return the record
     (module docstring). ``ValueError`` when the synthesised design cannot fit ``device``.
-    ``timing_weight``: nextpnr's placer timing weight (its default when None)."""
+    ``timing_weight``: nextpnr's placer timing weight, ``router`` its router (its defaults
+    when None)."""
     t0 = time.monotonic()
     if progress:
         progress(f"{unit}: building the Verilog" + (f" ({copies} copies)" if copies > 1 else ""))
@@ -127,13 +128,15 @@ def pnr_unit(unit: str, fmt, options: dict, *, device: str = "LFE5U-85F", speed:
     flow = run_flow(text, module, device=device, speed=speed, freq=freq, seeds=seeds,
                     use_cache=use_cache, base=base, progress=progress,
                     check=lambda counts: check_fit(counts, device, what),
-                    timing_weight=timing_weight)
+                    timing_weight=timing_weight, router=router)
     rec = flow_record(unit, module, fmt, options, latency, flow, emit_s=emit_s,
                       device=device, speed=speed, freq=freq, seeds=seeds, copies=copies,
                       command=command or _command(unit, fmt, options, device, speed, freq,
                                                   len(seeds), copies,
-                                                  timing_weight=timing_weight))
+                                                  timing_weight=timing_weight,
+                                                  router=router))
     rec["placer_timing_weight"] = timing_weight
+    rec["router"] = router or "router1"
     return rec
 
 
@@ -151,7 +154,7 @@ def check_copies(unit: str, fmt, options: dict, copies: int, device: str, what: 
 
 
 def _command(unit, fmt, options, device, speed, freq, n, copies=1, bitstream=False,
-             timing_weight=None) -> str:
+             timing_weight=None, router=None) -> str:
     parts = ["raplas-hdl pnr", unit, "--format", fmt.name]
     for k, v in sorted(options.items()):
         flag = "--" + k.replace("_", "-")
@@ -166,6 +169,8 @@ def _command(unit, fmt, options, device, speed, freq, n, copies=1, bitstream=Fal
         parts.append("--bitstream")
     if timing_weight is not None:
         parts += ["--placer-timing-weight", str(timing_weight)]
+    if router is not None:
+        parts += ["--router", router]
     return " ".join(parts)
 
 
