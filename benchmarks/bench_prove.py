@@ -16,9 +16,10 @@ One solver call at a time, each bounded by
 ``--timeout``. Each record notes the 1-minute load average before and after it (the
 machine is shared).
 
-Writes ``docs/results/proofs.json`` (merged by unit, format, rounding, stages, method,
-so a partial run updates its rows) and the table between the markers of
-``docs/formal.md``.
+Then the intersection unit's stream stages with SymbiYosys
+(:mod:`raplas_hdl.formal.streams`). Writes ``docs/results/proofs.json`` (merged by unit,
+format, rounding, stages, method, target, so a partial run updates its rows; the stream
+stages under ``streams``) and the tables between the markers of ``docs/formal.md``.
 
 Usage::
 
@@ -43,12 +44,14 @@ if str(ROOT) not in sys.path:
 from raplas_hdl.fp import PRESETS, ROUNDINGS, parse_format  # noqa: E402
 from raplas_hdl.formal import default_stages, prove  # noqa: E402
 from raplas_hdl.formal.prove import NETLIST_METHODS, ONE_STAGE, UNITS  # noqa: E402
+from raplas_hdl.formal.streams import STAGES, check_stage  # noqa: E402
 from raplas_hdl.rtl.fp_add import ADD_STEPS  # noqa: E402
 from raplas_hdl.rtl.fp_mul import MUL_STEPS  # noqa: E402
 
 JSON = ROOT / "docs" / "results" / "proofs.json"
 DOC = ROOT / "docs" / "formal.md"
 BEGIN, END = "<!-- proofs:begin -->", "<!-- proofs:end -->"
+S_BEGIN, S_END = "<!-- streams:begin -->", "<!-- streams:end -->"
 MAX_STAGES = {"fp-add": len(ADD_STEPS), "fp-mul": len(MUL_STEPS)}
 
 
@@ -97,6 +100,27 @@ def load():
     return json.loads(JSON.read_text())["proofs"] if JSON.exists() else []
 
 
+def load_streams():
+    return json.loads(JSON.read_text()).get("streams", []) if JSON.exists() else []
+
+
+def stream_table(rows):
+    lines = ["| stage | what | result | how | seconds | load |", "|---|---|---|---|---:|---|"]
+    for r in sorted(rows, key=lambda r: r["stage"]):
+        how = "; ".join(st["proves"].split(": ", 1)[1] for st in r["steps"])
+        lines.append(f"| {r['stage']} | {r['what']} | {r['result']} | {how} | "
+                     f"{r['seconds']:.1f} | {r['load'][0]:.1f} / {r['load'][1]:.1f} |")
+    return "\n".join(lines)
+
+
+def _between(text, begin, end, body):
+    if begin not in text or end not in text:
+        return text
+    head, rest = text.split(begin, 1)
+    _, tail = rest.split(end, 1)
+    return f"{head}{begin}\n{body}\n{end}{tail}"
+
+
 def table(rows):
     lines = ["| unit | target | format | rounding | stages | method | result | seconds | "
              "solver s | load |", "|---|---|---|---|---|---|---|---:|---:|---|"]
@@ -112,19 +136,18 @@ def table(rows):
     return "\n".join(lines)
 
 
-def write(rows):
+def write(rows, streams=None):
+    streams = load_streams() if streams is None else streams
     JSON.parent.mkdir(parents=True, exist_ok=True)
     meta = {"machine": f"{platform.machine()}, {os.cpu_count()} cores (shared)",
             "python": platform.python_version(), "written": time.strftime("%Y-%m-%d %H:%M UTC",
                                                                            time.gmtime()),
             "load": "1-minute load average before / after each proof"}
-    JSON.write_text(json.dumps({"meta": meta, "proofs": rows}, indent=1, sort_keys=True) + "\n")
+    JSON.write_text(json.dumps({"meta": meta, "proofs": rows, "streams": streams}, indent=1,
+                               sort_keys=True) + "\n")
     if DOC.exists():
-        text = DOC.read_text()
-        if BEGIN in text and END in text:
-            head, rest = text.split(BEGIN, 1)
-            _, tail = rest.split(END, 1)
-            DOC.write_text(f"{head}{BEGIN}\n{table(rows)}\n{END}{tail}")
+        text = _between(DOC.read_text(), BEGIN, END, table(rows))
+        DOC.write_text(_between(text, S_BEGIN, S_END, stream_table(streams)))
 
 
 def main(argv=None) -> int:
@@ -148,6 +171,15 @@ def main(argv=None) -> int:
         print(f"{unit:7} {target:7} {name:5} {rnd:4} s{stages} {k[4]:6} {res.result:14} "
               f"{res.seconds:7.1f} s  load {rec['load']}", flush=True)
         write(list(rows.values()))
+    streams = {r["stage"]: r for r in load_streams()}
+    for stage in STAGES:
+        if args.only_missing and stage in streams:
+            continue
+        before = os.getloadavg()[0]
+        rec = check_stage(stage, timeout=args.timeout, cwd=ROOT)
+        streams[stage] = {**rec, "load": [round(before, 2), round(os.getloadavg()[0], 2)]}
+        print(f"{stage:16} {rec['result']:14} {rec['seconds']:7.1f} s", flush=True)
+        write(list(rows.values()), list(streams.values()))
     return 0
 
 

@@ -17,6 +17,9 @@ What is checked here, and why each can fail:
 - synthesis: the netlists of ``synth_ecp5`` (with the DSP register packing) and of
   ``synth_xilinx -family xc4v`` proved equal to the RTL, and a netlist synthesised from
   mutated Verilog caught, with the RTL's side agreeing with the golden model;
+- stream stages (SymbiYosys): the block-RAM FIFO (bounded), the job distributor and the
+  result merger (k-induction) keep the stream rule and lose, double or reorder no beat, and
+  a mutant of each gives a counterexample;
 - the command line: exit codes 0, 1, 3 and 2.
 
 Each proof takes seconds (about 60 s in all on a quiet 2-core machine); the durations are
@@ -446,3 +449,31 @@ def test_virtex4_target_proved(unit, fmt, work):
 def test_virtex4_multiplier_mutant_gives_real_counterexample(work):
     res = check_proof("fp-mul", FP24, work, target="virtex4", mutate=_saturate_wrong)
     check_real_counterexample(res, FP24)
+
+
+# -- stream stages of the intersection unit (SymbiYosys) ------------------------------------
+@pytest.mark.parametrize("stage", ["bram-fifo", "job-distributor", "result-merger"])
+def test_stream_stage_checked(stage, work):
+    from raplas_hdl.formal.streams import STAGES, check_stage
+
+    res = check_stage(stage, timeout=TIMEOUT, cwd=work)
+    print(f"{stage}: {res['result']} in {res['seconds']:.1f} s")
+    expected = "proved" if STAGES[stage].mode == "prove" else "bounded"
+    assert res["result"] == expected, res
+    assert [s["proves"].split(":")[0] for s in res["steps"]] == [
+        f"sby {STAGES[stage].mode}", "sby cover"]
+
+
+@pytest.mark.parametrize("stage, mutation", [
+    # the turn moves on a beat offered but not taken: a beat on the wrong lane
+    ("job-distributor", ("assign \\$7  = i__valid & i__ready;", "assign \\$7  = i__valid;")),
+    # the turn moves after every beat, not after a job's last: results out of job order
+    ("result-merger", ("assign \\$8  = \\$7  & job_last;", "assign \\$8  = \\$7 ;")),
+    # a write into a full FIFO is accepted: a word overwritten, lost
+    ("bram-fifo", ("inner_level != 2'h3", "inner_level != 3'h4")),
+])
+def test_stream_stage_mutants_fail(stage, mutation, work):
+    from raplas_hdl.formal.streams import check_stage
+
+    res = check_stage(stage, timeout=TIMEOUT, cwd=work, mutate=lambda t: t.replace(*mutation))
+    assert res["result"] == "counterexample", res

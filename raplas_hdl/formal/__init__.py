@@ -7,7 +7,8 @@ equality to prove), :mod:`.cut` (the significand product as an uninterpreted fun
 :mod:`.solve` (one bounded solver call), :mod:`.control` (stall and reset over the
 transition relation), :mod:`.sby` (their port-level form with SymbiYosys),
 :mod:`.synthesized` (a unit's synthesised netlist, ECP5 or xc4v, as a model to compare with
-its RTL) and :mod:`.prove` (orchestration and results).
+its RTL), :mod:`.streams` (the intersection unit's stream stages with SymbiYosys) and
+:mod:`.prove` (orchestration and results).
 
 Nothing outside this package and the ``prove`` command imports it: the golden model and
 the host never need z3.

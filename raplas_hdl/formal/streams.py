@@ -1,0 +1,393 @@
+"""Stream stages of the intersection unit checked with SymbiYosys: nothing lost, doubled,
+reordered or dropped under any pattern of ``valid``, ``ready`` and reset.
+
+Each stage is emitted by Amaranth exactly as the unit instantiates it (small parameters) and
+wrapped in a formal harness (``read_verilog -formal``) whose inputs are free in every cycle:
+``valid``, ``ready``, ``rst`` and the payloads. The harness assumes what the stage's
+neighbours guarantee (an input stream keeps ``valid`` and its payload until taken: the
+stream rule) and asserts:
+
+- **the stream rule** on every output: a beat offered and not taken is offered again, with
+  the same payload, in the next cycle (unless ``rst``);
+- **conservation and order**, by sequence numbers: the environment numbers the beats it
+  sends (some payload bits are the count of beats accepted so far, as the stages treat
+  their payload as opaque data, except the merger's job-last bit, which stays free), and
+  every beat that leaves must carry the count of beats that left before it: so no beat is
+  lost, doubled or reordered, for runs as long as the counters (wider than the stage's
+  capacity);
+- **what is held**: beats in = beats out + beats held (the FIFO's ``level``, 0 for the
+  combinational lanes), and the stage's own ready/valid read from it;
+- for the FIFO, a bounded latency: a word held and not offered is offered in the next
+  cycle (with the one-cycle read of the block RAM, at most two edges after its write);
+- for the job distributor, that beat ``n`` leaves on lane ``n mod K``; for the result
+  merger, that it takes lane ``k``'s beats only between job-last beats ``k - 1`` and ``k``
+  (mod K).
+
+The stages and what each checks are :data:`STAGES`; :func:`check_stage` runs one
+(k-induction, ``mode prove``; a stage whose induction does not close at the depth given is
+``unknown``, never passed; the block-RAM FIFO is checked to a stated depth instead, since an
+induction over its memory's words needs an invariant the harness cannot state). Cover statements show the checks are not vacuous: each stage
+must reach a full FIFO / a lane change / a transfer while a reset is free.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import signal
+import subprocess
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from .netlist import WORK_DIR
+
+__all__ = ["STAGES", "Stage", "check_stage", "stage_verilog"]
+
+#: The SymbiYosys job: ``{mode}`` prove or cover, ``{depth}``, ``{timeout}``.
+_SBY = """[options]
+mode {mode}
+depth {depth}
+timeout {timeout}
+
+[engines]
+smtbmc z3
+
+[script]
+read_verilog stage.v
+read_verilog -formal check.v
+prep -top stream_check -flatten
+{probes}
+[files]
+stage.v
+check.v
+"""
+
+SEQ = 4         # bits of the sequence numbers of the lanes' checks
+FIFO_SEQ = 3    # the FIFO's words: sequence numbers mod 8, more than the 4 words it holds
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One stream stage and its check.
+
+    Attributes
+    ----------
+    name : str
+    what : str
+        One line: the component and its parameters.
+    depth : int
+        k of the k-induction, or the cycles of the bounded check.
+    mode : str
+        ``prove`` (k-induction) or ``bmc`` (bounded: the property holds for ``depth``
+        cycles from reset, where the induction cannot close without an invariant over the
+        memory's words).
+    probes : tuple
+        ``(wire, internal name)``: an internal register of the stage tied to a wire of the
+        harness after flattening (``connect -set``), so the harness can state the
+        invariant that links it to its own counters (which k-induction needs).
+    """
+
+    name: str
+    what: str
+    depth: int
+    mode: str = "prove"
+    probes: tuple = ()
+
+
+STAGES = {s.name: s for s in (
+    Stage("bram-fifo", "rtl.ram.BlockRAMFIFO(width=3, depth=4): the ray-triangle unit's "
+          "output FIFO in block RAM", 12, "bmc"),
+    Stage("job-distributor", "rtl.unit.lanes.JobDistributor, 3 lanes", 8,
+          probes=(("turn_probe", "dut.turn"),)),
+    Stage("result-merger", "rtl.unit.lanes.ResultMerger, 3 lanes", 8,
+          probes=(("turn_probe", "dut.turn"),)),
+)}
+
+
+def _config(lanes: int):
+    from ..fp import FP16
+    from ..model.memory_image import UnitConfig
+
+    return UnitConfig(fmt=FP16, rows=1, cols=2, tris_per_sphere=2, max_triangles=4,
+                      max_spheres=2, lanes=lanes)
+
+
+def stage_verilog(name: str) -> tuple[str, dict]:
+    """The stage's Verilog (module ``stage``) and its widths."""
+    from amaranth.back import verilog
+
+    if name == "bram-fifo":
+        from ..rtl.ram import BlockRAMFIFO
+
+        f = BlockRAMFIFO(width=FIFO_SEQ, depth=4)
+        ports = [f.w_data, f.w_en, f.w_rdy, f.r_data, f.r_en, f.r_rdy, f.level]
+        return (verilog.convert(f, name="stage", ports=ports, emit_src=False),
+                {"width": FIFO_SEQ, "depth": 4})
+    from ..rtl.unit.lanes import JobDistributor, ResultMerger
+
+    cfg = _config(3)
+    comp = (JobDistributor if name == "job-distributor" else ResultMerger)(cfg)
+    if name == "job-distributor":
+        width = comp.i.payload.shape().size
+    else:
+        width = comp.o.payload.shape().size
+    info = {"lanes": 3, "width": width, "top": cfg.ray_id_bits + 1,
+            "ray_lsb": _ray_lsb(comp) if name == "result-merger" else 0}
+    return verilog.convert(comp, name="stage", emit_src=False), info
+
+
+def _ray_lsb(merger) -> int:
+    """Bit offset of ``ray_id`` in the merger's input payload."""
+    layout = merger.i[0].payload.shape()
+    return layout["ray_id"].offset
+
+
+def _fifo_check(w: int, depth: int) -> str:
+    return f"""module stream_check(input clk, input rst, input w_en, input r_en);
+  reg init = 1;
+  reg [{w - 1}:0] n_in = 0, n_out = 0;
+  wire [{w - 1}:0] w_data = n_in;
+  wire w_rdy, r_rdy;
+  wire [{w - 1}:0] r_data;
+  wire [2:0] level;
+  stage dut(.clk(clk), .rst(rst), .w_data(w_data), .w_en(w_en), .w_rdy(w_rdy),
+            .r_data(r_data), .r_en(r_en), .r_rdy(r_rdy), .level(level));
+  reg offered = 0, waiting = 0;
+  reg [{w - 1}:0] offered_data = 0;
+  always @(posedge clk) begin
+    init <= 0;
+    if (rst) begin n_in <= 0; n_out <= 0; end
+    else begin
+      if (w_en && w_rdy) n_in <= n_in + 1;
+      if (r_en && r_rdy) n_out <= n_out + 1;
+    end
+    offered <= !rst && r_rdy && !r_en;
+    offered_data <= r_data;
+    waiting <= !rst && level != 0 && !r_rdy;
+  end
+  always @* begin
+    if (init) assume(rst);
+    if (!init && !rst) begin
+      assert(level == n_in - n_out);          // beats in = beats out + beats held
+      assert(level <= {depth});
+      if (r_rdy) assert(r_data == n_out);      // in order, none lost or doubled
+      if (r_rdy) assert(level != 0);
+      if (!w_rdy) assert(level >= {depth - 1});
+      if (offered) assert(r_rdy && r_data == offered_data);   // the stream rule
+      if (waiting) assert(r_rdy);              // a held word is offered a cycle later
+      cover(level == {depth});
+      cover(n_out == {depth + 2});
+    end
+  end
+endmodule
+"""
+
+
+def _distributor_check(info: dict) -> str:
+    k, w = info["lanes"], info["width"]
+    outs = "".join(f"  wire o{j}_valid; wire [{w - 1}:0] o{j}_payload;\n" for j in range(k))
+    conns = "".join(f", .o__{j}__valid(o{j}_valid), .o__{j}__payload(o{j}_payload), "
+                    f".o__{j}__ready(o{j}_ready)" for j in range(k))
+    ready_in = "".join(f", input o{j}_ready" for j in range(k))
+    asserts = []
+    for j in range(k):
+        asserts.append(f"""      if (o{j}_valid && o{j}_ready) begin
+        assert(o{j}_payload[{SEQ - 1}:0] == n_out[{SEQ - 1}:0]);   // in order, once
+        assert(lane == {j});                                  // beat n on lane n mod K
+      end
+      if (off{j}) assert(o{j}_valid && o{j}_payload == off{j}_data);
+      cover(o{j}_valid && o{j}_ready && n_out == {k + j});""")
+    regs = "".join(f"  reg off{j} = 0; reg [{w - 1}:0] off{j}_data = 0;\n" for j in range(k))
+    upd = "".join(f"    off{j} <= !rst && o{j}_valid && !o{j}_ready;\n"
+                  f"    off{j}_data <= o{j}_payload;\n" for j in range(k))
+    taken = " + ".join(f"(o{j}_valid && o{j}_ready)" for j in range(k))
+    return f"""module stream_check(input clk, input rst, input i_valid,
+                    input [{w - 1 - SEQ}:0] i_free{ready_in});
+  reg init = 1;
+  reg [{SEQ - 1}:0] n_in = 0, n_out = 0;
+  reg [1:0] lane = 0;
+  wire [1:0] turn_probe;                       // the distributor's turn (connect -set)
+  reg held = 0;
+  reg [{w - 1}:0] held_payload = 0;
+  wire [{w - 1}:0] i_payload = {{i_free, n_in}};
+  wire i_ready;
+{outs}{regs}  stage dut(.clk(clk), .rst(rst), .i__valid(i_valid), .i__payload(i_payload),
+            .i__ready(i_ready){conns});
+  wire [1:0] taken = {taken};
+  always @(posedge clk) begin
+    init <= 0;
+    if (rst) begin n_in <= 0; n_out <= 0; lane <= 0; end
+    else begin
+      if (i_valid && i_ready) n_in <= n_in + 1;
+      n_out <= n_out + taken;
+      if (taken != 0) lane <= (lane == {k - 1}) ? 0 : lane + 1;
+    end
+    held <= !rst && i_valid && !i_ready;
+    held_payload <= i_payload;
+{upd}  end
+  always @* begin
+    if (init) assume(rst);
+    if (!init && held) assume(i_valid && i_payload == held_payload);   // the stream rule
+    if (!init && !rst) begin
+      assert(n_in == n_out);                   // nothing held: beats in = beats out
+      assert(turn_probe == lane);              // its turn is the beat count mod K
+      assert(taken == (i_valid && i_ready));   // one out per one in, never two
+{chr(10).join(asserts)}
+    end
+  end
+endmodule
+"""
+
+
+def _merger_check(info: dict) -> str:
+    k, w, top, lsb = info["lanes"], info["width"], info["top"], info["ray_lsb"]
+    iw = w + 1                                   # the input payload has the job-last bit
+    last = lsb + top                             # its position (the sequence on top)
+    ins = "".join(f", input i{j}_valid, input [{iw - 1 - SEQ}:0] i{j}_free" for j in range(k))
+    wires = "".join(f"  wire i{j}_ready; wire [{iw - 1}:0] i{j}_payload = "
+                    f"{{n_in{j}, i{j}_free}};\n" for j in range(k))
+    conns = "".join(f", .i__{j}__valid(i{j}_valid), .i__{j}__payload(i{j}_payload), "
+                    f".i__{j}__ready(i{j}_ready)" for j in range(k))
+    regs = "".join(f"  reg [{SEQ - 1}:0] n_in{j} = 0; reg held{j} = 0; "
+                   f"reg [{iw - 1}:0] held{j}_payload = 0;\n" for j in range(k))
+    upd = "".join(f"""    if (rst) n_in{j} <= 0; else if (i{j}_valid && i{j}_ready) n_in{j} <= n_in{j} + 1;
+    held{j} <= !rst && i{j}_valid && !i{j}_ready;
+    held{j}_payload <= i{j}_payload;
+""" for j in range(k))
+    assumes = "".join(f"    if (!init && held{j}) assume(i{j}_valid && "
+                      f"i{j}_payload == held{j}_payload);\n" for j in range(k))
+    low = (lambda j: f"        assert(o_payload[{last - 1}:0] == i{j}_payload[{last - 1}:0]);\n"
+           if last > 0 else "")
+    per_lane = []
+    for j in range(k):
+        per_lane.append(f"""      if (i{j}_valid && i{j}_ready) begin
+        assert(turn == {j} && o_valid && o_ready);         // only the turn's lane, as o
+        assert(o_payload[{w - 1}:{w - SEQ}] == n_in{j});       // its beats in order, once
+        assert(o_payload[{w - 1}:{last}] == i{j}_payload[{iw - 1}:{last + 1}]);
+{low(j)}      end""")
+    sel = " : ".join(f"(turn == {j}) ? i{j}_payload[{last}]" for j in range(k)) + " : 1'b0"
+    taken_in = " + ".join(f"(i{j}_valid && i{j}_ready)" for j in range(k))
+    return f"""module stream_check(input clk, input rst, input o_ready{ins});
+  reg init = 1;
+  reg [1:0] turn = 0;
+  wire [1:0] turn_probe;                       // the merger's turn (connect -set)
+  reg [{SEQ - 1}:0] n_out = 0, n_all = 0;
+  reg off = 0;
+  reg [{w - 1}:0] off_data = 0;
+{regs}{wires}  wire o_valid;
+  wire [{w - 1}:0] o_payload;
+  stage dut(.clk(clk), .rst(rst), .o__valid(o_valid), .o__payload(o_payload),
+            .o__ready(o_ready){conns});
+  wire job_last = {sel};
+  wire [1:0] taken_in = {taken_in};
+  always @(posedge clk) begin
+    init <= 0;
+{upd}    if (rst) begin turn <= 0; n_out <= 0; n_all <= 0; end
+    else begin
+      if (o_valid && o_ready) n_out <= n_out + 1;
+      n_all <= n_all + taken_in;
+      if (o_valid && o_ready && job_last) turn <= (turn == {k - 1}) ? 0 : turn + 1;
+    end
+    off <= !rst && o_valid && !o_ready;
+    off_data <= o_payload;
+  end
+  always @* begin
+    if (init) assume(rst);
+{assumes}    if (!init && !rst) begin
+      assert(n_all == n_out);                  // beats in = beats out, none held
+      assert(turn_probe == turn);
+      assert(taken_in == (o_valid && o_ready));
+{chr(10).join(per_lane)}
+      if (off) assert(o_valid && o_payload == off_data);    // the stream rule
+      cover(turn == {k - 1} && o_valid && o_ready && job_last);
+    end
+  end
+endmodule
+"""
+
+
+def _check_text(name: str, info: dict) -> str:
+    if name == "bram-fifo":
+        return _fifo_check(info["width"], info["depth"])
+    if name == "job-distributor":
+        return _distributor_check(info)
+    return _merger_check(info)
+
+
+def _run(work: Path, mode: str, depth: int, timeout: float, probes: tuple
+         ) -> tuple[str, float, str]:
+    from .sby import sby_tools
+
+    tools = sby_tools()
+    job = f"{mode}.sby"
+    tie = "".join(f"connect -set {wire} {inner}\n" for wire, inner in probes)
+    (work / job).write_text(_SBY.format(mode=mode, depth=depth, timeout=max(1, int(timeout)),
+                                        probes=tie))
+    env = {**os.environ, "PATH": tools["z3_dir"] + os.pathsep + os.environ.get("PATH", "")}
+    cmd = [tools["sby"], "-f", job, "--yosys", tools["yosys"], "--smtbmc", tools["smtbmc"],
+           "--witness", tools["witness"]]
+    t0 = time.monotonic()
+    proc = subprocess.Popen(cmd, cwd=work, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    try:
+        out, _ = proc.communicate(timeout=timeout + 30)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        return "unknown", time.monotonic() - t0, f"no answer after {timeout:g} s"
+    seconds = time.monotonic() - t0
+    (work / f"{mode}.log").write_text(out)
+    if "DONE (PASS" in out:
+        return ("proved" if mode != "bmc" else "bounded", seconds,
+                {"prove": "k-induction", "bmc": f"no failure in {depth} cycles from reset",
+                 "cover": "every cover reached"}[mode])
+    if "DONE (FAIL" in out:
+        return "counterexample", seconds, f"trace under {work / mode}"
+    last = [line for line in out.splitlines() if line.strip()][-1:] or ["no output"]
+    return "unknown", seconds, last[0]
+
+
+def check_stage(name: str, *, timeout: float = 300, cwd: Path | str = ".",
+                mutate=None) -> dict:
+    """Check stream stage ``name`` (one of :data:`STAGES`): the properties by k-induction,
+    then the cover statements (non-vacuity).
+
+    Returns ``{"stage", "what", "result", "seconds", "steps", "reason"}``: ``result`` is
+    ``proved`` only if the induction passed and every cover was reached, ``bounded`` for a
+    stage checked to a bounded depth (:attr:`Stage.mode`) whose covers were reached. ``mutate``
+    (``str -> str``) changes the stage's Verilog (negative controls).
+
+    Raises
+    ------
+    ValueError
+        For an unknown stage, or a mutation that leaves the Verilog unchanged.
+    """
+    if name not in STAGES:
+        raise ValueError(f"stage must be one of {', '.join(STAGES)}, not {name!r}")
+    stage = STAGES[name]
+    text, info = stage_verilog(name)
+    if mutate is not None:
+        changed = mutate(text)
+        if changed == text:
+            raise ValueError("the mutation did not change the Verilog")
+        text = changed
+    check = _check_text(name, info)
+    digest = hashlib.sha256((text + check).encode()).hexdigest()[:12]
+    work = Path(cwd) / WORK_DIR / f"stream-{name}-{digest}"
+    work.mkdir(parents=True, exist_ok=True)
+    (work / "stage.v").write_text(text)
+    (work / "check.v").write_text(check)
+    steps, result, reason = [], "proved" if stage.mode == "prove" else "bounded", ""
+    for mode, depth in ((stage.mode, stage.depth), ("cover", stage.depth + 4)):
+        res, secs, detail = _run(work, mode, depth, timeout, stage.probes)
+        steps.append({"proves": f"sby {mode}: {detail}", "result": res,
+                      "seconds": round(secs, 3)})
+        if res not in ("proved", "bounded"):
+            result, reason = res, detail
+            if mode == "cover" and res == "counterexample":
+                result, reason = "unknown", f"a cover was not reached ({detail}): vacuous?"
+            break
+    return {"stage": name, "what": stage.what, "result": result,
+            "seconds": round(sum(s["seconds"] for s in steps), 3), "steps": steps,
+            "reason": reason}
