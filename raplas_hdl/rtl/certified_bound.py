@@ -119,10 +119,12 @@ class BoundOps:
     @property
     def operand_layout(self):
         """What :meth:`rnd_add_operands` hands to :meth:`rnd_add_top`: whether an operand is
-        zero (``opz``), and in chop the larger operand exponent field ``f``."""
+        zero (``opz``), and in chop the larger operand exponent field ``f`` and the term's
+        exponent built on it (``fe``)."""
         fields = {"opz": 1}
         if self.fmt.rounding == "chop":
             fields["f"] = self.fmt.exp_bits
+            fields["fe"] = signed(self.ew)
         return data.StructLayout(fields)
 
     @property
@@ -138,8 +140,13 @@ class BoundOps:
         m.d.comb += r.opz.eq(self.is_zero(a) | self.is_zero(b))
         if self.fmt.rounding == "chop":          # the larger field is the larger exponent
             fa, fb = self._field(a), self._field(b)
-            m.d.comb += r.f.eq(Mux(fa > fb, fa, fb))
+            m.d.comb += [r.f.eq(Mux(fa > fb, fa, fb)), r.fe.eq(self._chop_exp(r.f))]
         return r
+
+    def _chop_exp(self, field):
+        """chop's rounding-term exponent built on an exponent field: ``field - bias - M``."""
+        f = self.fmt
+        return Cat(field, Const(0, 2)).as_signed() - f.bias - f.man_bits
 
     def rnd_add_top(self, m, opnd, s):
         """First half of the rounding term, from :meth:`rnd_add_operands`' record ``opnd``
@@ -151,9 +158,10 @@ class BoundOps:
         r = Signal(self.top_layout, name=f"btop{self._n}")
         sz = self.is_zero(s)
         if f.rounding == "chop":
+            # the compare and the sum's exponent side by side, then one choice (the
+            # operands' exponent came with them)
             fs = self._field(s)
-            top = Mux(~sz & (fs > opnd.f), fs, opnd.f)
-            e = Cat(top, Const(0, 2)).as_signed() - f.bias - f.man_bits
+            e = Mux(~sz & (fs > opnd.f), self._chop_exp(fs), opnd.fe)
         else:
             e = self._ulp_exp(s)
         m.d.comb += [r.e.eq(e), r.sz.eq(sz), r.opz.eq(opnd.opz)]
