@@ -114,6 +114,8 @@ CASES = [
      ["--max-triangles", "1 to 65536"]),
     ("verilog-address-map", "verilog board-top --max-spheres 16384 --tris-per-sphere 4096 "
                             "-o {t}/x.v", ["address map"]),
+    ("verilog-board-certified", "verilog board-top --mode certified -o {t}/x.v",
+     ["register map has modes paper, conservative, not 'certified'"]),
     ("verilog-not-an-integer", "verilog fp-add --stages two -o {t}/x.v",
      ["--stages", "'two' is not an integer"]),
     ("missing-required-option", "verilog fp-add", ["required", "-o"]),

@@ -34,7 +34,7 @@ from amaranth.lib.wiring import In, Out
 
 from ..model.board_map import (ADDR_BITS, BOARD_ID, CMD_BANK_BIT, CMD_COUNT_BITS,
                                CMD_INDIRECT_BIT, CMD_KEEP_ALL_BIT, CONTROL_BITS,
-                               COUNTER_REGS, MAP_VERSION, REGISTERS, RES_INFO_BITS,
+                               COUNTER_REGS, MAP_VERSION, MODE_CODES, REGISTERS, RES_INFO_BITS,
                                RES_RAY_SHIFT, STATUS_BITS, config_words)
 from ..model.memory_image import UnitConfig
 from .intersection import IntersectionUnit
@@ -85,6 +85,10 @@ class BoardTop(wiring.Component):
         if config.fmt.width > 32:
             raise ValueError(f"the board top reads results as 32-bit words; {config.fmt} is "
                              f"{config.fmt.width} bits wide")
+        if config.mode not in MODE_CODES:
+            raise ValueError(f"the board top's register map has modes "
+                             f"{', '.join(MODE_CODES)}, not {config.mode!r} (its result "
+                             "words carry no certified outcome yet)")
         self._cfg = config
         self._multiplier = multiplier
         self._adder = adder
