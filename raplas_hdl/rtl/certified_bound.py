@@ -140,7 +140,9 @@ class BoundOps:
         m.d.comb += r.opz.eq(self.is_zero(a) | self.is_zero(b))
         if self.fmt.rounding == "chop":          # the larger field is the larger exponent
             fa, fb = self._field(a), self._field(b)
-            m.d.comb += [r.f.eq(Mux(fa > fb, fa, fb)), r.fe.eq(self._chop_exp(r.f))]
+            a_larger = fa > fb           # beside both exponents, then one choice
+            m.d.comb += [r.f.eq(Mux(a_larger, fa, fb)),
+                         r.fe.eq(Mux(a_larger, self._chop_exp(fa), self._chop_exp(fb)))]
         return r
 
     def _chop_exp(self, field):
