@@ -73,9 +73,9 @@ from __future__ import annotations
 
 from amaranth.hdl import Cat, Const, Module, Mux, Value
 from amaranth.lib import wiring
-from amaranth.lib.wiring import In, Out
 
-from .fp_common import check_format, leading_zeros, pack, round_significand, unpack
+from .fp_add_front import SPECIALS, adder_ports, classify, keep, order
+from .fp_common import check_format, leading_zeros, pack, round_significand
 from .pipeline import Step, build_pipeline, group_steps, place_registers, wire
 from .step_delays import DEFAULT_STAGES, step_weights
 
@@ -88,9 +88,6 @@ TARGETS = ("generic", "virtex4")
 #: The combinational steps, in datapath order (their weights: :mod:`.step_delays`).
 ADD_STEPS = ("classify", "order", "align", "shift", "add", "lzc", "normalise", "round",
              "pack")
-
-_SPECIALS = ("nan", "invalid", "inf")
-
 
 def _check_target(target, multiplier):
     if multiplier is not None:
@@ -109,12 +106,6 @@ def check_adder(adder) -> str:
     if adder not in TARGETS:
         raise ValueError(f"adder must be one of {', '.join(TARGETS)}, not {adder!r}")
     return adder
-
-
-def adder_ports(width: int) -> dict:
-    """The ports of :class:`FPAdd` (both targets) for ``width``-bit patterns."""
-    return {"a": In(width), "b": In(width), "sub": In(1), "i_valid": In(1), "en": In(1),
-            "o": Out(width), "flags": Out(3), "o_valid": Out(1)}
 
 
 def add_weights(fmt) -> list[int]:
@@ -236,43 +227,10 @@ class FPAdd(wiring.Component):
 
     # -- combinational steps -----------------------------------------------------------
     def _step_classify(self, m, v):
-        fmt = self._fmt
-        ua, ub = unpack(fmt, v["a"]), unpack(fmt, v["b"])
-        sign_b = ub.sign ^ v["sub"]
-        both_inf = ua.is_inf & ub.is_inf
-        eff_sub = ua.sign ^ sign_b
-        any_nan = ua.is_nan | ub.is_nan
-        return {
-            "sign_a": ua.sign, "sign_b": sign_b, "exp_a": ua.exp, "exp_b": ub.exp,
-            "sig_a": ua.sig, "sig_b": ub.sig,
-            # the magnitude order and both exponent differences side by side: ``order``
-            # picks one difference, so no subtraction waits for the comparison. The raw
-            # patterns are compared (no zeroing of a denormal's fraction in front of the
-            # carry chain): they order as the magnitudes do except between two zero-valued
-            # patterns, where either order gives the same sum
-            "swap": v["b"][:fmt.width - 1] > v["a"][:fmt.width - 1],
-            "diff_ab": (ua.exp - ub.exp)[:fmt.exp_bits],
-            "diff_ba": (ub.exp - ua.exp)[:fmt.exp_bits],
-            "zero_sign": ua.sign & sign_b,
-            "eff_sub": eff_sub,
-            "nan": any_nan | (both_inf & eff_sub),
-            "invalid": ~any_nan & both_inf & eff_sub,
-            "inf": ua.is_inf | ub.is_inf,
-        }
+        return classify(self._fmt, m, v)
 
     def _step_order(self, m, v):
-        swap = wire(m, v["swap"], "swap")
-        return {"sign_x": Mux(swap, v["sign_b"], v["sign_a"]),
-                **_keep(v, "zero_sign", "eff_sub"),
-                "exp_x": Mux(swap, v["exp_b"], v["exp_a"]),
-                "sig_x": Mux(swap, v["sig_b"], v["sig_a"]),
-                "sig_y": Mux(swap, v["sig_a"], v["sig_b"]),
-                "diff": Mux(swap, v["diff_ba"], v["diff_ab"]),
-                **_keep(v, *_SPECIALS)}
-
-    def _step_unpack(self, m, v):
-        """``classify`` then ``order`` in one step (the DSP48 adder's first step)."""
-        return FPAdd._step_order(self, m, FPAdd._step_classify(self, m, v))
+        return order(m, v)
 
     def _step_align(self, m, v):
         # the shift by the difference's multiple of 4 (clamped to the width, which shifts
@@ -282,7 +240,7 @@ class FPAdd(wiring.Component):
         amount = Value.cast(v["diff"])
         clamped = wire(m, Mux(amount > width, width, amount), "clamped")
         wide = Cat(Const(0, width), Const(0, 2), v["sig_y"]) >> Cat(Const(0, 2), clamped[2:])
-        return {**_keep(v, "sign_x", "zero_sign", "eff_sub", "exp_x", "sig_x", *_SPECIALS),
+        return {**keep(v, "sign_x", "zero_sign", "eff_sub", "exp_x", "sig_x", *SPECIALS),
                 "wide": wide[:2 * width], "fine": clamped[:2]}
 
     def _step_shift(self, m, v):
@@ -291,7 +249,7 @@ class FPAdd(wiring.Component):
         shifted, sticky = wide[width:2 * width], wide[:width] != 0
         if self._fmt.rounding == "chop":
             shifted, sticky = Cat(Const(0, 2), shifted[2:]), Const(0, 1)
-        return {**_keep(v, "sign_x", "zero_sign", "eff_sub", "exp_x", "sig_x", *_SPECIALS),
+        return {**keep(v, "sign_x", "zero_sign", "eff_sub", "exp_x", "sig_x", *SPECIALS),
                 "sig_y": shifted, "sticky": sticky}
 
     def _step_add(self, m, v):
@@ -302,25 +260,25 @@ class FPAdd(wiring.Component):
         y = Value.cast(v["sig_y"])
         y = Cat(y ^ sub.replicate(len(y)), sub.replicate(width - len(y)))
         total = x + y + (sub & ~v["sticky"])
-        return {**_keep(v, "sign_x", "zero_sign", "exp_x", "sticky", *_SPECIALS),
+        return {**keep(v, "sign_x", "zero_sign", "exp_x", "sticky", *SPECIALS),
                 "sum": total[:width]}
 
     def _step_lzc(self, m, v):
         count, zero = leading_zeros(v["sum"])
-        return {**_keep(v, "sign_x", "zero_sign", "exp_x", "sticky", "sum", *_SPECIALS),
+        return {**keep(v, "sign_x", "zero_sign", "exp_x", "sticky", "sum", *SPECIALS),
                 "lzc": count, "zero": zero}
 
     def _step_normalise(self, m, v):
         width = self._fmt.man_bits + 4
         norm = (v["sum"] << v["lzc"])[:width]
-        return {**_keep(v, "sign_x", "zero_sign", "zero", *_SPECIALS),
+        return {**keep(v, "sign_x", "zero_sign", "zero", *SPECIALS),
                 "sig": norm[3:], "guard": norm[2],
                 "sticky": norm[:2].any() | v["sticky"],
                 "exp": v["exp_x"] + 1 - v["lzc"]}
 
     def _step_round(self, m, v):
         sig, exp = round_significand(self._fmt, v["sig"], v["exp"], v["guard"], v["sticky"])
-        return {**_keep(v, "sign_x", "zero_sign", "zero", *_SPECIALS),
+        return {**keep(v, "sign_x", "zero_sign", "zero", *SPECIALS),
                 "sig": sig, "exp": exp}
 
     def _step_pack(self, m, v):
@@ -345,8 +303,4 @@ class FPAdd(wiring.Component):
         m.d.comb += [self.o.eq(out["bits"]), self.flags.eq(out["flags"]),
                      self.o_valid.eq(valid)]
         return m
-
-
-def _keep(v, *names):
-    return {name: v[name] for name in names}
 

@@ -69,7 +69,7 @@ from amaranth.hdl import Cat, Const, Module, Mux
 from amaranth.lib import wiring
 
 from .dsp48 import LIMB, dsp48
-from .fp_add import FPAdd, adder_ports
+from .fp_add_front import adder_ports, classify_and_order
 from .fp_common import check_format, leading_zeros, pack
 from .pipeline import Step, build_pipeline, delay, wire
 
@@ -140,7 +140,7 @@ class FPAddDSP48(wiring.Component):
     # -- combinational steps -----------------------------------------------------------
     def _step_unpack(self, m, v):
         # The generic adder's classification and ordering, unchanged (one definition).
-        return FPAdd._step_unpack(self, m, v)
+        return classify_and_order(self._fmt, m, v)
 
     def _step_operands(self, m, v):
         """DSP #1 operands: ``A`` (y, maybe pre-shifted), ``B`` (one-hot), ``C``, carry-in."""
