@@ -121,3 +121,19 @@ def test_rewritten_page_keeps_the_place_and_route_block():
     newer = block.replace("| a | 1 |", "| a | 2 |")
     assert carry_block(newer, got) == got.replace("| a | 1 |", "| a | 2 |")
     assert carry_block("# Page without a block\n", fresh) == fresh
+
+
+def test_rewritten_page_keeps_the_sections_it_does_not_write():
+    """The sections written by another command (``--capacity``) or by hand, after the
+    generated ones, survive a rewrite; the generated ones are replaced."""
+    from raplas_hdl.synth.report import carry_sections
+
+    old = ("# Page\n\n## Units\n\nold units\n\n## Capacity per configuration\n\ncap 1\n\n"
+           "### ECP5\n\necp\n\n## Is 2x met?\n\nno\n")
+    fresh = "# Page\n\n## Units\n\nnew units\n"
+    got = carry_sections(old, fresh)
+    assert "new units" in got and "old units" not in got
+    assert got.index("## Capacity per configuration") < got.index("### ECP5") \
+        < got.index("## Is 2x met?")
+    assert got.count("## Units") == 1 and "cap 1" in got and got.endswith("no\n")
+    assert carry_sections(got, got) == got

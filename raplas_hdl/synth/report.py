@@ -570,7 +570,8 @@ def write_report(report: dict, md_path=None, json_path=None, *, command=None) ->
         p.parent.mkdir(parents=True, exist_ok=True)
         text = render_markdown(report, command=command)
         if p.exists():
-            text = carry_block(p.read_text(), text)
+            old = p.read_text()
+            text = carry_sections(old, carry_block(old, text))
         p.write_text(text)
         written.append(p)
     return written
@@ -579,6 +580,19 @@ def write_report(report: dict, md_path=None, json_path=None, *, command=None) ->
 #: The block of the page that ``benchmarks/bench_pnr.py`` writes (the clock beside the
 #: paper's, from place and route): kept when the page is rewritten.
 PNR_BEGIN, PNR_END = "<!-- pnr-clock:begin -->", "<!-- pnr-clock:end -->"
+
+
+def carry_sections(old: str, new: str) -> str:
+    """``new`` followed by every ``## `` section of ``old`` whose heading ``new`` lacks, in
+    ``old``'s order: the sections other commands write into the page (``bench_synth.py
+    --capacity``) or that are written by hand survive a rewrite of the generated ones."""
+    parts = ("\n" + old).split("\n## ")[1:]
+    kept = [part for part in parts
+            if "\n## " + part.split("\n", 1)[0] + "\n" not in "\n" + new]
+    if not kept:
+        return new
+    return new.rstrip("\n") + "\n\n" + "\n".join("## " + part.rstrip("\n") + "\n"
+                                                for part in kept)
 
 
 def carry_block(old: str, new: str) -> str:
