@@ -29,7 +29,7 @@ from pathlib import Path
 from ..fp.format import FPFormat
 from .netlist import WORK_DIR, mutated_verilog
 
-__all__ = ["sby_tools", "wrapper", "run_sby", "SBY_FILE"]
+__all__ = ["sby_tools", "wrapper", "run_sby", "run_job", "SBY_FILE"]
 
 #: The SymbiYosys job; ``{timeout}`` in seconds, ``{depth}`` the latency plus 3 (a base
 #: case long enough for a valid input to reach the output).
@@ -120,7 +120,7 @@ def run_sby(unit: str, fmt: FPFormat, stages: int, *, timeout: float = 300,
     ``result`` is ``proved`` (PASS), ``counterexample`` (FAIL; ``detail`` names the trace
     file) or ``unknown`` (timeout or an error; ``detail`` says which).
     """
-    tools = sby_tools()
+    sby_tools()             # FileNotFoundError naming a missing tool, before any work
     top = unit.replace("-", "_")
     text, latency = mutated_verilog(unit, fmt, stages, top, mutate)
     digest = hashlib.sha256(text.encode()).hexdigest()[:12]
@@ -130,8 +130,24 @@ def run_sby(unit: str, fmt: FPFormat, stages: int, *, timeout: float = 300,
     (work / "check.v").write_text(wrapper(unit, fmt, top))
     job = SBY_FILE.format(timeout=max(1, int(timeout)), depth=latency + 3)
     (work / "control.sby").write_text(job)
+    status, seconds, out = run_job(work, "control.sby", timeout)
+    if status == "timeout":
+        return "unknown", seconds, f"no answer after {timeout:g} s"
+    (work / "sby.log").write_text(out)
+    if status == "pass":
+        return "proved", seconds, "k-induction"
+    if status == "fail":
+        return "counterexample", seconds, f"trace under {work / 'control'}"
+    return "unknown", seconds, out
+
+
+def run_job(work: Path, job: str, timeout: float) -> tuple[str, float, str]:
+    """Run the SymbiYosys job file ``job`` in ``work``, killed with the solvers it started
+    ``timeout + 30`` s on. Returns ``(status, seconds, output)``: ``status`` is ``pass``,
+    ``fail``, ``timeout`` or ``error`` (then ``output`` is its last line)."""
+    tools = sby_tools()
     env = {**os.environ, "PATH": tools["z3_dir"] + os.pathsep + os.environ.get("PATH", "")}
-    cmd = [tools["sby"], "-f", "control.sby", "--yosys", tools["yosys"],
+    cmd = [tools["sby"], "-f", job, "--yosys", tools["yosys"],
            "--smtbmc", tools["smtbmc"], "--witness", tools["witness"]]
     t0 = time.monotonic()
     proc = subprocess.Popen(cmd, cwd=work, env=env, stdout=subprocess.PIPE,
@@ -141,12 +157,11 @@ def run_sby(unit: str, fmt: FPFormat, stages: int, *, timeout: float = 300,
     except subprocess.TimeoutExpired:
         os.killpg(proc.pid, signal.SIGKILL)     # sby and the solvers it started
         proc.communicate()
-        return "unknown", time.monotonic() - t0, f"no answer after {timeout:g} s"
+        return "timeout", time.monotonic() - t0, ""
     seconds = time.monotonic() - t0
-    (work / "sby.log").write_text(out)
     if "DONE (PASS" in out:
-        return "proved", seconds, "k-induction"
+        return "pass", seconds, out
     if "DONE (FAIL" in out:
-        return "counterexample", seconds, f"trace under {work / 'control'}"
+        return "fail", seconds, out
     last = [line for line in out.splitlines() if line.strip()][-1:] or ["no output"]
-    return "unknown", seconds, last[0]
+    return "error", seconds, last[0]

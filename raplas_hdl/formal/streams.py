@@ -33,10 +33,6 @@ must reach a full FIFO / a lane change / a transfer while a reset is free.
 from __future__ import annotations
 
 import hashlib
-import os
-import signal
-import subprocess
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -317,35 +313,23 @@ def _check_text(name: str, info: dict) -> str:
 
 def _run(work: Path, mode: str, depth: int, timeout: float, probes: tuple
          ) -> tuple[str, float, str]:
-    from .sby import sby_tools
+    from .sby import run_job
 
-    tools = sby_tools()
     job = f"{mode}.sby"
     tie = "".join(f"connect -set {wire} {inner}\n" for wire, inner in probes)
     (work / job).write_text(_SBY.format(mode=mode, depth=depth, timeout=max(1, int(timeout)),
                                         probes=tie))
-    env = {**os.environ, "PATH": tools["z3_dir"] + os.pathsep + os.environ.get("PATH", "")}
-    cmd = [tools["sby"], "-f", job, "--yosys", tools["yosys"], "--smtbmc", tools["smtbmc"],
-           "--witness", tools["witness"]]
-    t0 = time.monotonic()
-    proc = subprocess.Popen(cmd, cwd=work, env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, start_new_session=True)
-    try:
-        out, _ = proc.communicate(timeout=timeout + 30)
-    except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.communicate()
-        return "unknown", time.monotonic() - t0, f"no answer after {timeout:g} s"
-    seconds = time.monotonic() - t0
+    status, seconds, out = run_job(work, job, timeout)
+    if status == "timeout":
+        return "unknown", seconds, f"no answer after {timeout:g} s"
     (work / f"{mode}.log").write_text(out)
-    if "DONE (PASS" in out:
+    if status == "pass":
         return ("proved" if mode != "bmc" else "bounded", seconds,
                 {"prove": "k-induction", "bmc": f"no failure in {depth} cycles from reset",
                  "cover": "every cover reached"}[mode])
-    if "DONE (FAIL" in out:
+    if status == "fail":
         return "counterexample", seconds, f"trace under {work / mode}"
-    last = [line for line in out.splitlines() if line.strip()][-1:] or ["no output"]
-    return "unknown", seconds, last[0]
+    return "unknown", seconds, out
 
 
 def check_stage(name: str, *, timeout: float = 300, cwd: Path | str = ".",
