@@ -360,9 +360,9 @@ def render(runs: list) -> str:
             "(107.9-109.9), rne 104.5 MHz (97.7-105.6). In chop the rounding term's first "
             "half ran from the sum's register through the exponent compare, the choice "
             "and the subtraction of the bias into the term's register (10.2 ns, 98.0 MHz "
-            "on seed 1); now the exponent built on the operands' larger field comes with "
-            "them, the one built on the sum's is formed beside the compare, and one "
-            "choice follows the chains.", "",
+            "on seed 1); now the term's exponent is formed from each operand's field and "
+            "from the sum's beside the compares, and one choice follows the chains: chop "
+            "102.6 MHz (99.2-105.1; latency 45, 15,534 LUT4, 24,688 FF).", "",
             "**The certified whole unit** (26,537 LUT4 and 5,735 CCU2C, 36,354 FF: its "
             "bounds double the ray-triangle unit) did not finish routing with nextpnr's "
             "default router: router1 was still at 194-249 overused wires after 220,000 "
