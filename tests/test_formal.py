@@ -17,8 +17,8 @@ What is checked here, and why each can fail:
 - synthesis: the netlists of ``synth_ecp5`` (with the DSP register packing) and of
   ``synth_xilinx -family xc4v`` proved equal to the RTL, and a netlist synthesised from
   mutated Verilog caught, with the RTL's side agreeing with the golden model;
-- stream stages (SymbiYosys): the block-RAM FIFO (bounded), the job distributor and the
-  result merger (k-induction) keep the stream rule and lose, double or reorder no beat, and
+- stream stages (SymbiYosys): the block-RAM FIFO and Amaranth's SyncFIFOBuffered
+  (bounded), the job distributor and the result merger (k-induction) keep the stream rule and lose, double or reorder no beat, and
   a mutant of each gives a counterexample;
 - the command line: exit codes 0, 1, 3 and 2.
 
@@ -452,7 +452,8 @@ def test_virtex4_multiplier_mutant_gives_real_counterexample(work):
 
 
 # -- stream stages of the intersection unit (SymbiYosys) ------------------------------------
-@pytest.mark.parametrize("stage", ["bram-fifo", "job-distributor", "result-merger"])
+@pytest.mark.parametrize("stage", ["bram-fifo", "sync-fifo-buffered", "job-distributor",
+                                   "result-merger"])
 def test_stream_stage_checked(stage, work):
     from raplas_hdl.formal.streams import STAGES, check_stage
 
@@ -471,6 +472,7 @@ def test_stream_stage_checked(stage, work):
     ("result-merger", ("assign \\$8  = \\$7  & job_last;", "assign \\$8  = \\$7 ;")),
     # a write into a full FIFO is accepted: a word overwritten, lost
     ("bram-fifo", ("inner_level != 2'h3", "inner_level != 3'h4")),
+    ("sync-fifo-buffered", ("inner_level != 2'h3", "inner_level != 3'h4")),
 ])
 def test_stream_stage_mutants_fail(stage, mutation, work):
     from raplas_hdl.formal.streams import check_stage

@@ -94,6 +94,8 @@ class Stage:
 STAGES = {s.name: s for s in (
     Stage("bram-fifo", "rtl.ram.BlockRAMFIFO(width=3, depth=4): the ray-triangle unit's "
           "output FIFO in block RAM", 12, "bmc"),
+    Stage("sync-fifo-buffered", "amaranth.lib.fifo.SyncFIFOBuffered(width=3, depth=4): the "
+          "unit's job, pair, result and sphere FIFOs", 12, "bmc"),
     Stage("job-distributor", "rtl.unit.lanes.JobDistributor, 3 lanes", 8,
           probes=(("turn_probe", "dut.turn"),)),
     Stage("result-merger", "rtl.unit.lanes.ResultMerger, 3 lanes", 8,
@@ -113,10 +115,13 @@ def stage_verilog(name: str) -> tuple[str, dict]:
     """The stage's Verilog (module ``stage``) and its widths."""
     from amaranth.back import verilog
 
-    if name == "bram-fifo":
+    if name in ("bram-fifo", "sync-fifo-buffered"):
+        from amaranth.lib.fifo import SyncFIFOBuffered
+
         from ..rtl.ram import BlockRAMFIFO
 
-        f = BlockRAMFIFO(width=FIFO_SEQ, depth=4)
+        cls = BlockRAMFIFO if name == "bram-fifo" else SyncFIFOBuffered
+        f = cls(width=FIFO_SEQ, depth=4)
         ports = [f.w_data, f.w_en, f.w_rdy, f.r_data, f.r_en, f.r_rdy, f.level]
         return (verilog.convert(f, name="stage", ports=ports, emit_src=False),
                 {"width": FIFO_SEQ, "depth": 4})
@@ -304,7 +309,7 @@ endmodule
 
 
 def _check_text(name: str, info: dict) -> str:
-    if name == "bram-fifo":
+    if name in ("bram-fifo", "sync-fifo-buffered"):
         return _fifo_check(info["width"], info["depth"])
     if name == "job-distributor":
         return _distributor_check(info)
