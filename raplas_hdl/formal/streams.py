@@ -25,8 +25,8 @@ stream rule) and asserts:
 
 The stages and what each checks are :data:`STAGES`; :func:`check_stage` runs one
 (k-induction, ``mode prove``; a stage whose induction does not close at the depth given is
-``unknown``, never passed; the block-RAM FIFO is checked to a stated depth instead, since an
-induction over its memory's words needs an invariant the harness cannot state). Cover statements show the checks are not vacuous: each stage
+``unknown``, never passed; the two FIFOs are checked to a stated depth instead, since an
+induction over their memory's words needs an invariant the harness cannot state). Cover statements show the checks are not vacuous: each stage
 must reach a full FIFO / a lane change / a transfer while a reset is free.
 """
 
