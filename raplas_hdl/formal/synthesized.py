@@ -35,7 +35,7 @@ import hashlib
 import subprocess
 from pathlib import Path
 
-from .netlist import Netlist, _yosys_version
+from .netlist import Netlist, yosys_version
 
 __all__ = ["FLOWS", "synthesized", "FLATTEN"]
 
@@ -95,7 +95,7 @@ def synthesized(net: Netlist, flow: str, *, timeout: float = 600) -> Netlist:
         raise ValueError(f"flow must be one of {', '.join(FLOWS)}, not {flow!r}")
     name = f"{net.top}_{flow}"
     digest = hashlib.sha256("\n".join([net.verilog, FLATTEN, _MODELS[flow],
-                                       _yosys_version()]).encode()).hexdigest()[:12]
+                                       yosys_version()]).encode()).hexdigest()[:12]
     work = net.workdir / f"{flow}-{digest}"
     work.mkdir(parents=True, exist_ok=True)
     smt = work / "net.smt2"
