@@ -16,8 +16,8 @@ operators and chop's rounding term come in two halves, so that a caller can put 
 between them (each half a few short carry chains, to meet the FP units' clock):
 
 - ``add = add_sum(align(a, b))``: exponent differences, both orders' shifts side by side,
-  and the larger exponent plus 0, 1 and 2 | significand sum, rounding up, the exponent
-  chosen;
+  and the larger exponent plus 0, 1 and 2 | the significand sum plus 0, 1 and 2 side by
+  side, the rounded sum and the exponent chosen;
 - ``mul = mul_round(mul_product(a, b))``: the partial-product sum and the exponent sum
   plus 0, 1 and 2 | rounding up, the exponent chosen;
 - ``rnd_add = rnd_add_finish(rnd_add_top(rnd_add_operands(a, b), s))``: what the term
@@ -231,13 +231,17 @@ class BoundOps:
     def add_sum(self, m, x):
         """Second half of a bound sum, from :meth:`align`'s record ``x``."""
         k = self.k
-        s = Signal(k + 2, name=f"bs{self._n}")
-        m.d.comb += s.eq(Cat(x.f, Const(1, 1)) + x.lo)
-        big = s[k + 1]
-        mant = Mux(big, s[1:], s[:k + 1])
-        rup = Mux(big, s[0] | x.sticky, x.sticky)
-        mr = Signal(k + 2, name=f"bmr{self._n}")
-        m.d.comb += mr.eq(mant + rup)
+        # the significand sum ``s`` and ``s + 1``, ``s + 2`` side by side (three short carry
+        # chains in parallel, not the sum's chain and then the round-up's): rounded up,
+        # the sum is one of them, or one of them halved (``s >= 2**(k+1)``)
+        n = self._n
+        s0, s1, s2 = (Signal(k + 3, name=f"bs{c}_{n}") for c in range(3))
+        a = Cat(x.f, Const(1, 1))
+        m.d.comb += [s0.eq(a + x.lo), s1.eq(a + x.lo + 1), s2.eq(a + x.lo + 2)]
+        big = s0[k + 1]
+        mr = Signal(k + 2, name=f"bmr{n}")
+        m.d.comb += mr.eq(Mux(big, Mux(s0[0], s1[1:], Mux(x.sticky, s2[1:], s0[1:])),
+                              Mux(x.sticky, s1, s0)))
         carry = mr[k + 1]
         both = self._new(m, "add", 0, self._bump(x, big, carry), Mux(carry, 0, mr[:k]))
         r = Signal(self.layout, name=f"bsum{self._n}")

@@ -22,7 +22,9 @@ The unit is its stages, components of :mod:`raplas_hdl.rtl.unit` joined by strea
 4. :class:`~raplas_hdl.rtl.unit.selector.PairSelector`: the ray iterator and the enable
    lookup, masks -> jobs (one enabled ray of one sphere) -> a 4-deep job FIFO;
 5. :class:`~raplas_hdl.rtl.unit.fetch.RecordFetch`: the triangle expander and the record
-   fetch, jobs -> pairs -> the pair FIFO (``fifo_depth``);
+   fetch, jobs -> pairs -> the pair FIFO (``fifo_depth``; a
+   :class:`~raplas_hdl.rtl.unit.credit_fifo.CreditFIFO`, as the feeder's sphere FIFO: the
+   writer's credits make room, so a write does not wait on the FIFO's level);
 6. :class:`~raplas_hdl.rtl.ray_triangle.RayTriangleUnit`: pairs -> results;
 7. a 3-deep result FIFO (a register slice: the ray-triangle unit's FIFO reads into its
    registers, not through the framing into the counters' adders, a path of 10.6 ns placed
@@ -51,7 +53,9 @@ streams and the drain rule (when the host may write which memory) are in
 ``docs/intersection-unit.md``.
 
 Counters (32 bits, wrap around, zeroed by ``clear``): ``cycles`` (cycles while a run is
-outstanding), ``spheres`` and ``plane_tests`` (counted into the feeder's sphere FIFO),
+outstanding: ``busy``, from a count of runs that takes the ``cmd`` and last-beat handshakes
+a cycle late and adds them back, so that the feeder's ``cmd.ready`` never reaches its
+carry chain), ``spheres`` and ``plane_tests`` (counted into the feeder's sphere FIFO),
 ``pairs_issued`` (at the ray-triangle input), ``pairs_skipped`` (disabled rays), ``hits``,
 and ``overflow``, ``underflow``, ``invalid``: the operations that raised the event, summed
 over the issued pairs (the ray-triangle unit counts them per pair, up to 34, beside the ORed
@@ -69,6 +73,7 @@ from ..model.memory_image import UnitConfig
 from ..model.records import CMD, COUNTERS, result_record
 from .ram import SyncRAM
 from .records import struct_layout
+from .unit.credit_fifo import CreditFIFO
 from .unit.feeder import SphereFeeder
 from .unit.fetch import RecordFetch
 from .unit.framing import EventCounters, ResultFraming
@@ -356,12 +361,18 @@ class IntersectionUnit(wiring.Component):
                                    + cfg.lanes * lane_slots
                                    + RESULT_FIFO_DEPTH + OUT_FIFO_DEPTH + RUN_FIFO_DEPTH
                                    + 16))
-        started = self.cmd.valid & self.cmd.ready
-        finished = self.o.valid & self.o.ready & self.o.payload.last
-        m.d.sync += outstanding.eq(outstanding + started - finished)
+        # ``outstanding`` lags a cycle: the handshakes that change it are registered first
+        # (``cmd.ready`` comes from the feeder's state, which sits far from this counter),
+        # and ``busy`` adds them back, so it is the unlagged count's ``!= 0``
+        started, finished = Signal(), Signal()
+        m.d.sync += [started.eq(self.cmd.valid & self.cmd.ready),
+                     finished.eq(self.o.valid & self.o.ready & self.o.payload.last),
+                     outstanding.eq(outstanding + started - finished)]
+        now = Mux(finished, Mux(started, outstanding != 0, outstanding != 1),
+                  started | (outstanding != 0))
         issued = [u.i.valid & u.i.ready & ~u.i.payload.ray_id[cfg.ray_id_bits] for u in rtus]
         inc = events.inc
-        m.d.comb += [self.busy.eq(outstanding != 0), inc.cycles.eq(self.busy),
+        m.d.comb += [self.busy.eq(now), inc.cycles.eq(self.busy),
                      inc.spheres.eq(feeder.spheres),
                      inc.plane_tests.eq(Mux(feeder.spheres, cfg.n_planes, 0)),
                      inc.pairs_issued.eq(sum(issued[1:], issued[0])),
@@ -378,7 +389,9 @@ class IntersectionUnit(wiring.Component):
         cfg = self._cfg
         job_fifo = SyncFIFOBuffered(width=job_layout(cfg).size, depth=JOB_FIFO_DEPTH)
         fetch = RecordFetch(cfg, depth=cfg.fifo_depth, job_last=job_last)
-        pair_fifo = SyncFIFOBuffered(width=fetch.o.payload.shape().size, depth=cfg.fifo_depth)
+        # the fetch writes on its credits: a FIFO that takes every write (no level -> write
+        # enable -> level loop)
+        pair_fifo = CreditFIFO(width=fetch.o.payload.shape().size, depth=cfg.fifo_depth)
         m.submodules["job_fifo" + suffix] = job_fifo
         m.submodules["fetch" + suffix] = fetch
         m.submodules["pair_fifo" + suffix] = pair_fifo

@@ -36,10 +36,12 @@ that accepts a pair on
 Back-pressure: the pipeline never stalls (its clock enable is tied high). Every accepted
 pair will land in the output FIFO, whose depth is ``latency + 1``; a credit counter counts the
 pairs accepted and not yet taken from ``o``, and ``i.ready`` is high while it is below the
-FIFO depth, so the FIFO can never overflow. ``i.ready`` is a function of that counter
-register only: there is no combinational path from ``o.ready`` into the pipeline or to
-``i.ready``. With ``o.ready`` held high the unit takes one pair per clock indefinitely.
-Results leave in the order the pairs came in.
+FIFO depth, so the FIFO can never overflow. ``i.ready`` is a function of registers only:
+there is no combinational path from ``o.ready`` into the pipeline, to ``i.ready`` or into the
+counter's adder (a take from ``o`` is registered and subtracted a cycle later, and
+``i.ready`` allows for it, so the handshakes are those of the plain counter). With
+``o.ready`` held high the unit takes one pair per clock indefinitely. Results leave in the
+order the pairs came in.
 
 **Delay lines in SRL16E.** With ``adder="virtex4"`` the schedule is 45 cycles deep and the
 operand, ID and count delay lines hold most of the unit's flip-flops (about 7,200 of 11,200
@@ -527,16 +529,22 @@ class RayTriangleUnit(wiring.Component):
         fifo_cls = BlockRAMFIFO if self._bram_fifo else SyncFIFO
         fifo = m.submodules.fifo = fifo_cls(width=len(self.o.payload.as_value()),
                                             depth=self.fifo_depth)
-        credits = Signal(range(self.fifo_depth + 1))
+        # credits in use, kept as ``held = in use + took``: ``took`` is the last cycle's
+        # take from ``o``, registered, so that ``o.ready`` (from whatever the unit feeds,
+        # maybe far across the chip) reaches only a flip-flop, never the counter's carry
+        # chain; ``i.ready`` is the same function of the true count as it would be
+        # unregistered, so every handshake happens on the same cycle
+        held = Signal(range(self.fifo_depth + 2))
+        took = Signal()
         accept = Signal()
         m.d.comb += [
-            self.i.ready.eq(credits < self.fifo_depth),
+            self.i.ready.eq(Mux(took, held <= self.fifo_depth, held < self.fifo_depth)),
             accept.eq(self.i.valid & self.i.ready),
             self.o.valid.eq(fifo.r_rdy),
             fifo.r_en.eq(self.o.ready),
             self.o.payload.eq(fifo.r_data),
         ]
-        m.d.sync += credits.eq(credits + accept - (fifo.r_rdy & self.o.ready))
+        m.d.sync += [took.eq(fifo.r_rdy & self.o.ready), held.eq(held + accept - took)]
         # event counts: per event, the number of the pair's operations that raised it,
         # summed along the pipeline as the operations finish (each running sum only as
         # wide as the operations finished so far need); the OR flags follow from them

@@ -18,12 +18,12 @@ from __future__ import annotations
 
 from amaranth.hdl import Module, Mux, Signal
 from amaranth.lib import data, stream, wiring
-from amaranth.lib.fifo import SyncFIFOBuffered
 from amaranth.lib.wiring import In, Out
 
 from ...model.memory_image import UnitConfig
 from ...model.records import PLANE
 from ..records import struct_layout
+from .credit_fifo import CreditFIFO
 from .memories import read_ports
 from .streams import cmd_layout, sphere_layout, tag_layout
 
@@ -91,8 +91,8 @@ class SphereFeeder(wiring.Component):
         fs = Signal(data.StructLayout({"v": 1, "tag": tag}))
         f2 = Signal(data.StructLayout({"v": 1, "tag": tag}))
         f3 = Signal(data.StructLayout({"v": 1, "tag": tag, "c": 3 * w, "r": w}))
-        m.submodules.fifo = fifo = SyncFIFOBuffered(width=self.o.payload.shape().size,
-                                                    depth=SPHERE_FIFO_DEPTH)
+        m.submodules.fifo = fifo = CreditFIFO(width=self.o.payload.shape().size,
+                                              depth=SPHERE_FIFO_DEPTH)
         # credits: free sphere FIFO entries not yet claimed by a started sphere
         credit = Signal(range(SPHERE_FIFO_DEPTH + 1), init=SPHERE_FIFO_DEPTH)
         freed = Signal()
@@ -176,7 +176,8 @@ class SphereFeeder(wiring.Component):
                      f2.v.eq(fs.v), f2.tag.eq(fs.tag),
                      f3.v.eq(f2.v), f3.tag.eq(f2.tag), f3.c.eq(self.sphere.data[:3 * w]),
                      f3.r.eq(self.sphere.data[3 * w:4 * w])]
-        # the credits leave the FIFO room for every started sphere (w_rdy is then always 1)
+        # the credits leave the FIFO room for every started sphere: the FIFO takes every
+        # write (:mod:`.credit_fifo`)
         fifo_in = data.View(self.o.payload.shape(), fifo.w_stream.payload)
         m.d.comb += [fifo.w_stream.valid.eq(f3.v), fifo_in.id.eq(f3.tag),
                      fifo_in.c.eq(f3.c), fifo_in.r.eq(f3.r),
