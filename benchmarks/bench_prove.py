@@ -25,6 +25,7 @@ Usage::
 
     python benchmarks/bench_prove.py [--timeout 300] [--formats FP16 FP24 ...]
                                      [--only-missing]
+    python benchmarks/bench_prove.py --stages credit-fifo sync-fifo-buffered
 """
 
 from __future__ import annotations
@@ -156,9 +157,12 @@ def main(argv=None) -> int:
     p.add_argument("--formats", nargs="+", default=list(PRESETS), help="default: all presets")
     p.add_argument("--only-missing", action="store_true",
                    help="skip the rows proofs.json already has")
+    p.add_argument("--stages", nargs="+", choices=list(STAGES), default=None,
+                   help="check only these stream stages (no FP proof)")
     args = p.parse_args(argv)
     rows = {key(r): r for r in load()}
-    for unit, name, rnd, stages, method, target in plan(args.formats):
+    for unit, name, rnd, stages, method, target in ([] if args.stages else
+                                                     plan(args.formats)):
         fmt = PRESETS[name].with_rounding(rnd)
         k = (unit, name, rnd, stages, method or UNITS[unit][1], target)
         if args.only_missing and k in rows:
@@ -172,7 +176,7 @@ def main(argv=None) -> int:
               f"{res.seconds:7.1f} s  load {rec['load']}", flush=True)
         write(list(rows.values()))
     streams = {r["stage"]: r for r in load_streams()}
-    for stage in STAGES:
+    for stage in args.stages or STAGES:
         if args.only_missing and stage in streams:
             continue
         before = os.getloadavg()[0]

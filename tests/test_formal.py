@@ -453,8 +453,8 @@ def test_virtex4_multiplier_mutant_gives_real_counterexample(work):
 
 
 # -- stream stages of the intersection unit (SymbiYosys) ------------------------------------
-@pytest.mark.parametrize("stage", ["bram-fifo", "sync-fifo-buffered", "job-distributor",
-                                   "result-merger"])
+@pytest.mark.parametrize("stage", ["bram-fifo", "sync-fifo-buffered", "credit-fifo",
+                                   "job-distributor", "result-merger"])
 def test_stream_stage_checked(stage, work):
     from raplas_hdl.formal.streams import STAGES, check_stage
 
@@ -474,6 +474,9 @@ def test_stream_stage_checked(stage, work):
     # a write into a full FIFO is accepted: a word overwritten, lost
     ("bram-fifo", ("inner_level != 2'h3", "inner_level != 3'h4")),
     ("sync-fifo-buffered", ("inner_level != 2'h3", "inner_level != 3'h4")),
+    # the FIFO reports room an entry early: the writers' credits no longer find it
+    ("credit-fifo", ("w_stream__ready = inner_level != 2'h3", "w_stream__ready = inner_level "
+                                                              "!= 2'h2")),
 ])
 def test_stream_stage_mutants_fail(stage, mutation, work):
     from raplas_hdl.formal.streams import check_stage

@@ -19,6 +19,11 @@ stream rule) and asserts:
   combinational lanes), and the stage's own ready/valid read from it;
 - for the FIFO, a bounded latency: a word held and not offered is offered in the next
   cycle (with the one-cycle read of the block RAM, at most two edges after its write);
+- for the FIFO written on credits (:class:`~raplas_hdl.rtl.unit.credit_fifo.CreditFIFO`,
+  which takes every write), an environment that holds the writers' credits (``depth`` at
+  reset, one spent per write, one back a cycle after each read) and no other assumption on
+  its writes; the harness asserts that every write then finds a free entry (``w_rdy``), the
+  premise of taking it unchecked, besides all of the above;
 - for the job distributor, that beat ``n`` leaves on lane ``n mod K``; for the result
   merger, that it takes lane ``k``'s beats only between job-last beats ``k - 1`` and ``k``
   (mod K).
@@ -97,7 +102,9 @@ STAGES = {s.name: s for s in (
     Stage("bram-fifo", "rtl.ram.BlockRAMFIFO(width=3, depth=4): the ray-triangle unit's "
           "output FIFO in block RAM", 12, "bmc"),
     Stage("sync-fifo-buffered", "amaranth.lib.fifo.SyncFIFOBuffered(width=3, depth=4): the "
-          "unit's job, pair, result and sphere FIFOs", 12, "bmc"),
+          "unit's job and result FIFOs", 12, "bmc"),
+    Stage("credit-fifo", "rtl.unit.credit_fifo.CreditFIFO(width=3, depth=4) behind a writer "
+          "with credits: the unit's pair and sphere FIFOs", 12, "bmc"),
     Stage("job-distributor", "rtl.unit.lanes.JobDistributor, 3 lanes", 8,
           probes=(("turn_probe", "dut.turn"),)),
     Stage("result-merger", "rtl.unit.lanes.ResultMerger, 3 lanes", 8,
@@ -127,6 +134,12 @@ def stage_verilog(name: str) -> tuple[str, dict]:
         ports = [f.w_data, f.w_en, f.w_rdy, f.r_data, f.r_en, f.r_rdy, f.level]
         return (verilog.convert(f, name="stage", ports=ports, emit_src=False),
                 {"width": FIFO_SEQ, "depth": 4})
+    if name == "credit-fifo":
+        from ..rtl.unit.credit_fifo import CreditFIFO
+
+        f = CreditFIFO(width=FIFO_SEQ, depth=4)
+        return (verilog.convert(f, name="stage", emit_src=False),
+                {"width": FIFO_SEQ, "depth": 4, "credits": True})
     from ..rtl.unit.lanes import JobDistributor, ResultMerger
 
     cfg = _config(3)
@@ -146,7 +159,28 @@ def _ray_lsb(merger) -> int:
     return layout["ray_id"].offset
 
 
-def _fifo_check(w: int, depth: int) -> str:
+def _fifo_check(w: int, depth: int, credits: bool = False) -> str:
+    if credits:        # CreditFIFO's stream ports; the writer holds credits
+        dut = ("stage dut(.clk(clk), .rst(rst), .w_stream__payload(w_data), "
+               ".w_stream__valid(w_en), .w_stream__ready(w_rdy),\n"
+               "            .r_stream__payload(r_data), .r_stream__ready(r_en), "
+               ".r_stream__valid(r_rdy), .level(level));")
+        env = f"""  reg [2:0] credit = {depth};
+  reg freed = 0;
+  always @(posedge clk) begin
+    if (rst) begin credit <= {depth}; freed <= 0; end
+    else begin credit <= credit - w_en + freed; freed <= r_en && r_rdy; end
+  end
+"""
+        rules = """    if (!init && !rst) assume(!w_en || credit != 0);   // a write spends a credit
+"""
+        premise = """      if (w_en) assert(w_rdy);                // the credits made room
+"""
+    else:
+        dut = ("stage dut(.clk(clk), .rst(rst), .w_data(w_data), .w_en(w_en), "
+               ".w_rdy(w_rdy),\n"
+               "            .r_data(r_data), .r_en(r_en), .r_rdy(r_rdy), .level(level));")
+        env = rules = premise = ""
     return f"""module stream_check(input clk, input rst, input w_en, input r_en);
   reg init = 1;
   reg [{w - 1}:0] n_in = 0, n_out = 0;
@@ -154,8 +188,8 @@ def _fifo_check(w: int, depth: int) -> str:
   wire w_rdy, r_rdy;
   wire [{w - 1}:0] r_data;
   wire [2:0] level;
-  stage dut(.clk(clk), .rst(rst), .w_data(w_data), .w_en(w_en), .w_rdy(w_rdy),
-            .r_data(r_data), .r_en(r_en), .r_rdy(r_rdy), .level(level));
+  {dut}
+{env}
   reg offered = 0, waiting = 0;
   reg [{w - 1}:0] offered_data = 0;
   always @(posedge clk) begin
@@ -171,8 +205,8 @@ def _fifo_check(w: int, depth: int) -> str:
   end
   always @* begin
     if (init) assume(rst);
-    if (!init && !rst) begin
-      assert(level == n_in - n_out);          // beats in = beats out + beats held
+{rules}    if (!init && !rst) begin
+{premise}      assert(level == n_in - n_out);          // beats in = beats out + beats held
       assert(level <= {depth});
       if (r_rdy) assert(r_data == n_out);      // in order, none lost or doubled
       if (r_rdy) assert(level != 0);
@@ -312,8 +346,8 @@ endmodule
 
 
 def _check_text(name: str, info: dict) -> str:
-    if name in ("bram-fifo", "sync-fifo-buffered"):
-        return _fifo_check(info["width"], info["depth"])
+    if name in ("bram-fifo", "sync-fifo-buffered", "credit-fifo"):
+        return _fifo_check(info["width"], info["depth"], info.get("credits", False))
     if name == "job-distributor":
         return _distributor_check(info)
     return _merger_check(info)
