@@ -124,11 +124,11 @@ def speed_row(name, o, d, tri):
     """Pairs per CPU-second (and wall second) of paper mode and of the certified mode one
     pair at a time and a block at a time, on ``(o, d, tri)`` in format ``name``."""
     from raplas_hdl.fp.format import parse_format
-    from raplas_hdl.model.ray_triangle import _vec
+    from raplas_hdl.model.ray_triangle import operand_array
 
     fmt = parse_format(name)
     arrs, _ = _encoded(o, d, tri, fmt)
-    vec = [_vec(a, fmt, "x") for a in arrs]
+    vec = [operand_array(a, fmt, "x") for a in arrs]
     runs = {"paper": lambda: intersect(*arrs, fmt, mode="paper"),
             "certified_pairs": lambda: certified.intersect_certified(vec, fmt, block=False),
             "certified_block": lambda: certified.intersect_certified(vec, fmt, block=True)}

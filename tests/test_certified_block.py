@@ -13,7 +13,7 @@ from raplas_hdl.host.backends import ModelBackend
 from raplas_hdl.host.render import RenderSettings, render
 from raplas_hdl.host.scenes import get_scene
 from raplas_hdl.model import certified
-from raplas_hdl.model.ray_triangle import BLOCK, vpair
+from raplas_hdl.model.pair_kernels import BLOCK, vpair
 from raplas_hdl.verify import stress
 
 KEYS = ("o", "d", "v0", "e1", "e2", "n")

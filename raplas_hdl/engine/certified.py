@@ -48,7 +48,7 @@ from ..fp.numba_cache import drop_stale_cache
 from .exact_filter import HIT, MISS, filter_pair
 from .kernels import N_COUNTERS, plane_masks, sphere_rays
 from ..model.certified import block_pairs, pairs_one
-from ..model.ray_triangle import _loop as pairs_loop
+from ..model.ray_triangle import pairs_loop
 
 drop_stale_cache(__file__)
 

@@ -4,7 +4,7 @@ Two arithmetics run the same passes:
 
 - the **model**: the bit-exact plane test and ray-triangle pair of the golden models
   (:func:`raplas_hdl.model.plane_sphere.plane_keep`; the pairs a block at a time through
-  :func:`raplas_hdl.model.ray_triangle.vpair`, lanes that leave the common case through
+  :func:`raplas_hdl.model.pair_kernels.vpair`, lanes that leave the common case through
   :func:`~raplas_hdl.model.ray_triangle.pair_fast` and
   :func:`~raplas_hdl.model.ray_triangle.pair_exact`), the format, the rounding and the mode
   as runtime arguments: compiled once for all of them and cached on disk by numba;
@@ -46,7 +46,8 @@ from numba import njit
 from ..fp.kernels import decode_k, rmode_code
 from ..fp.numba_cache import drop_stale_cache
 from ..model.plane_sphere import plane_keep
-from ..model.ray_triangle import BLOCK, _margins, hit_common, pair_exact, pair_fast, vpair
+from ..model.pair_kernels import BLOCK, vpair
+from ..model.ray_triangle import hit_common, pair_exact, pair_fast, pair_margins
 
 drop_stale_cache(__file__)
 
@@ -207,7 +208,7 @@ def _flush(g, w, lane_b, lane_ray, lane_di, lane_tid, lane_u, n, ro, rd, v0, e1,
         if w[11, k] >= 0:
             margins = (zero, zero, zero, zero, zero)
             if cons:
-                margins = _margins(ro, b, rd, di, v0, e1, e2, nn, tid, e, m, mc)
+                margins = pair_margins(ro, b, rd, di, v0, e1, e2, nn, tid, e, m, mc)
             h = hit_common(w[3, k], w[0, k], w[1, k], w[2, k], w[4, k], w[5, k], cons,
                             margins, sb)
             tp = np.uint32(w[0, k])

@@ -18,9 +18,9 @@ from pathlib import Path
 __all__ = ["drop_stale_cache"]
 
 #: Files (relative to the package) whose compiled functions other files' kernels call.
-_SOURCES = ("fp/kernels.py", "fp/format.py", "fp/fast.py", "model/ray_triangle.py",
-            "model/plane_sphere.py", "model/conservative.py", "engine/kernels.py",
-            "engine/exact_filter.py", "model/certified.py")
+_SOURCES = ("fp/kernels.py", "fp/format.py", "fp/fast.py", "model/pair_kernels.py",
+            "model/ray_triangle.py", "model/plane_sphere.py", "model/conservative.py",
+            "engine/kernels.py", "engine/exact_filter.py", "model/certified.py")
 
 
 def _kernel_digest() -> str:

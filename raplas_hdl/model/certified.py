@@ -63,7 +63,7 @@ from ..fp.format import FLAG_OVERFLOW, FPFormat, check_format
 from ..fp.kernels import neg_k, rmode_code
 from ..fp.numba_cache import drop_stale_cache
 from ..parallel import run_chunks
-from .ray_triangle import BLOCK, _add, _mul, _sub, _tally, store, vpair
+from .pair_kernels import BLOCK, add_op, mul_op, store, sub_op, tally, vpair
 
 __all__ = ["VARIANTS", "DEFAULT_VARIANT", "N_OPS", "MAX_EXP_BITS", "certified_constants",
            "certified_domain", "check_certified_format", "pair_certified", "intersect_certified",
@@ -316,29 +316,29 @@ def _add_b(a, ba, b, bb, s, e, m, r, k):
 @njit(cache=True)
 def _dot_b(a0, a1, a2, ba0, ba1, ba2, b0, b1, b2, bb0, bb1, bb2, e, m, r, j, k):
     """``(a0*b0 + a1*b1) + a2*b2`` with its bound; returns ``(pattern, bound, counts)``."""
-    p0, f0 = _mul(a0, b0, e, m, r)
-    p1, f1 = _mul(a1, b1, e, m, r)
-    p2, f2 = _mul(a2, b2, e, m, r)
-    s01, f3 = _add(p0, p1, e, m, r)
-    s, f4 = _add(s01, p2, e, m, r)
+    p0, f0 = mul_op(a0, b0, e, m, r)
+    p1, f1 = mul_op(a1, b1, e, m, r)
+    p2, f2 = mul_op(a2, b2, e, m, r)
+    s01, f3 = add_op(p0, p1, e, m, r)
+    s, f4 = add_op(s01, p2, e, m, r)
     q0 = _mul_b(a0, ba0, b0, bb0, p0, e, m, r, j, k)
     q1 = _mul_b(a1, ba1, b1, bb1, p1, e, m, r, j, k)
     q2 = _mul_b(a2, ba2, b2, bb2, p2, e, m, r, j, k)
     g01 = _add_b(p0, q0, p1, q1, s01, e, m, r, k)
     g = _add_b(s01, g01, p2, q2, s, e, m, r, k)
-    return s, g, _tally(f0) + _tally(f1) + _tally(f2) + _tally(f3) + _tally(f4)
+    return s, g, tally(f0) + tally(f1) + tally(f2) + tally(f3) + tally(f4)
 
 
 @njit(cache=True)
 def _cross_b(a, b, bb, c, d, bd, e, m, r, j, k):
     """``a*b - c*d`` with ``a, c`` exact (D) and its bound."""
-    p, f0 = _mul(a, b, e, m, r)
-    q, f1 = _mul(c, d, e, m, r)
-    x, f2 = _sub(p, q, e, m, r)
+    p, f0 = mul_op(a, b, e, m, r)
+    q, f1 = mul_op(c, d, e, m, r)
+    x, f2 = sub_op(p, q, e, m, r)
     gp = _mul_b(b, bb, a, 0.0, p, e, m, r, j, k)
     gq = _mul_b(d, bd, c, 0.0, q, e, m, r, j, k)
     g = _add_b(p, gp, neg_k(q, e, m), gq, x, e, m, r, k)
-    return x, g, _tally(f0) + _tally(f1) + _tally(f2)
+    return x, g, tally(f0) + tally(f1) + tally(f2)
 
 
 @njit(cache=True)
@@ -362,9 +362,9 @@ def pair_full(o, oi, d, di, v0, e1, e2, nn, ti, e, m, r, cc):
         b1[c] = _input_bound(e1[ti, c], e, m, r, True, k)
         b2[c] = _input_bound(e2[ti, c], e, m, r, True, k)
         bn[c] = _input_bound(nn[ti, c], e, m, r, True, k)
-    tx, f0 = _sub(v0[ti, 0], o[oi, 0], e, m, r)
-    ty, f1 = _sub(v0[ti, 1], o[oi, 1], e, m, r)
-    tz, f2 = _sub(v0[ti, 2], o[oi, 2], e, m, r)
+    tx, f0 = sub_op(v0[ti, 0], o[oi, 0], e, m, r)
+    ty, f1 = sub_op(v0[ti, 1], o[oi, 1], e, m, r)
+    tz, f2 = sub_op(v0[ti, 2], o[oi, 2], e, m, r)
     gtx = _add_b(v0[ti, 0], bv[0], neg_k(o[oi, 0], e, m), 0.0, tx, e, m, r, k)
     gty = _add_b(v0[ti, 1], bv[1], neg_k(o[oi, 1], e, m), 0.0, ty, e, m, r, k)
     gtz = _add_b(v0[ti, 2], bv[2], neg_k(o[oi, 2], e, m), 0.0, tz, e, m, r, k)
@@ -380,12 +380,12 @@ def pair_full(o, oi, d, di, v0, e1, e2, nn, ti, e, m, r, cc):
     up = neg_k(qe2, e, m)
     vp, gv, c9 = _dot_b(e1[ti, 0], e1[ti, 1], e1[ti, 2], b1[0], b1[1], b1[2],
                         qx, qy, qz, gqx, gqy, gqz, e, m, r, j, k)
-    s, f10 = _add(up, vp, e, m, r)
+    s, f10 = add_op(up, vp, e, m, r)
     gs = _add_b(up, gu, vp, gv, s, e, m, r, k)
-    w, f11 = _sub(det, s, e, m, r)
+    w, f11 = sub_op(det, s, e, m, r)
     gw = _add_b(det, gdet, neg_k(s, e, m), gs, w, e, m, r, k)
-    cnt = (_tally(f0) + _tally(f1) + _tally(f2) + c3 + c4 + c5 + c6 + c7 + c8 + c9
-           + _tally(f10) + _tally(f11))
+    cnt = (tally(f0) + tally(f1) + tally(f2) + c3 + c4 + c5 + c6 + c7 + c8 + c9
+           + tally(f10) + tally(f11))
     emf = (np.int64(1) << e) - 1
     special = False
     for x in (det, tp, up, vp, w):
@@ -427,7 +427,7 @@ def pair_certified(o, oi, d, di, v0, e1, e2, nn, ti, e, m, r, cc):
 
 
 # -- pairs a block at a time ------------------------------------------------------------------
-# The values of a block come from :func:`~raplas_hdl.model.ray_triangle.vpair` (the 34
+# The values of a block come from :func:`~raplas_hdl.model.pair_kernels.vpair` (the 34
 # operations as vector loops of the common case, BLOCK lanes); their bounds from the loops
 # below, one per stage of :func:`pair_full`, over every lane. In a lane whose operations all
 # took the common case every operand and result is a normal number and no flag is raised, so
@@ -534,7 +534,7 @@ def _vcross_b(a, b, bb, c, d, bd, x, out, n, e, m, r, j, k):
 
 @njit(cache=True)
 def vbounds(g, w, gb, n, e, m, r, cc):
-    """The bounds of a block after :func:`~raplas_hdl.model.ray_triangle.vpair` (``g``
+    """The bounds of a block after :func:`~raplas_hdl.model.pair_kernels.vpair` (``g``
     the operands, ``w`` its results, conservative layout), into ``gb``; exact for the lanes
     whose ``w[11]`` is not negative."""
     j = np.int64(cc[1])
@@ -572,7 +572,7 @@ def vbounds(g, w, gb, n, e, m, r, cc):
 def gather(g, q, o, oi, d, di, v0, e1, e2, nn, ti):
     """Lane ``q`` of a block's operands ``g`` (18, BLOCK): ray row ``oi`` of ``o``, ``di``
     of ``d``, triangle row ``ti`` (the layout of
-    :func:`~raplas_hdl.model.ray_triangle.vpair`)."""
+    :func:`~raplas_hdl.model.pair_kernels.vpair`)."""
     g[0:3, q] = o[oi]
     g[3:6, q] = d[di]
     g[6:9, q] = v0[ti]
@@ -601,7 +601,7 @@ def block_pairs(o, d, v0, e1, e2, nn, cc, lane_o, lane_d, lane_t, lo, hi, outc, 
     outputs as :func:`intersect_certified`, the same bits as :func:`pair_full`.
 
     Per block: the operands gathered (:func:`gather`), the values by
-    :func:`~raplas_hdl.model.ray_triangle.vpair`, the bounds by :func:`vbounds`, the
+    :func:`~raplas_hdl.model.pair_kernels.vpair`, the bounds by :func:`vbounds`, the
     outcome of each common-case lane; the other lanes (and every lane of a block with fewer
     than a quarter of its lanes in the common case, where the bounds are skipped) by
     :func:`pair_full`. The one compiled kernel of the block path (each level of compiled

@@ -52,13 +52,15 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..fp.fast import common_add, common_mul, fast_add, fast_mul
+from ..fp.fast import fast_add, fast_mul
 from ..fp.format import FLAG_INVALID, FLAG_OVERFLOW, FLAG_UNDERFLOW, FPFormat, check_format
-from ..fp.kernels import add_int_k, is_nan_k, le_k, lt_k, mul_int_k, neg_k, rmode_code
+from ..fp.kernels import is_nan_k, le_k, lt_k, neg_k, rmode_code
 from ..fp.numba_cache import drop_stale_cache
 from ..parallel import run_chunks
+from .certified import DEFAULT_VARIANT, intersect_certified
 from .conservative import margin_constants, margin_k, margin_table
 from .modes import MODES, check_mode
+from .pair_kernels import BLOCK, add_op, mul_op, store, sub_op, tally, vpair
 
 __all__ = ["EVENTS", "MODES", "N_OPS", "intersect"]
 
@@ -67,55 +69,28 @@ N_OPS = {"paper": 33, "conservative": 34, "certified": 34}
 
 #: The events counted per pair, in the columns of ``event_counts``.
 EVENTS = ("overflow", "underflow", "invalid")
-# _tally packs the flag bits by these values
-assert (FLAG_OVERFLOW, FLAG_UNDERFLOW, FLAG_INVALID) == (1, 2, 4)
 
 
 drop_stale_cache(__file__)
 
 
 @njit(cache=True)
-def _tally(f):
-    """An operation's event flags as packed counts: one byte per event (overflow in bits
-    0-7, underflow 8-15, invalid 16-23), so that sums of up to 255 operations add lanewise."""
-    f = np.int64(f)
-    return (f & 1) | ((f & 2) << 7) | ((f & 4) << 14)
-
-
-@njit(cache=True)
-def _add(a, b, e, m, r):
-    """The reference ``a + b`` (the integer kernel: the same bits as ``add_k``, and one
-    compiled signature for every caller)."""
-    return add_int_k(np.int64(a), np.int64(b), e, m, r)
-
-
-@njit(cache=True)
-def _mul(a, b, e, m, r):
-    return mul_int_k(np.int64(a), np.int64(b), e, m, r)
-
-
-@njit(cache=True)
-def _sub(a, b, e, m, r):
-    return add_int_k(np.int64(a), np.int64(neg_k(np.int64(b), e, m)), e, m, r)
-
-
-@njit(cache=True)
 def _dot(a0, a1, a2, b0, b1, b2, e, m, r):
-    p0, f0 = _mul(a0, b0, e, m, r)
-    p1, f1 = _mul(a1, b1, e, m, r)
-    p2, f2 = _mul(a2, b2, e, m, r)
-    s01, f3 = _add(p0, p1, e, m, r)
-    s, f4 = _add(s01, p2, e, m, r)
-    return s, _tally(f0) + _tally(f1) + _tally(f2) + _tally(f3) + _tally(f4)
+    p0, f0 = mul_op(a0, b0, e, m, r)
+    p1, f1 = mul_op(a1, b1, e, m, r)
+    p2, f2 = mul_op(a2, b2, e, m, r)
+    s01, f3 = add_op(p0, p1, e, m, r)
+    s, f4 = add_op(s01, p2, e, m, r)
+    return s, tally(f0) + tally(f1) + tally(f2) + tally(f3) + tally(f4)
 
 
 @njit(cache=True)
 def _cross_term(a, b, c, d, e, m, r):
     """``a*b - c*d``."""
-    p, f0 = _mul(a, b, e, m, r)
-    q, f1 = _mul(c, d, e, m, r)
-    x, f2 = _sub(p, q, e, m, r)
-    return x, _tally(f0) + _tally(f1) + _tally(f2)
+    p, f0 = mul_op(a, b, e, m, r)
+    q, f1 = mul_op(c, d, e, m, r)
+    x, f2 = sub_op(p, q, e, m, r)
+    return x, tally(f0) + tally(f1) + tally(f2)
 
 
 @njit(cache=True)
@@ -126,7 +101,7 @@ def _field3(x, i, m, emf):
 
 
 @njit(cache=True)
-def _margins(o, oi, d, di, v0, e1, e2, nn, ti, e, m, mc):
+def pair_margins(o, oi, d, di, v0, e1, e2, nn, ti, e, m, mc):
     emf = (np.int64(1) << e) - 1
     return margin_k(_field3(o, oi, m, emf), _field3(d, di, m, emf), _field3(v0, ti, m, emf),
                     _field3(e1, ti, m, emf), _field3(e2, ti, m, emf), _field3(nn, ti, m, emf),
@@ -164,9 +139,9 @@ def pair_exact(o, oi, d, di, v0, e1, e2, nn, ti, e, m, r, cons, mc):
     v', det, counts)``, ``counts`` the packed event counts (overflow in bits 0-7,
     underflow 8-15, invalid 16-23).
     """
-    tx, f0 = _sub(v0[ti, 0], o[oi, 0], e, m, r)
-    ty, f1 = _sub(v0[ti, 1], o[oi, 1], e, m, r)
-    tz, f2 = _sub(v0[ti, 2], o[oi, 2], e, m, r)
+    tx, f0 = sub_op(v0[ti, 0], o[oi, 0], e, m, r)
+    ty, f1 = sub_op(v0[ti, 1], o[oi, 1], e, m, r)
+    tz, f2 = sub_op(v0[ti, 2], o[oi, 2], e, m, r)
     det, c3 = _dot(nn[ti, 0], nn[ti, 1], nn[ti, 2], d[di, 0], d[di, 1], d[di, 2], e, m, r)
     tp, c4 = _dot(nn[ti, 0], nn[ti, 1], nn[ti, 2], tx, ty, tz, e, m, r)
     qx, c5 = _cross_term(d[di, 1], tz, d[di, 2], ty, e, m, r)
@@ -175,18 +150,18 @@ def pair_exact(o, oi, d, di, v0, e1, e2, nn, ti, e, m, r, cons, mc):
     qe2, c8 = _dot(qx, qy, qz, e2[ti, 0], e2[ti, 1], e2[ti, 2], e, m, r)
     up = neg_k(qe2, e, m)
     vp, c9 = _dot(qx, qy, qz, e1[ti, 0], e1[ti, 1], e1[ti, 2], e, m, r)
-    s, f10 = _add(up, vp, e, m, r)
-    cnt = (_tally(f0) + _tally(f1) + _tally(f2) + c3 + c4 + c5 + c6 + c7 + c8 + c9
-           + _tally(f10))
+    s, f10 = add_op(up, vp, e, m, r)
+    cnt = (tally(f0) + tally(f1) + tally(f2) + c3 + c4 + c5 + c6 + c7 + c8 + c9
+           + tally(f10))
     w = np.uint32(0)
     bad = False
     margins = (w, w, w, w, w)
     if cons:
-        w, f11 = _sub(det, s, e, m, r)
-        cnt += _tally(f11)
+        w, f11 = sub_op(det, s, e, m, r)
+        cnt += tally(f11)
         bad = (is_nan_k(det, e, m) or is_nan_k(tp, e, m) or is_nan_k(up, e, m)
                or is_nan_k(vp, e, m) or is_nan_k(w, e, m) or (cnt & 0xFF) != 0)
-        margins = _margins(o, oi, d, di, v0, e1, e2, nn, ti, e, m, mc)
+        margins = pair_margins(o, oi, d, di, v0, e1, e2, nn, ti, e, m, mc)
     h = _decide(det, tp, up, vp, s, w, bad, cons, margins, e, m)
     return h, tp, up, vp, det, cnt
 
@@ -236,85 +211,10 @@ def pair_fast(o, oi, d, di, v0, e1, e2, nn, ti, E, M, R, cons, mc):
         return False, False, z, z, z, z
     margins = (np.uint32(0), np.uint32(0), np.uint32(0), np.uint32(0), np.uint32(0))
     if cons:
-        margins = _margins(o, oi, d, di, v0, e1, e2, nn, ti, E, M, mc)
+        margins = pair_margins(o, oi, d, di, v0, e1, e2, nn, ti, E, M, mc)
     h = _decide(np.uint32(det), np.uint32(tp), np.uint32(up), np.uint32(vp), np.uint32(s),
                 np.uint32(w), np.bool_(False), cons, margins, E, M)
     return True, h, np.uint32(tp), np.uint32(up), np.uint32(vp), np.uint32(det)
-
-
-# -- pairs a block at a time ----------------------------------------------------------------
-# Callers gather BLOCK pairs' operands structure-of-arrays and :func:`vpair` runs each of the
-# 33 (34) operations over the block as one loop of the branch-free common case of
-# :mod:`raplas_hdl.fp.fast` (LLVM vectorises these loops); ``acc`` collects the OR of every
-# intermediate pattern, so a lane with any sentinel (a zero, infinite or NaN operand,
-# overflow, underflow) is recomputed alone, by :func:`pair_fast` (zeros) or
-# :func:`pair_exact` (everything, with the event flags); the other lanes decide with
-# :func:`hit_common`.
-BLOCK = 128
-
-
-@njit(cache=True)
-def _vsub(a, b, out, acc, n, E, M, R):
-    sb = np.int64(1) << (E + M)
-    for k in range(n):
-        r = common_add(a[k], b[k] ^ sb, E, M, R)
-        out[k] = r
-        acc[k] |= r
-
-
-@njit(cache=True)
-def _vdot(a0, a1, a2, b0, b1, b2, out, acc, n, E, M, R):
-    for k in range(n):
-        p0 = common_mul(a0[k], b0[k], E, M, R)
-        p1 = common_mul(a1[k], b1[k], E, M, R)
-        p2 = common_mul(a2[k], b2[k], E, M, R)
-        s = common_add(p0, p1, E, M, R)
-        r = common_add(s, p2, E, M, R)
-        out[k] = r
-        acc[k] |= p0 | p1 | p2 | s | r
-
-
-@njit(cache=True)
-def _vcross(a, b, c, d, out, acc, n, E, M, R):
-    """``a*b - c*d``."""
-    sb = np.int64(1) << (E + M)
-    for k in range(n):
-        p = common_mul(a[k], b[k], E, M, R)
-        q = common_mul(c[k], d[k], E, M, R)
-        r = common_add(p, q ^ sb, E, M, R)
-        out[k] = r
-        acc[k] |= p | q | r
-
-
-@njit(cache=True)
-def vpair(g, w, n, cons, E, M, R):
-    """The pair's operations over a block: ``g`` (18, BLOCK) the operands (O, D, V0, E1,
-    E2, N, three rows each), ``w`` (13, BLOCK) out: t', u', v', det, s, w in rows 0-5, and
-    row 11 the OR of every intermediate (negative: a lane to recompute)."""
-    acc = w[11]
-    for k in range(n):
-        acc[k] = 0
-    tx, ty, tz = w[6], w[7], w[8]
-    _vsub(g[6], g[0], tx, acc, n, E, M, R)
-    _vsub(g[7], g[1], ty, acc, n, E, M, R)
-    _vsub(g[8], g[2], tz, acc, n, E, M, R)
-    det, tp, up, vp, s, ww = w[3], w[0], w[1], w[2], w[4], w[5]
-    _vdot(g[15], g[16], g[17], g[3], g[4], g[5], det, acc, n, E, M, R)
-    _vdot(g[15], g[16], g[17], tx, ty, tz, tp, acc, n, E, M, R)
-    qx, qy, qz = w[9], w[10], w[12]
-    _vcross(g[4], tz, g[5], ty, qx, acc, n, E, M, R)
-    _vcross(g[5], tx, g[3], tz, qy, acc, n, E, M, R)
-    _vcross(g[3], ty, g[4], tx, qz, acc, n, E, M, R)
-    _vdot(qx, qy, qz, g[12], g[13], g[14], up, acc, n, E, M, R)
-    _vdot(qx, qy, qz, g[9], g[10], g[11], vp, acc, n, E, M, R)
-    sb = np.int64(1) << (E + M)
-    for k in range(n):
-        up[k] ^= sb                                            # u' = neg(Q.E2)
-    for k in range(n):
-        s[k] = common_add(up[k], vp[k], E, M, R)               # s = u' + v' (not minus)
-        acc[k] |= s[k]
-    if cons:
-        _vsub(det, s, ww, acc, n, E, M, R)
 
 
 @njit(cache=True)
@@ -346,21 +246,8 @@ def hit_common(det, tp, up, vp, s, ww, cons, margins, sb):
     return (-kmd <= kd and pos) or (kd <= kmd and neg)
 
 
-@njit(cache=True)
-def store(i, tp, up, vp, det, cnt, t_o, u_o, v_o, det_o, cnt_o):
-    """Row ``i`` of the pair outputs: t', u', v', det and the packed event counts unpacked
-    into their three columns."""
-    t_o[i] = tp
-    u_o[i] = up
-    v_o[i] = vp
-    det_o[i] = det
-    cnt_o[i, 0] = cnt & 0xFF
-    cnt_o[i, 1] = (cnt >> 8) & 0xFF
-    cnt_o[i, 2] = (cnt >> 16) & 0xFF
-
-
 @njit(nogil=True, cache=True)
-def _loop(o, d, v0, e1, e2, nn, mc, lo, hi, hit, t_o, u_o, v_o, det_o, cnt_o, e, m, r, cons):
+def pairs_loop(o, d, v0, e1, e2, nn, mc, lo, hi, hit, t_o, u_o, v_o, det_o, cnt_o, e, m, r, cons):
     """Pairs ``lo .. hi-1`` of :func:`intersect`, a block at a time (:func:`vpair`; lanes
     that leave the common case through :func:`pair_fast` and :func:`pair_exact`). The format
     ``(e, m)``, the rounding code ``r`` and the mode ``cons`` are runtime arguments: one
@@ -387,7 +274,7 @@ def _loop(o, d, v0, e1, e2, nn, mc, lo, hi, hit, t_o, u_o, v_o, det_o, cnt_o, e,
             if w[11, k] >= 0:
                 margins = (zero, zero, zero, zero, zero)
                 if cons:
-                    margins = _margins(o, i, d, i, v0, e1, e2, nn, i, e, m, mc)
+                    margins = pair_margins(o, i, d, i, v0, e1, e2, nn, i, e, m, mc)
                 h = hit_common(w[3, k], w[0, k], w[1, k], w[2, k], w[4, k], w[5, k], cons,
                                margins, sb)
                 tp, up, vp, det = (np.uint32(w[0, k]), np.uint32(w[1, k]),
@@ -402,7 +289,7 @@ def _loop(o, d, v0, e1, e2, nn, mc, lo, hi, hit, t_o, u_o, v_o, det_o, cnt_o, e,
             store(i, tp, up, vp, det, cnt, t_o, u_o, v_o, det_o, cnt_o)
 
 
-def _vec(x, fmt, name):
+def operand_array(x, fmt, name):
     a = np.asarray(x)
     if a.ndim != 2 or a.shape[1] != 3:
         raise ValueError(f"{name} must have shape (n, 3), not {a.shape}")
@@ -453,13 +340,12 @@ def intersect(o, d, v0, e1, e2, n, fmt: FPFormat, mode: str = "paper",
     """
     check_format(fmt)
     check_mode(mode)
-    arrs = [_vec(x, fmt, name) for x, name in zip((o, d, v0, e1, e2, n),
+    arrs = [operand_array(x, fmt, name) for x, name in zip((o, d, v0, e1, e2, n),
                                                    ("o", "d", "v0", "e1", "e2", "n"))]
     count = arrs[0].shape[0]
     if any(a.shape[0] != count for a in arrs):
         raise ValueError("o, d, v0, e1, e2 and n must have the same number of rows")
     if mode == "certified":
-        from .certified import DEFAULT_VARIANT, intersect_certified
         res = intersect_certified(arrs, fmt, margin_scale, bound_variant or DEFAULT_VARIANT)
         res["hit"] = res["outcome"] == 1
         res["flags"] = _flags(res["event_counts"])
@@ -474,7 +360,7 @@ def intersect(o, d, v0, e1, e2, n, fmt: FPFormat, mode: str = "paper",
     counts = np.empty((count, 3), dtype=np.uint8)
     key = (np.int64(fmt.exp_bits), np.int64(fmt.man_bits), np.int64(rmode_code(fmt)),
            np.bool_(conservative))
-    run_chunks(count, lambda lo, hi: _loop(*arrs, mc, lo, hi, hit, *outs, counts, *key))
+    run_chunks(count, lambda lo, hi: pairs_loop(*arrs, mc, lo, hi, hit, *outs, counts, *key))
     return {"hit": hit, "t": outs[0], "u": outs[1], "v": outs[2], "det": outs[3],
             "flags": _flags(counts), "event_counts": counts}
 
