@@ -41,7 +41,8 @@ def build_parser() -> Parser:
     parser = Parser(
         prog="raplas-hdl",
         description="RAPLAS ray-tracing intersection accelerator: Verilog generation, "
-                    "bit-exact golden model, co-simulation and rendering.",
+                    "bit-exact golden model, co-simulation, rendering, place and route "
+                    "and proofs.",
         epilog="Every command takes the format as --format FMT (FP24, FP24/rtz, e7m16, "
                "e7m16-rne); sweeps take several. Errors are one line with exit code 2; "
                "--debug shows the traceback.")
