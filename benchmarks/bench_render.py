@@ -61,7 +61,8 @@ from raplas_hdl.host.render import (  # noqa: E402
     render,
     save_png,
 )
-from raplas_hdl.host.scenes import MESHES, get_scene  # noqa: E402
+from raplas_hdl.host.meshes import MESHES  # noqa: E402
+from raplas_hdl.host.scenes import get_scene  # noqa: E402
 from raplas_hdl.model.modes import MODES  # noqa: E402
 
 DEFAULT_MESH = "stanford-bunny"

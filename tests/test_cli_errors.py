@@ -421,7 +421,7 @@ def test_parse_format_spellings(text):
     ("dir.obj", "is a directory"),
 ])
 def test_load_mesh_errors_name_the_file(t, name, needle):
-    from raplas_hdl.host.scenes import load_mesh
+    from raplas_hdl.host.meshes import load_mesh
 
     with pytest.raises(ValueError) as exc:
         load_mesh(t / name)
@@ -548,7 +548,7 @@ def test_campaign_and_ray_triangle_take_the_format_given(tmp_path, monkeypatch):
 
 def test_shipped_meshes_and_procedural_scenes_pass_the_scene_check():
     from raplas_hdl.cli.render import check_scene
-    from raplas_hdl.host import scenes
+    from raplas_hdl.host import meshes, scenes
 
-    for name in [*scenes.SCENES, *getattr(scenes, "MESHES", {})]:
+    for name in [*scenes.SCENES, *meshes.MESHES]:
         check_scene(name)

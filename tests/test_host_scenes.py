@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from raplas_hdl.host.scenes import SCENES, get_scene, load_mesh, mesh_scene
+from raplas_hdl.host.meshes import load_mesh
+from raplas_hdl.host.scenes import SCENES, get_scene, mesh_scene
 
 
 @pytest.mark.parametrize("name", sorted(SCENES))
@@ -88,7 +89,7 @@ def test_missing_mesh_file(tmp_path):
 
 def test_bad_scene_arrays():
     from raplas_hdl.host.camera import Camera
-    from raplas_hdl.host.scenes import AreaLight, Scene
+    from raplas_hdl.host.scene import AreaLight, Scene
 
     cam = Camera((0, 0, 5), (0, 0, 0))
     light = AreaLight((0, 3, 0), (1, 0, 0), (0, 0, 1))
@@ -107,7 +108,7 @@ def test_shipped_meshes_load_by_name():
     licence notes, and load by name."""
     import os
 
-    from raplas_hdl.host.scenes import MESH_DIR, MESHES
+    from raplas_hdl.host.meshes import MESH_DIR, MESHES
 
     assert set(MESHES) == {"stanford-bunny", "teapot", "spot", "suzanne", "stanford-dragon-100k"}
     assert all(os.path.dirname(p) == MESH_DIR for p in MESHES.values())
@@ -121,7 +122,7 @@ def test_shipped_meshes_load_by_name():
 def test_scenes_without_materials_keep_one_shared_material():
     """Backward compatibility: a scene built without a materials table has ``(material,)``
     and material ID 0 on every triangle; ``material_at`` gives its constants per triangle."""
-    from raplas_hdl.host.scenes import Material
+    from raplas_hdl.host.scene import Material
 
     for name in SCENES:
         scene = get_scene(name)
@@ -135,7 +136,7 @@ def test_scenes_without_materials_keep_one_shared_material():
 
 def test_material_ids_are_checked():
     from raplas_hdl.host.camera import Camera
-    from raplas_hdl.host.scenes import AreaLight, Material, Scene
+    from raplas_hdl.host.scene import AreaLight, Material, Scene
 
     cam = Camera((0, 0, 5), (0, 0, 0))
     light = AreaLight((0, 3, 0), (1, 0, 0), (0, 0, 1))

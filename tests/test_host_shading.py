@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from raplas_hdl.host.scenes import AreaLight, Material
+from raplas_hdl.host.scene import AreaLight, Material
 from raplas_hdl.host.shading import nearest_hits, phong, shadow_bundles
 
 

@@ -18,7 +18,9 @@ from raplas_hdl.host.scene_file import (
     override_scene,
     parse_axis,
 )
-from raplas_hdl.host.scenes import MESHES, SCENE_FILES, Material, get_scene, load_mesh
+from raplas_hdl.host.meshes import MESHES, load_mesh
+from raplas_hdl.host.scene import Material
+from raplas_hdl.host.scenes import SCENE_FILES, get_scene
 
 SHOWCASE = SCENE_FILES["showcase"]
 

@@ -16,7 +16,9 @@ from raplas_hdl.host.camera import Camera
 from raplas_hdl.host.exact import float64_intersect
 from raplas_hdl.host.render import RenderSettings, compare, format_summary, render
 from raplas_hdl.host.scene_file import SceneFileError, check_scene_file, load_scene_file
-from raplas_hdl.host.scenes import SCENE_FILES, AreaLight, Material, Scene, _box, _Builder, _quad_grid
+from raplas_hdl.host.meshes import MeshBuilder, box_mesh, quad_grid
+from raplas_hdl.host.scene import AreaLight, Material, Scene
+from raplas_hdl.host.scenes import SCENE_FILES
 from raplas_hdl.host.secondary import perpendicular_axes, reflect, refract
 from raplas_hdl.host.shading import face_normals, phong
 from raplas_hdl.host.tracing import RAY_TYPES
@@ -30,7 +32,7 @@ WALL = Material()
 
 def _scene(parts, camera, light, name="test"):
     """A normalised scene of ``(vertices, faces, colour, material)`` parts."""
-    b, mats, ids = _Builder(), [Material()], []
+    b, mats, ids = MeshBuilder(), [Material()], []
     for v, f, colour, mat in parts:
         b.add(v, f, colour)
         mats.append(mat)
@@ -70,8 +72,8 @@ def mirror_scene():
     # mirror through the origin facing (1, 0, 1): rays along -z reflect towards +x
     s2 = math.sqrt(2.0)
     eu, ev = np.array([0.0, 2.0, 0.0]), np.array([-s2, 0.0, s2])
-    mirror = _quad_grid(-(eu + ev) / 2, eu, ev, 1)
-    wall = _quad_grid((3.0, -3.0, -3.0), (0.0, 0.0, 6.0), (0.0, 6.0, 0.0), 4)   # faces -x
+    mirror = quad_grid(-(eu + ev) / 2, eu, ev, 1)
+    wall = quad_grid((3.0, -3.0, -3.0), (0.0, 0.0, 6.0), (0.0, 6.0, 0.0), 4)   # faces -x
     return _scene([(*mirror, (0.9, 0.9, 0.9), MIRROR), (*wall, (0.8, 0.1, 0.1), WALL)],
                   Camera((0.0, 0.0, 5.0), (0.0, 0.0, 0.0), fov=30.0), _down_light(4.0, z=2.0))
 
@@ -189,8 +191,8 @@ def test_refract_obeys_snell_and_reflect_the_mirror_law():
 
 
 def test_refraction_through_a_slab_hits_the_predicted_back_face():
-    slab = _box((4.0, 4.0, 1.0), None, 2)               # z from -0.5 to 0.5, outward normals
-    floor = _quad_grid((-4.0, -3.0, -4.0), (0.0, 0.0, 8.0), (8.0, 0.0, 0.0), 2)
+    slab = box_mesh((4.0, 4.0, 1.0), None, 2)               # z from -0.5 to 0.5, outward normals
+    floor = quad_grid((-4.0, -3.0, -4.0), (0.0, 0.0, 8.0), (8.0, 0.0, 0.0), 2)
     sc = _scene([(slab.vertices, slab.faces, (0.9, 0.95, 1.0), GLASS),
                  (*floor, (0.6, 0.6, 0.6), WALL)],
                 Camera((2.0, 1.0, 5.0), (0.0, 0.0, 0.0), fov=25.0), _down_light(5.0))
@@ -214,7 +216,7 @@ def test_refraction_through_a_slab_hits_the_predicted_back_face():
 
 
 def test_total_internal_reflection_sends_the_weight_to_the_reflection():
-    box = _box((4.0, 4.0, 4.0), None, 1)
+    box = box_mesh((4.0, 4.0, 4.0), None, 1)
     sc = _scene([(box.vertices, box.faces, (0.9, 0.95, 1.0), GLASS)],
                 Camera((0.0, 0.0, 0.0), (0.0, 0.0, -1.0), fov=110.0),
                 _down_light(1.5, half=0.3))
@@ -245,8 +247,8 @@ def test_total_internal_reflection_sends_the_weight_to_the_reflection():
 # -- ambient occlusion -------------------------------------------------------------------
 
 def test_ambient_occlusion_in_a_corner_and_on_open_floor():
-    floor = _quad_grid((-4.0, 0.0, -4.0), (0.0, 0.0, 8.0), (8.0, 0.0, 0.0), 4)     # faces +y
-    wall = _quad_grid((-4.0, 0.0, -1.0), (8.0, 0.0, 0.0), (0.0, 3.0, 0.0), 2)      # faces +z
+    floor = quad_grid((-4.0, 0.0, -4.0), (0.0, 0.0, 8.0), (8.0, 0.0, 0.0), 4)     # faces +y
+    wall = quad_grid((-4.0, 0.0, -1.0), (8.0, 0.0, 0.0), (0.0, 3.0, 0.0), 2)      # faces +z
     sc = _scene([(*floor, (0.7, 0.7, 0.7), WALL), (*wall, (0.7, 0.7, 0.7), WALL)],
                 Camera((0.0, 3.0, 4.0), (0.0, 0.0, 0.0), fov=50.0), _down_light(3.5, z=1.0))
     s = _settings(ao_rows=3, ao_cols=3, ao_angle=50.0, ao_distance=0.2, record_rays=True,
@@ -291,7 +293,7 @@ def test_ambient_occlusion_in_a_corner_and_on_open_floor():
 # -- every backend ------------------------------------------------------------------------
 
 def test_model_agrees_with_float64_on_every_layer(mirror_scene):
-    slab = _box((1.0, 1.0, 0.5), None, 0)
+    slab = box_mesh((1.0, 1.0, 0.5), None, 0)
     sc = mirror_scene
     mats = list(sc.materials) + [Material(**{**MIRROR.__dict__, "gloss_angle": 5.0}), GLASS]
     glass_v = slab.vertices * sc.scale + np.array([-2.0, 0.0, 3.0])

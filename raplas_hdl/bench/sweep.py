@@ -2,7 +2,7 @@
 
 Axes: formats (FP16, FP20, FP24, FP32 and any extra), roundings (rtz, rne, chop), ray-triangle
 modes (paper, conservative), scenes (the procedural ones, and the meshes shipped with the
-package, :data:`raplas_hdl.host.scenes.MESH_DIR`), bundle sizes, backends (``float64``,
+package, :data:`raplas_hdl.host.meshes.MESH_DIR`), bundle sizes, backends (``float64``,
 ``model``; ``rtl`` on one tiny point on request). The full product is too large for one
 machine, so the points form three grids:
 
@@ -71,7 +71,8 @@ from ..fp import ROUNDINGS, FPFormat, parse_format
 from ..host.backends import COUNTERS, BackendUnavailable, ModelBackend, make_backend
 from ..host.exact import float64_intersect
 from ..host.render import RenderSettings, compare, render
-from ..host.scenes import MESH_DIR, MESH_SUFFIXES, SCENES, get_scene
+from ..host.meshes import MESH_DIR, MESH_SUFFIXES
+from ..host.scenes import SCENES, get_scene
 from ..model.modes import MODES
 from ..host.triangles import make_triangles
 from ..model.conservative import domain

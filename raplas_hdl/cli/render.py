@@ -177,7 +177,7 @@ def _secondary(args) -> dict:
 
 def settings_from_args(args, size, defaults: dict | None = None):
     """The render settings of the options; ``defaults`` (a scene's
-    :attr:`~raplas_hdl.host.scenes.Scene.render_defaults`) under the secondary-ray options."""
+    :attr:`~raplas_hdl.host.scene.Scene.render_defaults`) under the secondary-ray options."""
     from ..host.render import RenderSettings
 
     rows, cols = args.tile
@@ -194,18 +194,18 @@ def check_scene(spec: str, overrides: dict | None = None) -> None:
     """A scene name, a mesh file that exists (its contents are read by the command) or a
     scene file (``.toml``, or a shipped one by name), checked whole with the view
     ``overrides`` (:func:`~raplas_hdl.host.scene_file.check_scene_file`)."""
-    from ..host import scenes
+    from ..host import meshes, scenes
 
     def scene_file(path):
         from ..host.scene_file import check_scene_file
 
         check_scene_file(path, **(overrides or {}))
 
-    if spec in scenes.SCENES or spec in scenes.MESHES:
+    if spec in scenes.SCENES or spec in meshes.MESHES:
         return
     if spec in scenes.SCENE_FILES:
         return scene_file(scenes.SCENE_FILES[spec])
-    suffixes = tuple(scenes.SCENE_SUFFIXES) + tuple(scenes.MESH_SUFFIXES)
+    suffixes = tuple(scenes.SCENE_SUFFIXES) + tuple(meshes.MESH_SUFFIXES)
     p = Path(spec)
     if p.suffix.lower() in suffixes or p.exists():
         if p.is_dir():
@@ -220,7 +220,7 @@ def check_scene(spec: str, overrides: dict | None = None) -> None:
             scene_file(spec)
         return
     raise ValueError(f"unknown scene {spec!r}: use one of "
-                     f"{', '.join([*scenes.SCENES, *scenes.MESHES, *scenes.SCENE_FILES])} "
+                     f"{', '.join([*scenes.SCENES, *meshes.MESHES, *scenes.SCENE_FILES])} "
                      f"or a path to an {'/'.join(s[1:].upper() for s in suffixes)} file")
 
 

@@ -45,7 +45,7 @@ import numpy as np
 
 from .backends import Backend
 from .scene_file import MAX_DEPTH, MAX_SECONDARY_LATTICE
-from .scenes import Scene
+from .scene import Scene
 from .secondary import Tracer, whitted
 from .shading import face_normals, light_hits, phong, shadow_bundles
 from .spheres import build_sphere_tree, unit_margin

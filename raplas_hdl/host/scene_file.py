@@ -39,7 +39,7 @@ eye, ``fov`` outside 0-180 degrees), a light with parallel edges. An error is on
 naming the file, the line (tomllib's own for a syntax error; found in the text for a key)
 and the key: ``scene.toml: line 12: [[mesh]] #2 rotate: must be 3 numbers, not [0, 90]``.
 
-A point light is a small square area light (:class:`~raplas_hdl.host.scenes.AreaLight`
+A point light is a small square area light (:class:`~raplas_hdl.host.scene.AreaLight`
 with ``kind="point"``) centred on the point and facing ``direction`` (default: against
 the camera's up vector, i.e. down): the renderer shades and shadows with a light's
 lattice, so the square's side (``size``, default 1/100 of the meshes' bounding box) sets
@@ -61,20 +61,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .camera import Camera
-from .scenes import (
-    MESH_SUFFIXES,
-    MESHES,
-    AreaLight,
-    Material,
-    Scene,
-    _box,
-    _Builder,
-    _quad_grid,
-    load_mesh,
-)
+from .meshes import MESH_SUFFIXES, MESHES, MeshBuilder, box_mesh, load_mesh, quad_grid
+from .scene import AreaLight, Material, Scene
 
-__all__ = ["MAX_DEPTH", "MAX_SECONDARY_LATTICE", "PRIMITIVES", "SceneFileError", "check_scene_file", "load_scene_file",
-           "mesh_transform", "override_scene", "parse_axis"]
+__all__ = ["MAX_DEPTH", "MAX_SECONDARY_LATTICE", "PRIMITIVES", "SceneFileError",
+           "check_scene_file", "load_scene_file", "mesh_transform", "override_scene",
+           "parse_axis"]
 
 #: Procedural meshes of ``[[mesh]] primitive = ...``: their own keys and defaults.
 PRIMITIVES = {
@@ -596,13 +588,13 @@ def _primitive(kind: str, params: dict):
     import trimesh
 
     if kind == "box":
-        m = _box(params["size"], None, params["subdiv"])
+        m = box_mesh(params["size"], None, params["subdiv"])
         return m.vertices, m.faces
     if kind == "sphere":
         m = trimesh.creation.icosphere(subdivisions=params["subdiv"], radius=params["radius"])
         return m.vertices, m.faces
     sx, sz = params["size"]
-    return _quad_grid((-sx / 2, 0.0, -sz / 2), (0.0, 0.0, sz), (sx, 0.0, 0.0), params["subdiv"])
+    return quad_grid((-sx / 2, 0.0, -sz / 2), (0.0, 0.0, sz), (sx, 0.0, 0.0), params["subdiv"])
 
 
 def _point_light(spec: dict, size: float) -> AreaLight:
@@ -617,7 +609,7 @@ def _point_light(spec: dict, size: float) -> AreaLight:
 
 
 def _build(spec: _SceneSpec) -> Scene:
-    b, ids = _Builder(), []
+    b, ids = MeshBuilder(), []
     for m in spec.meshes:
         if m.source == "primitive":
             verts, faces = _primitive(m.value, m.params)

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .bundles import RayBundle, bundle_geometry
-from .scenes import AreaLight, Material
+from .scene import AreaLight, Material
 
 __all__ = [
     "ShadowPlan",
@@ -121,7 +121,7 @@ def phong(points, normals, albedo, eye, light: AreaLight, material: Material, vi
     light : AreaLight
     material : Material
         Constants shared by every point, or one value per point in each field
-        (:meth:`Scene.material_at <raplas_hdl.host.scenes.Scene.material_at>`).
+        (:meth:`Scene.material_at <raplas_hdl.host.scene.Scene.material_at>`).
     visibility : ndarray (n,)
         Fraction of the light seen (1: unshadowed).
     ambient : ndarray (n,), optional
