@@ -18,8 +18,9 @@ with it. Each task starts with :func:`worker_init` (numba's threads set to 1), i
 executor, so that a shard computes the same bits wherever it runs.
 
 A Dask cluster's workers must run the same versions as the client: on connecting, each
-worker reports the versions of raplas-hdl, numpy, numba and llvmlite, and the campaign's
-shard :data:`~raplas_hdl.verify.campaign.VERSION` (:func:`versions`); any difference, or a
+worker reports the versions of raplas-hdl, numpy, numba and llvmlite (:func:`versions`,
+or what the caller's ``worker_versions`` adds to them, as the stress campaign adds its
+shard format, :func:`raplas_hdl.verify.campaign.worker_versions`); any difference, or a
 worker that cannot import raplas_hdl, is an error before any shard runs.
 
 Nothing here imports Amaranth.
@@ -81,12 +82,10 @@ def _call(fn, item):
 
 
 def versions() -> dict:
-    """What a worker must share with the client for bit-identical shards."""
+    """The package versions a worker must share with the client for bit-identical shards."""
     import importlib.metadata as md
 
-    from .verify.campaign import VERSION
-
-    out = {"campaign_version": VERSION}
+    out = {}
     for pkg in ("raplas-hdl", "numpy", "numba", "llvmlite"):
         try:
             out[pkg] = md.version(pkg)
@@ -191,8 +190,10 @@ class DaskExecutor(Executor):
     kind = "dask"
 
     def __init__(self, scheduler: str | None = None, n_workers: int | None = None,
-                 timeout: float = CONNECT_TIMEOUT):
+                 timeout: float = CONNECT_TIMEOUT,
+                 worker_versions: Callable[[], dict] = versions):
         super().__init__()
+        self.worker_versions = worker_versions
         require_dask("--scheduler" if scheduler else "--dask-workers")
         if (scheduler is None) == (n_workers is None):
             raise ValueError("give either a scheduler address or a number of workers")
@@ -245,10 +246,11 @@ class DaskExecutor(Executor):
         return self.client
 
     def _check_versions(self, mine: dict | None = None):
-        """Every worker reports :func:`versions` equal to ``mine`` (default this process's)."""
-        mine = versions() if mine is None else mine
+        """Every worker reports ``worker_versions()`` equal to ``mine`` (default this
+        process's)."""
+        mine = self.worker_versions() if mine is None else mine
         try:
-            theirs = self.client.run(versions)
+            theirs = self.client.run(self.worker_versions)
         except (ImportError, ModuleNotFoundError) as exc:
             raise ValueError(f"a Dask worker cannot import raplas_hdl ({exc}): install the "
                              f"same raplas-hdl on every worker") from None
@@ -285,13 +287,15 @@ class DaskExecutor(Executor):
 
 
 def make_executor(jobs: int | None = None, scheduler: str | None = None,
-                  dask_workers: int | None = None) -> Executor:
-    """The executor asked for: Dask when ``scheduler`` or ``dask_workers`` is given, else a
-    process pool of ``jobs`` (default ``os.cpu_count()``), or this process when 1."""
+                  dask_workers: int | None = None,
+                  worker_versions: Callable[[], dict] = versions) -> Executor:
+    """The executor asked for: Dask when ``scheduler`` or ``dask_workers`` is given (its
+    workers checked with ``worker_versions``, a module-level function), else a process pool
+    of ``jobs`` (default ``os.cpu_count()``), or this process when 1."""
     if scheduler is not None or dask_workers is not None:
         if jobs is not None:
             raise ValueError("jobs applies to the process pool, not to a Dask cluster")
-        return DaskExecutor(scheduler, dask_workers)
+        return DaskExecutor(scheduler, dask_workers, worker_versions=worker_versions)
     jobs = (os.cpu_count() or 1) if jobs is None else int(jobs)
     if jobs < 1:
         raise ValueError(f"jobs must be at least 1, not {jobs}")
@@ -357,9 +361,10 @@ def check_options(args, conflicts=()) -> None:
         args.scheduler = addr
 
 
-def executor_from_args(args, jobs: int | None = None) -> Executor:
+def executor_from_args(args, jobs: int | None = None,
+                       worker_versions: Callable[[], dict] = versions) -> Executor:
     """The executor the parsed options ask for (:func:`make_executor`)."""
-    return make_executor(jobs, args.scheduler, args.dask_workers)
+    return make_executor(jobs, args.scheduler, args.dask_workers, worker_versions)
 
 
 def command_options(args) -> list[str]:

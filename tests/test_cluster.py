@@ -122,11 +122,22 @@ def test_bench_slice_on_two_dask_workers_equals_one_process(dask_ex):
 
 def test_workers_with_other_versions_are_refused(dask_ex):
     mine = cluster.versions()
-    assert mine["raplas-hdl"] and mine["campaign_version"] == campaign.VERSION
+    assert mine["raplas-hdl"] and mine["numba"]
     dask_ex._check_versions()       # the real workers match
     with pytest.raises(ValueError, match=re.escape(f"other versions: numba {mine['numba']} "
                                                    "(here 0.0)")):
         dask_ex._check_versions({**mine, "numba": "0.0"})
+    # the campaign's executor checks its shard format too, on the workers
+    ours = campaign.worker_versions()
+    assert ours == {**mine, "campaign_version": campaign.VERSION}
+    dask_ex.worker_versions = campaign.worker_versions
+    try:
+        dask_ex._check_versions()
+        with pytest.raises(ValueError, match=re.escape(
+                f"campaign_version {campaign.VERSION} (here {campaign.VERSION + 1})")):
+            dask_ex._check_versions({**ours, "campaign_version": campaign.VERSION + 1})
+    finally:
+        dask_ex.worker_versions = cluster.versions
 
 
 def test_unreachable_scheduler_is_one_clear_error():

@@ -264,7 +264,8 @@ def run_campaign(args) -> int:
     params = args.params
     t0 = time.perf_counter()
     try:
-        with cluster.executor_from_args(args, args.jobs) as executor:
+        with cluster.executor_from_args(args, args.jobs,
+                                        campaign.worker_versions) as executor:
             info = campaign.run_campaign(params, args.shard_dir, max_shards=args.max_shards,
                                          progress=not args.no_progress, executor=executor)
     except KeyboardInterrupt:

@@ -101,10 +101,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..cluster import SerialExecutor, make_executor, versions
 from ..fp.format import ROUNDINGS, FPFormat, parse_format
 from ..model.modes import MODES
 
-__all__ = ["VERSION", "RUN_KEYS", "MODES", "KINDS", "CampaignParams", "Shard", "plan",
+__all__ = ["VERSION", "worker_versions", "RUN_KEYS", "MODES", "KINDS", "CampaignParams", "Shard", "plan",
            "shard_path", "compute_shard", "write_shard", "run_shard", "run_campaign", "merge",
            "markdown", "culling_shard",
            "raytri_shard", "random_bundle", "random_spheres", "adversarial_spheres",
@@ -115,6 +116,12 @@ __all__ = ["VERSION", "RUN_KEYS", "MODES", "KINDS", "CampaignParams", "Shard", "
 RUN_KEYS = ("command", "machine", "date", "run", "cpu_s", "shard_wall_s")
 #: Version of the shard computations: bump it when a change alters any shard's result.
 VERSION = 2
+
+
+def worker_versions() -> dict:
+    """What a Dask worker must share with the client to compute the same shards: the
+    package versions (:func:`raplas_hdl.cluster.versions`) and :data:`VERSION`."""
+    return {**versions(), "campaign_version": VERSION}
 #: Sphere kinds of the culling proof.
 KINDS = ("random", "adversarial")
 #: Bound on ``|O|`` of the culling proof's bundles (scene units), as in the test.
@@ -558,13 +565,11 @@ def run_campaign(params: CampaignParams, out_dir="build/campaign", jobs=None,
         ``shards`` (total), ``reused``, ``run`` (computed now), ``pending`` (still
         missing), ``wall_s``, ``executor`` (where they ran).
     """
-    from ..cluster import SerialExecutor, make_executor
-
     if executor is not None and jobs is not None:
         raise ValueError("give jobs or an executor, not both")
     own = executor is None
     if own:
-        executor = make_executor(jobs)
+        executor = make_executor(jobs, worker_versions=worker_versions)
     t0 = time.perf_counter()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
