@@ -45,7 +45,7 @@ from raplas_hdl.host.backends import COUNTERS, ModelBackend  # noqa: E402
 from raplas_hdl.host.render import RenderSettings, render  # noqa: E402
 from raplas_hdl.host.scenes import SCENES as PROCEDURAL  # noqa: E402
 from raplas_hdl.host.scenes import get_scene  # noqa: E402
-from raplas_hdl.model.memory_image import UnitConfig  # noqa: E402
+from raplas_hdl.model.config import UnitConfig  # noqa: E402
 from raplas_hdl.model.throughput import Timing, profile_arrays, simulate  # noqa: E402
 
 SCENES = ("showcase", "cornell", "teapot", "stanford-bunny")

@@ -23,7 +23,7 @@ import pytest
 
 from raplas_hdl.fp import FP24
 from raplas_hdl.model.board_map import REGISTER_MAP, parse_markdown_table
-from raplas_hdl.model.memory_image import UnitConfig
+from raplas_hdl.model.config import UnitConfig
 from unit_scenes import assert_keep_all, check_against_model, scene_and_runs
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -8,7 +8,7 @@ import pytest
 
 from raplas_hdl.cli import main
 from raplas_hdl.fp import FP24
-from raplas_hdl.model.memory_image import UnitConfig
+from raplas_hdl.model.config import UnitConfig
 from raplas_hdl.synth.capacity import (DEVICES, Config, bram_blocks, build_capacity,
                                        capacity_row, compose, pairs_per_cycle, render_capacity,
                                        rest_of, unit_config)

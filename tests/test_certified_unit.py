@@ -26,7 +26,7 @@ import pytest
 
 from raplas_hdl.fp import FP24, FPFormat
 from raplas_hdl.model.intersection import result_dtype, run_runs
-from raplas_hdl.model.memory_image import UnitConfig
+from raplas_hdl.model.config import UnitConfig
 from raplas_hdl.model.records import OUTCOME_HIT, OUTCOME_UNCERTAIN
 from raplas_hdl.model.reduction import candidates, first_answers, reduce_run
 from raplas_hdl.sim.cosim_units import unit_cosim

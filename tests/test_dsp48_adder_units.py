@@ -220,7 +220,7 @@ def test_intersection_unit_cycles_equal_model_with_bram_fifo():
 
     from unit_scenes import check_against_model, scene_and_runs
 
-    from raplas_hdl.model.memory_image import UnitConfig
+    from raplas_hdl.model.config import UnitConfig
     from raplas_hdl.model.throughput import profile_runs, simulate
     from raplas_hdl.rtl.intersection import IntersectionUnit
     from raplas_hdl.sim.unit_harness import UnitSession

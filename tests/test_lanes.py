@@ -21,7 +21,7 @@ from unit_scenes import check_against_model, scene_and_runs
 
 from raplas_hdl.fp import FP24
 from raplas_hdl.model.intersection import run_runs
-from raplas_hdl.model.memory_image import UnitConfig
+from raplas_hdl.model.config import UnitConfig
 from raplas_hdl.model.throughput import Timing, pairs_per_cycle, profile_runs, simulate
 from raplas_hdl.rtl.intersection import IntersectionUnit
 from raplas_hdl.sim.unit_harness import UnitSession

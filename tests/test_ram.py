@@ -6,7 +6,7 @@ import pytest
 from amaranth.hdl import Module
 
 from raplas_hdl.fp import FP24
-from raplas_hdl.model.memory_image import UnitConfig
+from raplas_hdl.model.config import UnitConfig
 from raplas_hdl.rtl.emit import emit_verilog
 from raplas_hdl.rtl.intersection import IntersectionUnit
 from raplas_hdl.rtl.ram import RAM_MODULE, SyncRAM, ram_verilog

@@ -20,7 +20,7 @@ from amaranth.hdl import Shape
 from amaranth.lib import data
 
 from raplas_hdl.fp import FP16, FP24, FPFormat
-from raplas_hdl.model.memory_image import UnitConfig
+from raplas_hdl.model.config import UnitConfig
 from raplas_hdl.model.records import (CMD, COUNTERS, PAIR, PLANE, PS_RESULT, RECORDS, RESULT,
                                       RT_RESULT, SPHERE, Field, Record, unit_params)
 from raplas_hdl.rtl.records import struct_layout

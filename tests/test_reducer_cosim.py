@@ -13,7 +13,7 @@ import pytest
 from raplas_hdl.fp import FP24
 from raplas_hdl.fp import model as fpm
 from raplas_hdl.model.intersection import RESULT_DTYPE
-from raplas_hdl.model.memory_image import UnitConfig
+from raplas_hdl.model.config import UnitConfig
 from raplas_hdl.model.reduction import inf_pattern
 from raplas_hdl.sim.reducer_harness import cosim_reducer
 from test_reduction_model import _bundle, random_beats

@@ -12,7 +12,8 @@ from raplas_hdl.fp import model as fpm
 from raplas_hdl.host.reduction_passes import host_choice, pass_runs, recorded_runs
 from raplas_hdl.host.render import RenderSettings
 from raplas_hdl.model.intersection import RESULT_DTYPE, run_runs
-from raplas_hdl.model.memory_image import BundleMemory, UnitConfig, bundle_writes
+from raplas_hdl.model.config import UnitConfig
+from raplas_hdl.model.memory_image import BundleMemory, bundle_writes
 from raplas_hdl.model.reduction import (ANSWER_DTYPE, check_reduce_format, early_out_saving,
                                         inf_pattern, reduce_run)
 

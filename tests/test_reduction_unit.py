@@ -20,7 +20,8 @@ from unit_scenes import scene_and_runs
 from raplas_hdl.fp import FP24, FPFormat
 from raplas_hdl.fp import model as fpm
 from raplas_hdl.model.intersection import run_runs
-from raplas_hdl.model.memory_image import Run, UnitConfig, as_run
+from raplas_hdl.model.config import UnitConfig
+from raplas_hdl.model.memory_image import Run, as_run
 from raplas_hdl.model.reduction import inf_pattern
 from raplas_hdl.rtl.intersection import IntersectionUnit
 from raplas_hdl.sim.unit_harness import UnitSession

@@ -12,7 +12,7 @@ import gc
 import pytest
 
 from raplas_hdl.fp import FP24, FPFormat
-from raplas_hdl.model.memory_image import UnitConfig
+from raplas_hdl.model.config import UnitConfig
 from raplas_hdl.rtl.intersection import IntersectionUnit, build_intersection_unit
 from unit_amaranth_tb import simulate_runs
 from unit_scenes import (assert_keep_all, assert_operation_events, check_against_model,

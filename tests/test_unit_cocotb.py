@@ -14,7 +14,7 @@ and its overflow flag stays clear.
 import pytest
 
 from raplas_hdl.fp import FP24
-from raplas_hdl.model.memory_image import UnitConfig
+from raplas_hdl.model.config import UnitConfig
 from raplas_hdl.sim.unit_driver import run_runs
 from unit_scenes import (assert_keep_all, assert_operation_events, check_against_model,
                          scene_and_runs)

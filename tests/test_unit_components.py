@@ -16,8 +16,8 @@ from amaranth.sim import Simulator
 
 from raplas_hdl.fp import FPFormat
 from raplas_hdl.model.intersection import enumerate_pairs
-from raplas_hdl.model.memory_image import (UnitConfig, bundle_writes, run_list_writes,
-                                           scene_writes)
+from raplas_hdl.model.config import UnitConfig
+from raplas_hdl.model.memory_image import bundle_writes, run_list_writes, scene_writes
 from raplas_hdl.model.records import (CMD, COUNTERS, PAIR, PLANE, RAY, RESULT, RT_RESULT,
                                       TRIANGLE)
 from raplas_hdl.rtl.unit.feeder import SphereFeeder

@@ -21,7 +21,7 @@ from unit_scenes import (
 )
 
 from raplas_hdl.fp import FP24
-from raplas_hdl.model.memory_image import UnitConfig
+from raplas_hdl.model.config import UnitConfig
 from raplas_hdl.model.records import RESULT
 from raplas_hdl.sim.unit_harness import (
     HarnessError,

@@ -9,9 +9,10 @@ import pytest
 from raplas_hdl.fp import FP16, FP24
 from raplas_hdl.model.intersection import RESULT_DTYPE, run_bundle
 from raplas_hdl.host.culling import CullingBudget, bundle_slack
-from raplas_hdl.model.memory_image import (REGIONS, BundleMemory, Run, SceneMemory, UnitConfig,
-                                           as_run, bundle_writes, run_list_writes,
-                                           scene_writes, write_address)
+from raplas_hdl.model.config import UnitConfig
+from raplas_hdl.model.memory_image import (REGIONS, BundleMemory, Run, SceneMemory, as_run,
+                                           bundle_writes, run_list_writes, scene_writes,
+                                           write_address)
 from raplas_hdl.model.plane_sphere import tester_flags as plane_flags
 from raplas_hdl.model.ray_triangle import intersect
 from raplas_hdl.sim.unit_driver import random_bundle, random_scene

@@ -252,7 +252,7 @@ def check(args) -> None:
 def _check_build(args) -> None:
     """The unit's build parameters, checked by building it (no elaboration)."""
     if args.unit == "intersection-unit":
-        from ..model.memory_image import UnitConfig
+        from ..model.config import UnitConfig
 
         kw = {k: v for k, v in args.options.items()
               if v is not None and k not in ("target", "adder")}

@@ -35,7 +35,7 @@ Pass layout (``B`` bundles of ``rows`` x ``cols`` rays, ``P = rows + cols`` plan
 The trace kernels reduce the stream as the renderer needs it: per ray the nearest hit
 accepted by ``tmin <= t <= tmax[b, r]`` and ``tri != exclude[b]`` (ties to the lower
 triangle ID), the same choice as :func:`raplas_hdl.host.shading.nearest_hits`; and the
-unit's counters per run, in :data:`~raplas_hdl.model.memory_image.COUNTER_NAMES` order.
+unit's counters per run, in :data:`~raplas_hdl.model.config.COUNTER_NAMES` order.
 """
 
 from __future__ import annotations

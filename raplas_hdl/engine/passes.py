@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..model.memory_image import COUNTER_NAMES
+from ..model.config import COUNTER_NAMES
 from ..parallel import run_chunks
 from .kernels import N_COUNTERS
 

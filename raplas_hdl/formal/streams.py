@@ -114,7 +114,7 @@ STAGES = {s.name: s for s in (
 
 def _config(lanes: int):
     from ..fp import FP16
-    from ..model.memory_image import UnitConfig
+    from ..model.config import UnitConfig
 
     return UnitConfig(fmt=FP16, rows=1, cols=2, tris_per_sphere=2, max_triangles=4,
                       max_spheres=2, lanes=lanes)

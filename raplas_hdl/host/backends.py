@@ -68,7 +68,7 @@ __all__ = [
 
 BACKENDS = ("float64", "model", "rtl")
 
-#: The unit's counters (one definition: :data:`raplas_hdl.model.memory_image.COUNTER_NAMES`).
+#: The unit's counters (one definition: :data:`raplas_hdl.model.config.COUNTER_NAMES`).
 COUNTERS = COUNTER_NAMES
 
 
@@ -363,7 +363,7 @@ class ModelBackend(Backend):
 
     def config(self, rows, cols):
         """The unit configuration for a ``rows`` x ``cols`` bundle (one per size)."""
-        from ..model.memory_image import UnitConfig
+        from ..model.config import UnitConfig
 
         key = (rows, cols)
         if key not in self._configs:

@@ -26,8 +26,9 @@ from ..model.board_map import (BOARD_ID, CONTROL_BITS, COUNTER_REGS, MAP_VERSION
                                REGISTERS, RES_INFO_BITS, RESULT_REGS, STATUS_BITS,
                                cmd_start_word, config_from_words, config_words,
                                decode_result_words, result_beats)
-from ..model.memory_image import (BundleMemory, Run, SceneMemory, UnitConfig, as_run,
-                                  bundle_writes, run_list_writes, scene_writes)
+from ..model.config import UnitConfig
+from ..model.memory_image import (BundleMemory, Run, SceneMemory, as_run, bundle_writes,
+                                  run_list_writes, scene_writes)
 
 __all__ = ["BoardDriver", "BoardMismatch"]
 

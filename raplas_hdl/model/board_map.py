@@ -162,7 +162,7 @@ REGISTER_MAP: tuple[Register, ...] = (
 REGISTERS = {r.name: r.offset for r in REGISTER_MAP}
 #: Result-window registers after ``RES_INFO``, in read order.
 RESULT_REGS = ("RES_IDS", "RES_T", "RES_U", "RES_V", "RES_DET")
-#: Counter name (``cycles`` and :data:`~raplas_hdl.model.memory_image.COUNTER_NAMES`) ->
+#: Counter name (``cycles`` and :data:`~raplas_hdl.model.config.COUNTER_NAMES`) ->
 #: register name.
 COUNTER_REGS = {name: f"CTR_{name.upper()}" for name in _COUNTERS}
 

@@ -30,7 +30,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .memory_image import COUNTER_NAMES, BundleMemory, Run, SceneMemory, UnitConfig, as_run
+from .config import COUNTER_NAMES, UnitConfig
+from .memory_image import BundleMemory, Run, SceneMemory, as_run
 from .records import RESULT, result_record
 
 __all__ = ["RESULT_DTYPE", "UNIT_BOUND_VARIANT", "result_dtype", "run_bundle", "run_runs",
@@ -54,7 +55,7 @@ def result_dtype(config) -> np.dtype:
 
 
 def empty_counters() -> dict:
-    """Counters at zero, keyed by :data:`~raplas_hdl.model.memory_image.COUNTER_NAMES`."""
+    """Counters at zero, keyed by :data:`~raplas_hdl.model.config.COUNTER_NAMES`."""
     return {name: 0 for name in COUNTER_NAMES}
 
 

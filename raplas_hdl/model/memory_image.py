@@ -61,12 +61,12 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..fp.format import FP24, FPFormat, check_format
-from .modes import MODES, check_mode
+from .config import ADDRESS_INDEX_BITS, UnitConfig, check_int
+from .modes import MODES
+from .reduction import check_window
 
-__all__ = ["UnitConfig", "SceneMemory", "BundleMemory", "REGIONS", "write_address",
-           "scene_writes", "bundle_writes", "run_list_writes", "COUNTER_NAMES", "MODES",
-           "Run", "as_run"]
+__all__ = ["SceneMemory", "BundleMemory", "REGIONS", "write_address", "scene_writes",
+           "bundle_writes", "run_list_writes", "MODES", "Run", "as_run"]
 
 
 #: Regions of the write-port address map.
@@ -75,162 +75,8 @@ REGIONS = {"tri": 0, "sphere": 1, "tlist": 2, "plane": 3, "ray": 4, "rlist": 5,
 _REGION_SHIFT = 28
 _BANK_SHIFT = 27
 _INDEX_SHIFT = 4
-_MAX_INDEX = (1 << (_BANK_SHIFT - _INDEX_SHIFT)) - 1
-
-#: Counters kept by the unit and by the model, in the order of the RTL's ``counters`` port.
-#: ``cycles`` exists only in the RTL (the model has no clock).
-COUNTER_NAMES = ("spheres", "plane_tests", "pairs_issued", "pairs_skipped", "hits",
-                 "overflow", "underflow", "invalid")
-
-
-def _bits_for(n: int) -> int:
-    """Bits of an unsigned field holding the values 0 .. n-1 (at least 1)."""
-    return max(1, (int(n) - 1).bit_length())
-
-
-def _check_int(name, value, lo, hi=None):
-    if not isinstance(value, (int, np.integer)) or isinstance(value, bool):
-        raise ValueError(f"{name} must be an integer, not {value!r}")
-    if value < lo or (hi is not None and value > hi):
-        rng = f"at least {lo}" if hi is None else f"between {lo} and {hi}"
-        raise ValueError(f"{name} must be {rng}, not {value}")
-
-
-@dataclass(frozen=True)
-class UnitConfig:
-    """Build parameters of the intersection unit (and of its model).
-
-    Parameters
-    ----------
-    fmt : FPFormat
-        Arithmetic format of every unit and memory.
-    rows, cols : int
-        Bundle lattice, 1 to 64 each.
-    testers : int or None
-        Plane-sphere testers in the array (``None``: ``rows + cols``, one per plane).
-    tris_per_sphere : int
-        Largest triangle list of a sphere (1 to 4096).
-    max_triangles, max_spheres : int
-        Depths of Triangle Memory and Sphere Memory (1 to 2**20).
-    mode : str
-        Ray-triangle mode, ``"paper"``, ``"conservative"`` or ``"certified"`` (the result
-        records carry the pair's ``outcome``, :data:`raplas_hdl.model.records.OUTCOME`;
-        ``exp_bits <= 9``, ``margin_scale`` 1).
-    margin_scale : int
-        Scale of the conservative margin (the ray-triangle unit's parameter).
-    fifo_depth : int
-        Depth of the pair FIFO in front of the ray-triangle unit (3 to 1024: the record
-        fetch holds one credit per entry, and a 2-entry buffered FIFO cannot take a write
-        while its stored entry moves to its output register). Below 8 the credits' round
-        trip limits the fetch to ``fifo_depth`` pairs per 8 cycles.
-    lanes : int
-        Ray-triangle units fed by the one plane-sphere array (1 to 8): pairs are dealt to
-        them round-robin and their results merged back in the same order, so the result
-        stream does not depend on it (``docs/intersection-unit.md``). In :meth:`params`
-        only when not 1.
-    reduce : bool
-        On-chip reduction (:mod:`raplas_hdl.model.reduction`): the result stream carries
-        one answer per ray (the nearest accepted hit, or the first blocking hit of an
-        any-hit bundle) instead of one beat per pair. In :meth:`params` only when set.
-
-    Raises
-    ------
-    ValueError
-        Naming the parameter that is out of range.
-    """
-
-    fmt: FPFormat = FP24
-    rows: int = 4
-    cols: int = 4
-    testers: int | None = None
-    tris_per_sphere: int = 8
-    max_triangles: int = 1024
-    max_spheres: int = 256
-    mode: str = "paper"
-    margin_scale: int = 1
-    fifo_depth: int = 16
-    lanes: int = 1
-    reduce: bool = False
-
-    def __post_init__(self):
-        check_format(self.fmt)
-        _check_int("rows", self.rows, 1, 64)
-        _check_int("cols", self.cols, 1, 64)
-        if self.testers is not None:
-            _check_int("testers", self.testers, 1, 128)
-        _check_int("tris_per_sphere", self.tris_per_sphere, 1, 4096)
-        _check_int("max_triangles", self.max_triangles, 1, 1 << 20)
-        _check_int("max_spheres", self.max_spheres, 1, 1 << 20)
-        check_mode(self.mode)
-        _check_int("margin_scale", self.margin_scale, 1)
-        if self.mode == "certified":
-            from .certified import check_certified_format
-
-            check_certified_format(self.fmt)
-            if self.margin_scale != 1:
-                raise ValueError(f"the certified unit takes margin_scale 1 only, not "
-                                 f"{self.margin_scale}")
-        _check_int("fifo_depth", self.fifo_depth, 3, 1024)
-        _check_int("lanes", self.lanes, 1, 8)
-        if not isinstance(self.reduce, (bool, np.bool_)):
-            raise ValueError(f"reduce must be True or False, not {self.reduce!r}")
-        if self.max_spheres * self.tris_per_sphere > _MAX_INDEX + 1:
-            raise ValueError("max_spheres * tris_per_sphere exceeds the address map "
-                             f"({_MAX_INDEX + 1} list entries)")
-
-    # -- derived ----------------------------------------------------------------------
-    @property
-    def n_testers(self) -> int:
-        return self.rows + self.cols if self.testers is None else self.testers
-
-    @property
-    def n_planes(self) -> int:
-        return self.rows + self.cols
-
-    @property
-    def n_rays(self) -> int:
-        return self.rows * self.cols
-
-    @property
-    def ray_id_bits(self) -> int:
-        return _bits_for(self.n_rays)
-
-    @property
-    def tri_id_bits(self) -> int:
-        return _bits_for(self.max_triangles)
-
-    @property
-    def sphere_id_bits(self) -> int:
-        return _bits_for(self.max_spheres)
-
-    @property
-    def count_bits(self) -> int:
-        """Bits of a triangle count 0 .. tris_per_sphere."""
-        return _bits_for(self.tris_per_sphere + 1)
-
-    @property
-    def run_count_bits(self) -> int:
-        """Bits of a run's sphere count 0 .. max_spheres."""
-        return _bits_for(self.max_spheres + 1)
-
-    @classmethod
-    def from_params(cls, params: dict) -> UnitConfig:
-        """The configuration of :meth:`params` ``params`` (``testers`` as given there)."""
-        p = dict(params)
-        fmt = FPFormat(p.pop("exp_bits"), p.pop("man_bits"), p.pop("rounding"))
-        return cls(fmt=fmt, **p)
-
-    def params(self) -> dict:
-        """JSON-serialisable parameters (for headers, manifests and reports)."""
-        return {"exp_bits": self.fmt.exp_bits, "man_bits": self.fmt.man_bits,
-                "rounding": self.fmt.rounding, "rows": self.rows, "cols": self.cols,
-                "testers": self.n_testers, "tris_per_sphere": self.tris_per_sphere,
-                "max_triangles": self.max_triangles, "max_spheres": self.max_spheres,
-                "mode": self.mode, "margin_scale": self.margin_scale,
-                "fifo_depth": self.fifo_depth,
-                **({"lanes": self.lanes} if self.lanes != 1 else {}),
-                **({"reduce": True} if self.reduce else {})}
-
+_MAX_INDEX = (1 << ADDRESS_INDEX_BITS) - 1
+assert _INDEX_SHIFT + ADDRESS_INDEX_BITS == _BANK_SHIFT
 
 def _u32(name, a, shape_tail, fmt=None):
     a = np.asarray(a)
@@ -377,14 +223,14 @@ class BundleMemory:
                                  f"not {en.shape}")
             self.enable = en.astype(bool)
         self.keep_all = bool(self.keep_all)
-        _check_int("tmin", self.tmin, 0, 0xFFFFFFFF)
+        check_int("tmin", self.tmin, 0, 0xFFFFFFFF)
         self.tmin = int(self.tmin)
         if self.tmax is not None:
             self.tmax = _u32("tmax", np.asarray(self.tmax).reshape(-1), ())
             if self.tmax.shape[0] != self.ray_o.shape[0]:
                 raise ValueError(f"tmax must have one pattern per ray "
                                  f"({self.ray_o.shape[0]}), not {self.tmax.shape[0]}")
-        _check_int("exclude", self.exclude, -1)
+        check_int("exclude", self.exclude, -1)
         self.exclude = int(self.exclude)
         self.any_hit = bool(self.any_hit)
 
@@ -401,8 +247,6 @@ class BundleMemory:
             if a.size and a.max() > config.fmt.mask:
                 raise ValueError(f"{name} holds patterns wider than {config.fmt}")
         if config.reduce:
-            from .reduction import check_window
-
             check_window(config, self)
 
     def window_tmax(self, config: UnitConfig) -> np.ndarray:

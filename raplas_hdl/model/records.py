@@ -5,7 +5,7 @@ the low bits up in that order, exactly as an ``amaranth.lib.data.StructLayout`` 
 fields. A width is a number of bits or the name of a build parameter (``"W"``, the format
 width; ``"ray_id_bits"``; ...), so one record describes every build.
 :meth:`Record.bind` fixes the parameters (from a
-:class:`~raplas_hdl.model.memory_image.UnitConfig`, an
+:class:`~raplas_hdl.model.config.UnitConfig`, an
 :class:`~raplas_hdl.fp.format.FPFormat` or keywords) and gives a :class:`Layout`: field
 offsets, and the packers of the testbenches and drivers. The views:
 
@@ -50,7 +50,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .memory_image import COUNTER_NAMES
+from .config import COUNTER_NAMES, UnitConfig
 
 __all__ = ["Field", "Record", "Layout", "Slot", "unit_params", "words_to_ints",
            "ints_to_words", "PARAMETERS", "EVENT_COUNT_BITS", "RAY", "TRIANGLE", "PAIR",
@@ -263,7 +263,6 @@ def _params_of(source) -> dict:
     if isinstance(source, Mapping):
         return dict(source)
     from ..fp.format import FPFormat
-    from .memory_image import UnitConfig
 
     if isinstance(source, UnitConfig):
         return unit_params(source)
@@ -273,7 +272,7 @@ def _params_of(source) -> dict:
 
 
 def unit_params(config) -> dict:
-    """The width parameters of a :class:`~raplas_hdl.model.memory_image.UnitConfig`."""
+    """The width parameters of a :class:`~raplas_hdl.model.config.UnitConfig`."""
     return {"W": config.fmt.width, "ray_id_bits": config.ray_id_bits,
             "tri_id_bits": config.tri_id_bits, "sphere_id_bits": config.sphere_id_bits,
             "run_count_bits": config.run_count_bits, "rows": config.rows, "cols": config.cols}
@@ -631,7 +630,7 @@ def _counters():
 
 
 #: The intersection unit's counters: ``cycles`` and
-#: :data:`~raplas_hdl.model.memory_image.COUNTER_NAMES`.
+#: :data:`~raplas_hdl.model.config.COUNTER_NAMES`.
 COUNTERS = _counters()
 
 #: A plane: the plane-sphere array's plane word (``n.x + p = 0``), and Plane Memory's.

@@ -44,7 +44,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from numba import njit
-from .memory_image import UnitConfig, as_run
+from .config import UnitConfig
+from .memory_image import as_run
 
 __all__ = ["Timing", "Profile", "profile_runs", "profile_arrays", "simulate",
            "pairs_per_cycle", "RESULT_PATHS"]

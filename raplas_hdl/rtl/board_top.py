@@ -36,7 +36,7 @@ from ..model.board_map import (ADDR_BITS, BOARD_ID, CMD_BANK_BIT, CMD_COUNT_BITS
                                CMD_INDIRECT_BIT, CMD_KEEP_ALL_BIT, CONTROL_BITS,
                                COUNTER_REGS, MAP_VERSION, MODE_CODES, REGISTERS, RES_INFO_BITS,
                                RES_RAY_SHIFT, STATUS_BITS, config_words)
-from ..model.memory_image import UnitConfig
+from ..model.config import UnitConfig
 from .intersection import IntersectionUnit
 
 __all__ = ["BoardTop", "build_board_top", "CLOCK_PORT", "RESET_PORT"]

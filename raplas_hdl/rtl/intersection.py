@@ -69,7 +69,7 @@ from amaranth.lib import stream, wiring
 from amaranth.lib.fifo import SyncFIFOBuffered
 from amaranth.lib.wiring import In, Out
 
-from ..model.memory_image import UnitConfig
+from ..model.config import UnitConfig
 from ..model.records import CMD, COUNTERS, result_record
 from .ram import SyncRAM
 from .records import struct_layout
@@ -155,7 +155,7 @@ class IntersectionUnit(wiring.Component):
         pairs first, ``outcome`` 2, then its answers, ``outcome`` 1).
     counters : Out(counter_layout)
         ``cycles`` and the counters of
-        :data:`~raplas_hdl.model.memory_image.COUNTER_NAMES`, 32 bits each.
+        :data:`~raplas_hdl.model.config.COUNTER_NAMES`, 32 bits each.
     clear : In(1)
         Zero every counter.
     busy : Out(1)

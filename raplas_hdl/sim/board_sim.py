@@ -1,7 +1,7 @@
 """Co-simulation of the board-level top: the host driver against ``board_top``'s Verilog.
 
 :func:`run_board` emits the top's Verilog for a
-:class:`~raplas_hdl.model.memory_image.UnitConfig` (cached in memory and under
+:class:`~raplas_hdl.model.config.UnitConfig` (cached in memory and under
 ``build/sim/verilog/``), writes the scene and the runs into a stimulus file and runs
 :mod:`raplas_hdl.sim.tb_board`, in which :class:`raplas_hdl.host.board_driver.BoardDriver`
 drives the Wishbone port. It returns, per run, the result stream and the counters exactly as
@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from raplas_hdl.model.intersection import RESULT_DTYPE
-from raplas_hdl.model.memory_image import BundleMemory, Run, SceneMemory, UnitConfig, as_run
+from raplas_hdl.model.config import UnitConfig
+from raplas_hdl.model.memory_image import BundleMemory, Run, SceneMemory, as_run
 
 __all__ = ["board_verilog", "run_board", "encode_stimulus", "decode_stimulus", "TOPLEVEL"]
 

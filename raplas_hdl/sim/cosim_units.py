@@ -676,7 +676,7 @@ class IntersectionCosim(UnitCosim):
 
     def __init__(self, fmt, options):
         super().__init__(fmt, options)
-        from raplas_hdl.model.memory_image import UnitConfig
+        from raplas_hdl.model.config import UnitConfig
 
         kw = {k: self.options[k] for k in ("rows", "cols", "testers", "tris_per_sphere",
                                            "mode", "lanes", "reduce")

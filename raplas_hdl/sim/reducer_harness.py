@@ -16,7 +16,8 @@ from amaranth.hdl import Module
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from ..model.memory_image import REGIONS, UnitConfig, bundle_writes
+from ..model.config import UnitConfig
+from ..model.memory_image import REGIONS, bundle_writes
 from ..model.records import answer_record, result_record
 from ..model.reduction import reduce_run
 

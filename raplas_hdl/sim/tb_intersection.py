@@ -28,7 +28,7 @@ import numpy as np
 from cocotb.clock import Clock
 from cocotb.triggers import FallingEdge, RisingEdge
 
-from raplas_hdl.model.memory_image import UnitConfig
+from raplas_hdl.model.config import UnitConfig
 from raplas_hdl.model.records import CMD, COUNTERS, output_record
 
 

@@ -3,7 +3,7 @@
 :func:`run_runs` is the per-cycle cocotb path (the host's ``rtl`` backend takes it only for
 waveforms; its renders use the live sessions of :mod:`raplas_hdl.sim.unit_harness`, which
 reuse :func:`unit_verilog` and :func:`encode_runs`): it emits the unit's Verilog for a
-:class:`~raplas_hdl.model.memory_image.UnitConfig` (one simulator build per configuration,
+:class:`~raplas_hdl.model.config.UnitConfig` (one simulator build per configuration,
 reused), writes the scene and the runs into a stimulus file, runs
 :mod:`raplas_hdl.sim.tb_intersection` and returns, per run, the result stream (the structured array
 of :data:`raplas_hdl.model.intersection.RESULT_DTYPE`) and the counters, exactly as
@@ -23,8 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from raplas_hdl.fp import model as fpm
-from raplas_hdl.model.memory_image import (BundleMemory, SceneMemory, UnitConfig, as_run,
-                                           bundle_writes, run_list_writes, scene_writes)
+from raplas_hdl.model.config import UnitConfig
+from raplas_hdl.model.memory_image import (BundleMemory, SceneMemory, as_run, bundle_writes,
+                                           run_list_writes, scene_writes)
 from raplas_hdl.model.records import COUNTERS, output_record
 
 __all__ = ["random_scene", "random_bundle", "unit_verilog", "run_runs", "encode_runs",

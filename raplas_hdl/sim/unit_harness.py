@@ -58,7 +58,8 @@ from pathlib import Path
 
 import numpy as np
 
-from raplas_hdl.model.memory_image import SceneMemory, UnitConfig, as_run, scene_writes
+from raplas_hdl.model.config import UnitConfig
+from raplas_hdl.model.memory_image import SceneMemory, as_run, scene_writes
 from raplas_hdl.model.records import CMD, COUNTERS, output_record
 from raplas_hdl.sim.harness import _HEX, _UNHEX  # the hex digit tables, defined once
 

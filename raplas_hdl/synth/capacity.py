@@ -112,7 +112,7 @@ def bram_blocks(config, lanes: int = 1) -> dict:
 def unit_config(fmt, n_triangles: int, testers: int = 8, lanes: int = 1):
     """The :class:`UnitConfig` of a 4x4 unit with Triangle Memory for ``n_triangles`` (and
     Sphere Memory for one sphere per 4 triangles, the ratio of the unit's defaults: 1,024 and 256)."""
-    from ..model.memory_image import UnitConfig
+    from ..model.config import UnitConfig
 
     spheres = max(1, math.ceil(n_triangles / 4))
     return UnitConfig(fmt=fmt, rows=4, cols=4, testers=testers, max_triangles=n_triangles,
@@ -337,7 +337,7 @@ def needed_runs(families=("xc4v", "xc7")) -> list[tuple]:
 def unit_row(fmt, options: dict, family: str = "xc4v", *, cached_only: bool = False) -> dict:
     """:func:`.report.synth_row` for ``intersection-unit`` with ``UnitConfig`` fields the
     unit registry has no option for (``reduce``): the unit built directly."""
-    from ..model.memory_image import UnitConfig
+    from ..model.config import UnitConfig
     from ..rtl.emit import emit_verilog
     from ..rtl.intersection import IntersectionUnit
     from .yosys import synthesize

@@ -20,7 +20,7 @@ from amaranth.hdl import Module, Mux, Signal
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from ...model.memory_image import UnitConfig
+from ...model.config import UnitConfig
 from ...model.records import PLANE
 from ..records import struct_layout
 from .credit_fifo import CreditFIFO

@@ -21,7 +21,7 @@ from amaranth.hdl import Cat, Module, Mux, Signal
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from ...model.memory_image import UnitConfig
+from ...model.config import UnitConfig
 from ...model.records import RAY, TRIANGLE
 from ..records import struct_layout
 from .memories import read_ports

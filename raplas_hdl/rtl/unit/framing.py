@@ -11,7 +11,7 @@ from amaranth.hdl import Module, Signal
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from ...model.memory_image import UnitConfig
+from ...model.config import UnitConfig
 from ...model.records import EVENT_COUNT_BITS
 from .streams import counter_layout, result_layout, rt_result_layout
 

@@ -28,7 +28,7 @@ from amaranth.hdl import Module, Mux, Signal
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from ...model.memory_image import UnitConfig
+from ...model.config import UnitConfig
 from .streams import job_layout, rt_result_layout
 
 __all__ = ["JobDistributor", "ResultMerger"]

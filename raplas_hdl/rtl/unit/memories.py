@@ -14,7 +14,8 @@ from amaranth.hdl import Cat, Module, Mux
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
-from ...model.memory_image import REGIONS, UnitConfig
+from ...model.config import UnitConfig
+from ...model.memory_image import REGIONS
 
 __all__ = ["MEMORIES", "memory_geometry", "read_signature", "write_signature", "read_ports",
            "bind_read", "bind_write", "WriteDecoder"]

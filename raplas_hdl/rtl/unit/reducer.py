@@ -64,7 +64,8 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.fifo import SyncFIFOBuffered
 from amaranth.lib.wiring import In, Out
 
-from ...model.memory_image import REGIONS, UnitConfig
+from ...model.config import UnitConfig
+from ...model.memory_image import REGIONS
 from ...model.records import OUTCOME_HIT, OUTCOME_UNCERTAIN, answer_record
 from ..ram import SyncRAM
 from ..records import struct_layout

@@ -14,7 +14,7 @@ from amaranth.hdl import Cat, Module, Mux, Signal
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from ...model.memory_image import UnitConfig
+from ...model.config import UnitConfig
 from .memories import read_ports
 from .streams import job_layout, mask_layout, tag_layout
 

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 from amaranth.lib import data
 
-from ...model.memory_image import UnitConfig
+from ...model.config import UnitConfig
 from ...model.records import (CMD, COUNTERS, PAIR, PS_RESULT, SPHERE, result_record,
                               rt_result_record)
 from ..records import struct_layout
