@@ -41,6 +41,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from .capacity_ecp5 import ecp5_rows, render_ecp5
+from .rates import pairs_per_cycle
+
 __all__ = ["DEVICES", "Config", "CONFIGS", "bram_blocks", "compose", "capacity_row",
            "capacity_table", "validate", "PAPER_PAIRS_PER_SECOND", "CLOCK_MHZ"]
 
@@ -218,23 +221,6 @@ def load_throughput(path) -> list[dict]:
     return rows
 
 
-def pairs_per_cycle(rows, testers: int, lanes: int, fmt_name: str | None = None,
-                    key: str = "pairs_per_cycle") -> dict:
-    """``{scene: pairs per cycle}`` of the 4x4 rows with ``testers`` and ``lanes``
-    (``key``: another column of the rows, e.g. ``pairs_per_cycle_lane_results``)."""
-    out = {}
-    for r in rows:
-        if (r["testers"], r["lanes"]) != (testers, lanes):
-            continue
-        if r.get("rows", 4) != 4 or r.get("cols", 4) != 4:
-            continue
-        if fmt_name and r.get("format") and not str(r["format"]).startswith(fmt_name):
-            continue
-        if key in r:
-            out[r["scene"]] = float(r[key])
-    return out
-
-
 def capacity_table(parts: dict, throughput_rows, n_triangles: dict, fmt, *,
                    configs=CONFIGS, bram_calibration: dict | None = None,
                    reduce_cost: dict | None = None) -> list[dict]:
@@ -401,8 +387,6 @@ def build_capacity(fmt, found: dict, throughput_rows, n_triangles: dict, *,
     whole-unit run of the family; the other whole-unit runs validate the composition.
     ``pnr_runs`` (the runs of ``docs/results/pnr.json``) give the ECP5 rows
     (:func:`.capacity_ecp5.ecp5_rows`; without a multi-copy run: *not measured*)."""
-    from .capacity_ecp5 import ecp5_rows
-
     parts, validation, rests = {}, [], {}
     units = [(opts, fam, r) for (u, okey, fam), r in found.items()
              if u == "intersection-unit" for opts in [dict(okey)]]
@@ -571,8 +555,6 @@ def render_capacity(cap: dict, *, worst_path: int | None = None) -> list[str]:
             f"K{b125['lanes']}, {b125[f'units_x1.25[{first}]']} unit(s), {p125 / 1e6:.0f} M "
             f"pairs/s = **{p125 / paper:.2f}x**.")
     if "ecp5" in cap:
-        from .capacity_ecp5 import render_ecp5
-
         out += [""] + render_ecp5(cap["ecp5"], paper, cap.get("ecp5_source",
                                                              "docs/results/pnr.json"))
     out += _render_method(cap) + [""]

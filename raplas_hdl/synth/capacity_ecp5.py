@@ -24,6 +24,8 @@ import json
 import math
 from pathlib import Path
 
+from .rates import pairs_per_cycle
+
 __all__ = ["ECP5_DEVICE", "MEASURE_COMMAND", "load_pnr_runs", "ecp5_rows", "render_ecp5"]
 
 #: The device of the rows (the ULX3S's).
@@ -60,8 +62,6 @@ def _config(options: dict) -> tuple[int, int, bool]:
 def ecp5_rows(pnr_runs, throughput_rows, fmt) -> list[dict]:
     """One row per multi-copy intersection-unit run at ``fmt`` on :data:`ECP5_DEVICE` (4x4
     bundles, the generic target), or one *not measured* row."""
-    from .capacity import pairs_per_cycle
-
     out = []
     for r in pnr_runs or ():
         o = r.get("options") or {}
