@@ -50,7 +50,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from raplas_hdl.bench.sweep import RunSampler  # noqa: E402
-from raplas_hdl.cli.render import _jsonable, _lattice, _size  # noqa: E402
+from raplas_hdl.cli.grammar import jsonable, lattice, size  # noqa: E402
 from raplas_hdl.fp import parse_format  # noqa: E402
 from raplas_hdl.host.backends import COUNTERS, BackendUnavailable, make_backend  # noqa: E402
 from raplas_hdl.host.render import (  # noqa: E402
@@ -331,9 +331,9 @@ def main(argv=None) -> int:
         print(f"bench_render: {args.mesh} is neither a shipped mesh ({', '.join(MESHES)}) nor "
               "a file", file=sys.stderr)
         return 2
-    w, h = _size(args.size)
-    rows, cols = _lattice(args.tile, "--tile")
-    sr, sc = _lattice(args.shadow, "--shadow")
+    w, h = size(args.size)
+    rows, cols = lattice(args.tile, "--tile")
+    sr, sc = lattice(args.shadow, "--shadow")
     fmt = parse_format(args.format)
     settings = RenderSettings(w, h, rows, cols, sr, sc, batch_spheres=args.batch,
                               threads=args.threads)
@@ -396,7 +396,7 @@ def main(argv=None) -> int:
         save_png(res.image, out.parent / f"render_bench_{scene.name}_{name}.png")
         print(format_summary(res, entry.get("vs_float64")), flush=True)
         print("\n".join(_stage_lines(entry)), flush=True)
-        out.write_text(json.dumps(_jsonable(report), indent=2))
+        out.write_text(json.dumps(jsonable(report), indent=2))
     if args.rtl_sim and "rtl" not in args.backends.split(","):
         small = get_scene("soup", n=24)
         st = RenderSettings(16, 16, 4, 4, 0, 0, progress=False)
@@ -415,7 +415,7 @@ def main(argv=None) -> int:
                                                           and (r_rtl.image == r_mod.image).all())}
         except BackendUnavailable as exc:
             report["rtl_small"] = {"unavailable": str(exc)}
-        out.write_text(json.dumps(_jsonable(report), indent=2))
+        out.write_text(json.dumps(jsonable(report), indent=2))
     bf = next(iter(report["backends"].values()))
     print(f"pairs issued / brute force: {bf['pair_fraction']:.5f}; wrote {out}")
     return 0

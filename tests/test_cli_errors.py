@@ -330,7 +330,7 @@ def test_missing_simulator(t, capsys, monkeypatch):
 
 
 def test_verilator_waves_without_lz4(t, capsys, monkeypatch):
-    monkeypatch.setattr(g, "_fst_libs_missing", lambda: "the lz4 header lz4.h")
+    monkeypatch.setattr(g, "fst_libs_missing", lambda: "the lz4 header lz4.h")
     _check_error(capsys, ["cosim", "fp-add", "--sim", "verilator", "--random", "5", "--waves",
                           "--waves-dir", str(t / "w")], ["FST", "liblz4-dev", "--sim icarus"], t)
 

@@ -15,10 +15,10 @@ FST_MAGIC = bytes([0])   # an FST file starts with a header block of type 0 (VCD
 def test_cosim_waves_write_fst_and_print_the_path(tmp_path, capsys, sim):
     if sim not in available_simulators():
         pytest.skip(f"{sim} is not installed")
-    from raplas_hdl.cli.grammar import _fst_libs_missing
+    from raplas_hdl.cli.grammar import fst_libs_missing
 
-    if sim == "verilator" and _fst_libs_missing():
-        pytest.skip(f"Verilator FST needs {_fst_libs_missing()} (apt-get install liblz4-dev)")
+    if sim == "verilator" and fst_libs_missing():
+        pytest.skip(f"Verilator FST needs {fst_libs_missing()} (apt-get install liblz4-dev)")
     waves = tmp_path / "waves"
     assert main(["cosim", "fp-mul", "--sim", sim, "--random", "64", "--format", "FP16",
                  "--waves", "--waves-dir", str(waves)]) == 0

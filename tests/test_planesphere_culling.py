@@ -20,7 +20,7 @@ from raplas_hdl.fp import FP24, FPFormat
 from raplas_hdl.fp import model as fpm
 from raplas_hdl.host.bundles import RayBundle, encode_bundles
 # the generators are shared with the stress campaign
-from raplas_hdl.verify.campaign import _line_gap as line_gap
+from raplas_hdl.verify.campaign import line_gap
 from raplas_hdl.verify.campaign import (adversarial_spheres, exact_line_hit, random_bundle,
                                       random_spheres)
 from raplas_hdl.host.culling import CullingBudget, bundle_slack, bundle_slacks, encode_spheres

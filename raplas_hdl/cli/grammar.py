@@ -42,9 +42,10 @@ from pathlib import Path
 __all__ = [
     "MAX_IMAGE", "MAX_LATTICE", "UsageError", "Parser", "int_range", "float_range",
     "choice", "size", "lattice", "lattice_list", "add_format_option", "format_from_args",
-    "formats_from_args", "format_names", "canonical_format", "roundings_of", "add_out_option", "add_waves_option", "waves",
-    "check_output_file", "check_output_dir", "check_input_file", "check_distinct",
-    "reject", "given", "one_line", "jsonable", "require_simulator", "plain",
+    "formats_from_args", "format_names", "canonical_format", "roundings_of", "add_out_option",
+    "add_waves_option", "waves", "fst_libs_missing", "check_output_file", "check_output_dir",
+    "check_input_file", "check_distinct", "reject", "given", "one_line", "jsonable",
+    "require_simulator", "plain",
 ]
 
 #: Largest image side (``--size``, ``--mesh-size``): 8192 pixels.
@@ -612,14 +613,14 @@ def check_waves(args, simulator: str | None, applies: bool = True, why: str = ""
     args.waves_dir = str(check_output_dir(
         args.waves_dir or os.path.join("build", "waves", args.command), "--waves-dir"))
     if simulator == "verilator":
-        missing = _fst_libs_missing()
+        missing = fst_libs_missing()
         if missing:
             raise UsageError(f"--waves under Verilator writes FST, which needs {missing}: "
                              "install it with `apt-get install liblz4-dev`, or use "
                              "--sim icarus")
 
 
-def _fst_libs_missing() -> str | None:
+def fst_libs_missing() -> str | None:
     """What Verilator's FST writer lacks to compile and link (lz4), or None."""
     import shutil
     import subprocess

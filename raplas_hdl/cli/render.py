@@ -9,9 +9,6 @@ from ..model.modes import MODES
 from . import grammar as g
 
 __all__ = [
-    "_jsonable",
-    "_lattice",
-    "_size",
     "add_parser",
     "add_render_options",
     "add_secondary_options",
@@ -27,19 +24,6 @@ __all__ = [
 MAX_TRIS_PER_SPHERE = 4096
 MAX_FANOUT = 64
 MAX_BATCH = 4096
-
-
-def _size(text: str) -> tuple[int, int]:
-    """``WxH`` with sides 1 to :data:`grammar.MAX_IMAGE` (used by scripts too)."""
-    return g.size(text)
-
-
-def _lattice(text: str, name: str) -> tuple[int, int]:
-    """``RxC`` with sides 1 to 64, or ``0`` (used by scripts too)."""
-    return g.lattice(text, name)
-
-
-_jsonable = g.jsonable
 
 
 def _power_of_two(text):

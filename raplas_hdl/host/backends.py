@@ -102,7 +102,7 @@ class RunResult:
                    np.zeros(0, np.uint8), dict(counters or {}))
 
 
-def _runs_of(run_b, run_start, run_sph):
+def runs_of(run_b, run_start, run_sph):
     return [(int(b), run_sph[run_start[u]:run_start[u + 1]]) for u, b in enumerate(run_b)]
 
 
@@ -484,7 +484,7 @@ class ModelBackend(Backend):
         (:meth:`_resolve_outcomes`)."""
         from ..fp import model as fpm
 
-        runs = _runs_of(run_b, run_start, run_sph)
+        runs = runs_of(run_b, run_start, run_sph)
         counters = np.zeros((len(runs), len(COUNTERS)), np.int64)
         if not runs:
             return counters
@@ -782,7 +782,7 @@ class RtlBackend(ModelBackend):
         if self.reduce:
             return self._trace_reduced(batch, run_b, run_start, run_sph, best_t, best_tri,
                                        tmin, tmax, exclude, any_hit)
-        runs = _runs_of(run_b, run_start, run_sph)
+        runs = runs_of(run_b, run_start, run_sph)
         counters = np.zeros((len(runs), len(COUNTERS)), np.int64)
         R = batch.n_rays
         if runs and self.mode in ("conservative", "certified"):

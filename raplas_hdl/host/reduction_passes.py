@@ -37,7 +37,7 @@ class RecordedPass:
 def recorded_runs(scene_name: str, settings, fmt=None, mode: str = "paper", **scene_options):
     """Render ``scene_name`` through the model backend; return ``(backend, passes)``."""
     from ..fp import FP24
-    from .backends import ModelBackend, _runs_of
+    from .backends import ModelBackend, runs_of
     from .render import render
     from .scenes import get_scene
 
@@ -47,7 +47,7 @@ def recorded_runs(scene_name: str, settings, fmt=None, mode: str = "paper", **sc
         def trace(self, batch, run_b, run_start, run_sph, best_t, best_tri, tmin=0.0,
                   tmax=None, exclude=None, any_hit=False):
             passes.append(RecordedPass(
-                batch, batch.enable.copy(), _runs_of(run_b, run_start, run_sph), float(tmin),
+                batch, batch.enable.copy(), runs_of(run_b, run_start, run_sph), float(tmin),
                 None if tmax is None else np.array(tmax, np.float64),
                 None if exclude is None else np.array(exclude, np.int64), bool(any_hit)))
             return super().trace(batch, run_b, run_start, run_sph, best_t, best_tri, tmin,

@@ -27,10 +27,10 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from .board import BOARD, check_lpf, lpf_text, ulx3s_pins
-from .ecp5 import _run_tool, check_device, route_seeds, synthesize_ecp5
+from .ecp5 import run_tool, check_device, route_seeds, synthesize_ecp5
 from .fit import check_fit
 from .tools import ecppack_command
-from .unit import _command, check_copies, design, flow_record, report_stem
+from .unit import pnr_command, check_copies, design, flow_record, report_stem
 
 __all__ = ["bitstream_unit", "check_bitstream", "bitstream_summary", "PREAMBLE"]
 
@@ -128,7 +128,7 @@ def bitstream_unit(unit: str, fmt, options: dict, out_dir, *, device: str = "LFE
     if not (use_cache and packed.exists() and flow.runs[med]["cached"]):
         if progress:
             progress(f"{top}: yowasp-ecppack (seed {med})")
-        pack_s = _run_tool(ecppack_command() + [configs[med], bit_name], syn.work,
+        pack_s = run_tool(ecppack_command() + [configs[med], bit_name], syn.work,
                            f"{bit_name}.log", timeout, None, f"{top}: ecppack")
     size = check_bitstream(packed)
 
@@ -137,7 +137,7 @@ def bitstream_unit(unit: str, fmt, options: dict, out_dir, *, device: str = "LFE
     rec = flow_record(unit, top, fmt, options, wrapper.latency, flow, emit_s=emit_s,
                       device=device, speed=speed, freq=clock_mhz, seeds=seeds, copies=copies,
                       out_of_context=False,
-                      command=command or _command(unit, fmt, options, device, speed,
+                      command=command or pnr_command(unit, fmt, options, device, speed,
                                                   clock_mhz, len(seeds), copies,
                                                   bitstream=True))
     stem = report_stem({**rec, "bitstream": {"board": BOARD}})

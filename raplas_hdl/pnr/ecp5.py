@@ -120,7 +120,7 @@ class FlowResult:
         return order[(len(order) - 1) // 2]
 
 
-def _run_tool(cmd: Sequence[str], work: Path, log: str, timeout: float,
+def run_tool(cmd: Sequence[str], work: Path, log: str, timeout: float,
               progress: Callable[[str], None] | None = None, what: str = "",
               watch: str | None = None) -> float:
     """Run ``cmd`` in ``work`` with its output to ``log``; the seconds it took.
@@ -191,7 +191,7 @@ def synthesize_ecp5(verilog: str, top: str, *, base: Path | None = None,
     (work / "top.v").write_text(verilog)
     if progress:
         progress(f"{top}: synthesis (yosys synth_ecp5)")
-    seconds = _run_tool(yosys_command() + ["-q", "-l", "synth.log", "-p",
+    seconds = run_tool(yosys_command() + ["-q", "-l", "synth.log", "-p",
                                            SYNTH_SCRIPT.format(top=top)],
                         work, "synth.stdout", timeout, None, f"{top}: synthesis")
     counts = synth_counts(json.loads((work / "stat.json").read_text()))
@@ -227,7 +227,7 @@ def place_and_route(syn: EcpSynth, *, device: str = "LFE5U-85F", speed: int = 6,
     if out_of_context:
         cmd.append("--out-of-context")
     cmd += list(extra)
-    seconds = _run_tool(cmd, syn.work, f"{name}.stdout", timeout, progress,
+    seconds = run_tool(cmd, syn.work, f"{name}.stdout", timeout, progress,
                         f"{syn.top}: seed {seed}", watch=f"{name}.log")
     result = parse_report(json.loads(report_file.read_text()))
     meta_file.write_text(json.dumps({"seconds": round(seconds, 2), "command": cmd[1:]}))

@@ -131,7 +131,7 @@ def pnr_unit(unit: str, fmt, options: dict, *, device: str = "LFE5U-85F", speed:
                     timing_weight=timing_weight, router=router)
     rec = flow_record(unit, module, fmt, options, latency, flow, emit_s=emit_s,
                       device=device, speed=speed, freq=freq, seeds=seeds, copies=copies,
-                      command=command or _command(unit, fmt, options, device, speed, freq,
+                      command=command or pnr_command(unit, fmt, options, device, speed, freq,
                                                   len(seeds), copies,
                                                   timing_weight=timing_weight,
                                                   router=router))
@@ -153,7 +153,7 @@ def check_copies(unit: str, fmt, options: dict, copies: int, device: str, what: 
     check_fit({k: v * copies for k, v in one.counts.items()}, device, what, io=io)
 
 
-def _command(unit, fmt, options, device, speed, freq, n, copies=1, bitstream=False,
+def pnr_command(unit, fmt, options, device, speed, freq, n, copies=1, bitstream=False,
              timing_weight=None, router=None) -> str:
     parts = ["raplas-hdl pnr", unit, "--format", fmt.name]
     for k, v in sorted(options.items()):

@@ -34,11 +34,11 @@ _BUNDLE_FIELDS = ("plane_n", "plane_p", "ray_o", "ray_d", "enable")
 
 
 def _digest(config: UnitConfig) -> str:
-    from raplas_hdl.sim.unit_driver import _source_digest
+    from raplas_hdl.sim.unit_driver import unit_verilog_digest
 
     import raplas_hdl
 
-    h = hashlib.sha256(_source_digest(config).encode())
+    h = hashlib.sha256(unit_verilog_digest(config).encode())
     h.update((Path(raplas_hdl.__file__).parent / "model" / "board_map.py").read_bytes())
     return h.hexdigest()[:16]
 
@@ -49,12 +49,13 @@ def board_verilog(config: UnitConfig) -> str:
     Cached in memory and on disk, keyed by the parameters and the RTL sources; a file lock
     makes concurrent callers (pytest-xdist workers) wait for one emission.
     """
-    from raplas_hdl.sim.runner import BUILD_ROOT, _file_lock
+    from raplas_hdl.locks import file_lock
+    from raplas_hdl.sim.runner import BUILD_ROOT
 
     if config in _VERILOG_CACHE:
         return _VERILOG_CACHE[config]
     path = BUILD_ROOT / "verilog" / f"{TOPLEVEL}-{_digest(config)}.v"
-    with _file_lock(path.with_suffix(".lock")):
+    with file_lock(path.with_suffix(".lock")):
         if path.exists():
             text = path.read_text()
         else:

@@ -119,7 +119,7 @@ def _words32(words64: np.ndarray, bits: int) -> np.ndarray:
     return w[:, :(bits + 31) // 32].astype(np.uint32)
 
 
-def _words64(values, bits: int) -> np.ndarray:
+def words64(values, bits: int) -> np.ndarray:
     """A harness output column (uint32/uint64 array or uint32 words) -> uint64 words."""
     v = np.asarray(values)
     n64 = max(1, -(-bits // 64))
@@ -270,9 +270,9 @@ class UnitCosim:
 def _batch(simulator, spec, text, key, columns, valid_density, stall_density, seed,
            timeout_s):
     from .harness import run_batch
-    from .unit_driver import ICARUS_ARGS, _verilator_pch_fix
+    from .unit_driver import ICARUS_ARGS, verilator_pch_fix
 
-    with _verilator_pch_fix(simulator):
+    with verilator_pch_fix(simulator):
         return run_batch(simulator, spec, text, key, columns, valid_density, stall_density,
                          seed, timeout_s=timeout_s,
                          build_args=VERILATOR_ARGS if simulator == "verilator" else ICARUS_ARGS)
@@ -374,7 +374,7 @@ class RayTriangleCosim(UnitCosim):
                            _key("ray_triangle", self.fmt.name, self.mode, self.targets),
                            {"i__payload": _words32(words, self.pair.size)}, valid_density,
                            stall_density, seed, timeout_s)
-        words = _words64(out["o__payload"], out_bits)
+        words = words64(out["o__payload"], out_bits)
         rec = self.res.unpack_words(words)
         got = {}
         for s in self.res.fields:
@@ -653,7 +653,7 @@ class ArrayCosim(_PlaneCosim):
                            _key("plane_sphere", self.fmt.name, f"{self.rows}x{self.cols}",
                                 f"t{self.options.get('testers', p)}", self.targets),
                            cols, valid_density, stall_density, seed, timeout_s)
-        rec = res.unpack_words(_words64(out["result"], res.size))
+        rec = res.unpack_words(words64(out["result"], res.size))
         info["latency"] = latency
         return {k: rec[k] for k in self.outputs}, info
 
@@ -889,10 +889,10 @@ class IntersectionCosim(UnitCosim):
 
     def simulate(self, cases, simulator, *, valid_density, stall_density, seed,
                  timeout_s=None):
-        from .runner import _waves
+        from .runner import waves_requested
 
         t0 = time.monotonic()
-        if _waves():       # the per-cycle cocotb driver records waveforms
+        if waves_requested():       # the per-cycle cocotb driver records waveforms
             from .unit_driver import run_runs
 
             got = run_runs(simulator, self.config, cases["scene"], cases["runs"], seed=seed,

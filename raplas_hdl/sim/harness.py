@@ -45,12 +45,12 @@ import numpy as np
 __all__ = ["Port", "HarnessSpec", "harness_verilog", "pack_lines", "unpack_lines",
            "write_vectors", "read_results", "batch_plusargs", "to_words", "from_words"]
 
-_HEX = np.frombuffer(b"0123456789abcdef", dtype=np.uint8)
-_UNHEX = np.full(256, 255, dtype=np.uint8)
+HEX_DIGITS = np.frombuffer(b"0123456789abcdef", dtype=np.uint8)
+HEX_VALUES = np.full(256, 255, dtype=np.uint8)
 for _i, _c in enumerate(b"0123456789abcdef"):
-    _UNHEX[_c] = _i
+    HEX_VALUES[_c] = _i
 for _i, _c in enumerate(b"ABCDEF"):
-    _UNHEX[_c] = 10 + _i
+    HEX_VALUES[_c] = 10 + _i
 
 
 @dataclass(frozen=True)
@@ -369,7 +369,7 @@ def pack_lines(ports, columns: dict) -> bytes:
     for p, w in zip(ports, words):
         k = np.arange(p.digits - 1, -1, -1)          # nibble index of each digit, MS first
         nib = (w[:, k // 8] >> (4 * (k % 8)).astype(np.uint32)) & np.uint32(0xF)
-        buf[:, col:col + p.digits] = _HEX[nib]
+        buf[:, col:col + p.digits] = HEX_DIGITS[nib]
         col += p.digits
         buf[:, col] = ord(" ")
         col += 1
@@ -400,7 +400,7 @@ def unpack_lines(ports, data: bytes) -> dict:
     out = {}
     col = 0
     for p in ports:
-        nib = _UNHEX[buf[:, col:col + p.digits]]
+        nib = HEX_VALUES[buf[:, col:col + p.digits]]
         if np.any(nib == 255):
             bad = int(np.argmax(np.any(nib == 255, axis=1)))
             raise ValueError(f"result line {bad}, port {p.name}: not a hex value "

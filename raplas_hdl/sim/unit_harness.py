@@ -61,7 +61,7 @@ import numpy as np
 from raplas_hdl.model.config import UnitConfig
 from raplas_hdl.model.memory_image import SceneMemory, as_run, scene_writes
 from raplas_hdl.model.records import CMD, COUNTERS, output_record
-from raplas_hdl.sim.harness import _HEX, _UNHEX  # the hex digit tables, defined once
+from raplas_hdl.sim.harness import HEX_DIGITS, HEX_VALUES  # the hex digit tables, defined once
 
 __all__ = [
     "BACKDOOR",
@@ -237,7 +237,8 @@ def build_harness(simulator: str, config: UnitConfig, build_key: str | None = No
     no tracing, the plain C++ main). Icarus: ``iverilog -g2005``, run with ``vvp -n``. Both
     are built once per Verilog hash under ``build/sim/``.
     """
-    from raplas_hdl.sim.runner import BUILD_ROOT, _file_lock, build_plain_verilator, simulator_env
+    from raplas_hdl.locks import file_lock
+    from raplas_hdl.sim.runner import BUILD_ROOT, build_plain_verilator, simulator_env
     from raplas_hdl.sim.unit_driver import unit_verilog
 
     text = harness_verilog(config) + unit_verilog(config, multiplier, adder)
@@ -253,7 +254,7 @@ def build_harness(simulator: str, config: UnitConfig, build_key: str | None = No
     out = d / "sim.vvp"
     stamp = d / ".built"
     if not stamp.exists():
-        with _file_lock(d.parent / ".icarus-plain.lock"):
+        with file_lock(d.parent / ".icarus-plain.lock"):
             if not stamp.exists():
                 if d.exists():
                     shutil.rmtree(d)
@@ -275,7 +276,7 @@ def build_harness(simulator: str, config: UnitConfig, build_key: str | None = No
 def _hex_cols(values, digits: int) -> np.ndarray:
     v = np.asarray(values, np.uint64).reshape(-1)
     shifts = np.arange(4 * (digits - 1), -1, -4, dtype=np.uint64)
-    return _HEX[((v[:, None] >> shifts) & np.uint64(15)).astype(np.uint8)]
+    return HEX_DIGITS[((v[:, None] >> shifts) & np.uint64(15)).astype(np.uint8)]
 
 
 def ops_bytes(op, addr, data) -> bytes:
@@ -303,7 +304,7 @@ def parse_hex(data: bytes, digits: int) -> np.ndarray:
     if raw.size % line:
         raise HarnessError(f"result file of {raw.size} bytes is not made of {line}-byte lines")
     raw = raw.reshape(-1, line)
-    nib = _UNHEX[raw[:, :digits]]
+    nib = HEX_VALUES[raw[:, :digits]]
     if np.any(nib == 255) or np.any(raw[:, digits] != ord("\n")):
         bad = int(np.nonzero((nib == 255).any(axis=1) | (raw[:, digits] != ord("\n")))[0][0])
         raise HarnessError(f"result line {bad} is not hex: {bytes(raw[bad])!r}")
@@ -392,7 +393,7 @@ def scene_images(config: UnitConfig, scene: SceneMemory) -> dict:
         for b in range(lw):
             bits[rows, lane * lw + b] = ((data >> np.uint64(b)) & np.uint64(1)).astype(np.uint8)
         nib = bits.reshape(n, digits, 4) @ np.array([1, 2, 4, 8], np.uint8)
-        text = np.concatenate([_HEX[nib[:, ::-1]], np.full((n, 1), ord("\n"), np.uint8)],
+        text = np.concatenate([HEX_DIGITS[nib[:, ::-1]], np.full((n, 1), ord("\n"), np.uint8)],
                               axis=1)
         out[name] = text.tobytes()
     return out

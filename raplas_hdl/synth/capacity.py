@@ -138,12 +138,12 @@ def compose(array: dict, rtu: dict, rest: dict, lanes: int, family: str = "xc4v"
     ``cells`` (and the cell counts of every part, ``cells_by_type``) the cells are summed
     and the slice estimate is taken of the sum (:func:`.yosys.summarize`'s formula)."""
     if cells and _with_cells(array, rtu, rest):
-        from .yosys import _count
+        from .yosys import count_cells
 
         types = set(array["cells_by_type"]) | set(rtu["cells_by_type"]) | set(rest["cells_by_type"])
         cells = {t: array["cells_by_type"].get(t, 0) + lanes * rtu["cells_by_type"].get(t, 0)
                  + rest["cells_by_type"].get(t, 0) for t in types}
-        c = _count(cells, family)
+        c = count_cells(cells, family)
         return {k: c[k] for k in _FIELDS}
     return {k: array[k] + lanes * rtu[k] + rest[k] for k in _FIELDS}
 
@@ -444,9 +444,9 @@ def build_capacity(fmt, found: dict, throughput_rows, n_triangles: dict, *,
         "array": {n: _brief(a) for n, a in p["array"].items()}, "rtu": _brief(p["rtu"]),
         "rest": {k: v for k, v in p["rest"].items() if k != "cells_by_type"}}
         for (fam, target), p in parts.items()}
-    from .report import _fmt_label
+    from .report import report_format_label
 
-    return {"format": f"{_fmt_label(fmt)}/{fmt.rounding}", "table": table,
+    return {"format": f"{report_format_label(fmt)}/{fmt.rounding}", "table": table,
             "validation": validation, "inputs": inputs,
             "bram_calibration": cal,
             "reduce_cost": {f: {k: v for k, v in rc.items() if k != "cells_by_type"}

@@ -94,7 +94,7 @@ def synth_row(name: str, fmt: FPFormat, options: dict | None = None, *, cache_di
     t_emit = time.monotonic() - t0
     r = synthesize(text, module, cache_dir=cache_dir, use_cache=use_cache,
                    cached_only=cached_only, family=family)
-    row = {"unit": name, "format": _fmt_label(fmt), "exp_bits": fmt.exp_bits,
+    row = {"unit": name, "format": report_format_label(fmt), "exp_bits": fmt.exp_bits,
            "man_bits": fmt.man_bits, "rounding": fmt.rounding, "options": opts,
            "latency": latency, "emit_seconds": round(t_emit, 2), "family": family}
     row.update(r.to_dict())
@@ -133,7 +133,7 @@ def dsp48_option_rows(formats, *, adder_roundings=ROUNDINGS, cache_dir=None,
                                cached_only=cached_only)
             except LookupError:
                 continue
-            row = {"component": "sigmul", "format": _fmt_label(fmt), "width": width,
+            row = {"component": "sigmul", "format": report_format_label(fmt), "width": width,
                    "target": target, "latency": multiplier_latency(width), **r.to_dict()}
             rows.append(row)
             if progress:
@@ -194,7 +194,7 @@ def adder_option_rows(formats, roundings=ROUNDINGS, *, cache_dir=None, use_cache
     return rows
 
 
-def _fmt_label(fmt: FPFormat) -> str:
+def report_format_label(fmt: FPFormat) -> str:
     return str(fmt).split("/")[0]
 
 

@@ -191,7 +191,7 @@ def _param_int(value, default: int) -> int:
         return default
 
 
-def _count(cells_by_type: dict, family: str = "xc4v") -> dict:
+def count_cells(cells_by_type: dict, family: str = "xc4v") -> dict:
     c = dict(cells_by_type)
     luts = sum(n for t, n in c.items() if _LUT.match(t))
     lutram = sum(_LUTRAM_SITES[t] * n for t, n in c.items() if t in _LUTRAM_SITES)
@@ -373,7 +373,7 @@ def summarize(stat: dict, netlist: dict, top: str, family: str = "xc4v") -> dict
     mods = stat.get("modules", {})
     entry = mods.get("\\" + top) or mods.get(top) or stat.get("design", {})
     cells_by_type = {k.lstrip("\\"): v for k, v in entry.get("num_cells_by_type", {}).items()}
-    out = _count(cells_by_type, family)
+    out = count_cells(cells_by_type, family)
     pc, pl, comp = longest_paths(netlist, top)
     out.update(path_cells=pc, path_levels=pl, path=comp, cells_by_type=cells_by_type)
     return out

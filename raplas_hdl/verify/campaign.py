@@ -105,11 +105,11 @@ from ..cluster import SerialExecutor, make_executor, versions
 from ..fp.format import ROUNDINGS, FPFormat, parse_format
 from ..model.modes import MODES
 
-__all__ = ["VERSION", "worker_versions", "RUN_KEYS", "MODES", "KINDS", "CampaignParams", "Shard", "plan",
-           "shard_path", "compute_shard", "write_shard", "run_shard", "run_campaign", "merge",
-           "markdown", "culling_shard",
-           "raytri_shard", "random_bundle", "random_spheres", "adversarial_spheres",
-           "exact_line_hit", "quantile_from_hist", "results_of", "write_outputs"]
+__all__ = ["VERSION", "worker_versions", "RUN_KEYS", "MODES", "KINDS", "CampaignParams",
+           "Shard", "plan", "shard_path", "compute_shard", "write_shard", "run_shard",
+           "run_campaign", "merge", "markdown", "culling_shard", "raytri_shard",
+           "random_bundle", "random_spheres", "adversarial_spheres", "exact_line_hit",
+           "line_gap", "quantile_from_hist", "results_of", "write_outputs"]
 
 #: Keys of the merged document that describe a run rather than its results
 #: (:func:`results_of` drops them).
@@ -410,7 +410,7 @@ def exact_line_hit(o, d, c, r) -> bool:
     return sum(x * x for x in cx) <= Fraction(float(r)) ** 2 * dd
 
 
-def _line_gap(o, d, c, r):
+def line_gap(o, d, c, r):
     """float64 ``|w x D|^2 - r^2 |D|^2`` per (ray, sphere) and a scale of its error."""
     w = c[None, :, :] - o[None, None, :]
     dd = np.sum(d * d, axis=1)[:, None]
@@ -472,7 +472,7 @@ def culling_shard(shard: Shard) -> dict:
         both_raw = keep_raw[:, row] & keep_raw[:, col]
         # the float64 line test is only sound for finite encoded spheres
         fin = np.isfinite(c_dec).all(1) & np.isfinite(r_dec)
-        gap, scale = _line_gap(o_dec, d_dec, np.where(fin[:, None], c_dec, 0.0),
+        gap, scale = line_gap(o_dec, d_dec, np.where(fin[:, None], c_dec, 0.0),
                                np.where(fin, r_dec, 0.0))                       # (rays, S)
         sure = (gap < -1e-9 * scale) & fin[None, :]
         maybe = (np.abs(gap) <= 1e-9 * scale) & fin[None, :]
