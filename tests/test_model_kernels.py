@@ -77,9 +77,9 @@ def test_ray_triangle_paths_agree(spec, mode):
                 np.empty((n, 3), np.uint8))
 
     whole, split = outputs(), outputs()
-    ray_triangle._loop(*arrs, mc, 0, n, *whole, *key)
+    ray_triangle.pairs_loop(*arrs, mc, 0, n, *whole, *key)
     for lo in range(0, n, 1000):          # ranges that cut blocks: the same bits
-        ray_triangle._loop(*arrs, mc, lo, min(n, lo + 1000), *split, *key)
+        ray_triangle.pairs_loop(*arrs, mc, lo, min(n, lo + 1000), *split, *key)
     ref = [ray_triangle.pair_exact(*[a for a in arrs[:1]], i, arrs[1], i, *arrs[2:], i, *key,
                                    mc) for i in range(n)]
     ref_hit = np.array([r[0] for r in ref])
