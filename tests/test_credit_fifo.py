@@ -1,6 +1,7 @@
 """CreditFIFO equals Amaranth's SyncFIFOBuffered cycle for cycle behind a writer that holds
 credits (as the record fetch and the sphere feeder do), and a write beyond the credits is
-where the two part (the guard the credits make unnecessary)."""
+where the two part (the guard the credits make unnecessary). A banked CreditFIFO equals one
+bank."""
 
 import random
 
@@ -12,12 +13,12 @@ from amaranth.sim import Simulator
 from raplas_hdl.rtl.unit.credit_fifo import CreditFIFO
 
 
-def _run(depth, cycles, seed, p_write, p_read, honour_credits=True):
+def _run(depth, cycles, seed, p_write, p_read, honour_credits=True, banks=1):
     """Drive both FIFOs with the same writes and reads; return the cycles where they differ
     (``valid``, ``payload`` of the head, ``level``, ``w_ready``)."""
     m = Module()
     m.submodules.ref = ref = SyncFIFOBuffered(width=8, depth=depth)
-    m.submodules.dut = dut = CreditFIFO(width=8, depth=depth)
+    m.submodules.dut = dut = CreditFIFO(width=8, depth=depth, banks=banks)
     w_valid, w_data, r_ready = Signal(), Signal(8), Signal()
     m.d.comb += [ref.w_en.eq(w_valid), ref.w_data.eq(w_data), ref.r_en.eq(r_ready),
                  dut.w_stream.valid.eq(w_valid), dut.w_stream.payload.eq(w_data),
@@ -51,10 +52,11 @@ def _run(depth, cycles, seed, p_write, p_read, honour_credits=True):
     return diffs
 
 
-@pytest.mark.parametrize("depth", [3, 4, 5, 16])
-def test_credit_fifo_equals_sync_fifo_buffered_behind_credits(depth):
+@pytest.mark.parametrize("depth,banks", [(3, 1), (4, 1), (5, 1), (16, 1), (3, 3), (5, 2),
+                                         (16, 8)])
+def test_credit_fifo_equals_sync_fifo_buffered_behind_credits(depth, banks):
     for seed, (pw, pr) in enumerate([(0.9, 0.9), (0.9, 0.3), (0.4, 0.8), (1.0, 1.0)]):
-        assert _run(depth, 600, seed, pw, pr) == [], (depth, pw, pr)
+        assert _run(depth, 600, seed, pw, pr, banks=banks) == [], (depth, pw, pr)
 
 
 def test_writes_beyond_the_credits_are_where_the_two_part():
@@ -66,3 +68,9 @@ def test_writes_beyond_the_credits_are_where_the_two_part():
 def test_depth_below_three_is_refused():
     with pytest.raises(ValueError, match="at least 3 words, not 2"):
         CreditFIFO(width=8, depth=2)
+
+
+@pytest.mark.parametrize("banks", [0, 9])
+def test_banks_beyond_the_width_are_refused(banks):
+    with pytest.raises(ValueError, match=f"of 8 bits takes 1 to 8 banks, not {banks}"):
+        CreditFIFO(width=8, depth=4, banks=banks)
