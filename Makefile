@@ -32,10 +32,12 @@ verilog: setup
 
 ## The tests (about 14 minutes on 2 cores from a fresh clone; both simulators, place and route, proofs).
 test: setup
+	$(VENV)/bin/lint-imports
 	$(PYTEST) -m "not full" tests
 
 ## Long campaigns on top of the tests.
 test-full: setup
+	$(VENV)/bin/lint-imports
 	$(PYTEST) tests
 
 bench: setup

@@ -1,7 +1,7 @@
 """Test set-up: the repository root on ``sys.path``, and the common kernels compiled once.
 
 Under pytest-xdist every worker would compile the same numba kernels at the same time;
-:func:`raplas_hdl.engine.warm.warm` compiles them under a file lock, so the first worker
+:func:`raplas_hdl.host.warm.warm` compiles them under a file lock, so the first worker
 compiles and the others load numba's disk cache.
 """
 
@@ -17,6 +17,6 @@ if _ROOT not in sys.path:
 
 @pytest.fixture(scope="session", autouse=True)
 def _compiled_once():
-    from raplas_hdl.engine.warm import default_lock, warm
+    from raplas_hdl.host.warm import default_lock, warm
 
     warm(lock=default_lock())

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from raplas_hdl.host.bundles import RayBundle
+from raplas_hdl.model.bundles import RayBundle
 from raplas_hdl.host.camera import Camera
 
 

@@ -16,7 +16,7 @@ import pytest
 
 from raplas_hdl.fp import FP16, FP24
 from raplas_hdl.host.backends import Float64Backend, ModelBackend
-from raplas_hdl.host.bundles import RayBundle
+from raplas_hdl.model.bundles import RayBundle
 from raplas_hdl.host.exact import exact_intersect
 from raplas_hdl.host.scenes import get_scene
 from raplas_hdl.host.shading import face_normals

@@ -7,7 +7,7 @@ import pytest
 
 from raplas_hdl.fp import FP24
 from raplas_hdl.fp import model as fpm
-from raplas_hdl.host.bundles import RayBundle, encode_bundles
+from raplas_hdl.model.bundles import RayBundle, encode_bundles
 
 GOOD = dict(origin=[0.1, -0.2, -3.0], centre=[0, 0, 0], col_axis=[0.5, 0, 0],
             row_axis=[0, 0.4, 0.1])

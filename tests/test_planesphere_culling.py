@@ -18,7 +18,7 @@ import pytest
 
 from raplas_hdl.fp import FP24, FPFormat
 from raplas_hdl.fp import model as fpm
-from raplas_hdl.host.bundles import RayBundle, encode_bundles
+from raplas_hdl.model.bundles import RayBundle, encode_bundles
 # the generators are shared with the stress campaign
 from raplas_hdl.verify.campaign import line_gap
 from raplas_hdl.verify.campaign import (adversarial_spheres, exact_line_hit, random_bundle,

@@ -24,7 +24,7 @@ from amaranth.sim import Simulator
 
 from raplas_hdl.fp import FP24, FPFormat
 from raplas_hdl.fp import model as fpm
-from raplas_hdl.host.bundles import RayBundle
+from raplas_hdl.model.bundles import RayBundle
 from raplas_hdl.host.culling import CullingBudget, encode_spheres
 from raplas_hdl.model.plane_sphere import sphere_masks
 from raplas_hdl.model.records import PLANE, PS_RESULT, SPHERE

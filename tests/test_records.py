@@ -184,7 +184,7 @@ def test_markdown_tables():
 
 
 def test_host_plane_packer_agrees_with_the_record():
-    from raplas_hdl.host.bundles import RayBundle
+    from raplas_hdl.model.bundles import RayBundle
 
     b = RayBundle(np.array([0.1, 0.2, -5.0]), np.array([0.0, 0.0, 1.0]),
                   np.array([0.3, 0.0, 0.0]), np.array([0.0, 0.2, 0.0]), 3, 4)

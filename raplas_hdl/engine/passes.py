@@ -116,7 +116,7 @@ class BundleBatch:
     origin : ndarray (B, 3), directions : ndarray (B, R, 3)
         The rays as the unit sees them, float64 (decoded for the model).
     geometry : dict
-        The float64 bundle geometry (:func:`raplas_hdl.host.bundles.bundle_geometry`).
+        The float64 bundle geometry (:func:`raplas_hdl.model.bundles.bundle_geometry`).
     """
 
     rows: int

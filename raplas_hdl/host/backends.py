@@ -49,8 +49,8 @@ from ..engine.kernels import (F64_SLACK, cull_f64, cull_model, model_args, trace
 from ..engine.passes import (COUNTER_NAMES, Arithmetic, BundleBatch, EngineScene,
                              cull_pass, round_runs, trace_pass)
 from ..fp.format import FP24, FPFormat, check_format
+from ..model.bundles import RayBundle, bundle_geometry, encode_bundle_arrays
 from ..model.modes import check_mode
-from .bundles import RayBundle, bundle_geometry, encode_bundle_arrays
 from .shading import nearest_hits
 from .spheres import SphereTree
 
@@ -160,7 +160,7 @@ class Backend:
     def batch(self, origins, centres, col_axes, row_axes, rows: int, cols: int,
               enable=None) -> BundleBatch:
         """``B`` bundles of ``rows`` x ``cols`` rays from arrays (B, 3) (see
-        :func:`raplas_hdl.host.bundles.bundle_geometry`); ``enable`` (B, rows*cols) bool."""
+        :func:`raplas_hdl.model.bundles.bundle_geometry`); ``enable`` (B, rows*cols) bool."""
         raise NotImplementedError
 
     def cull(self, batch: BundleBatch, hierarchy: bool = True):
@@ -185,7 +185,7 @@ class Backend:
 
     # -- one bundle at a time (tests and exploration) ---------------------------------------
     def prepare(self, bundle: RayBundle, enable=None) -> BundleBatch:
-        """A batch of one :class:`~raplas_hdl.host.bundles.RayBundle`."""
+        """A batch of one :class:`~raplas_hdl.model.bundles.RayBundle`."""
         en = None if enable is None else self._enable(bundle, enable)[None]
         return self.batch(bundle.origin[None], bundle.centre[None], bundle.col_axis[None],
                           bundle.row_axis[None], bundle.rows, bundle.cols, en)

@@ -30,7 +30,7 @@ holds for the whole line, so for the ray too) has ``|X - C| <= r``, exactly.
    ``|d - f(C)| <= g3 (sum_i |n_i C_i| + |p|) + 6 phi <= g3 (nu |C| + |p|) + 6 phi``.
    So the sphere is kept whenever
    ``r' >= nu r + eps_O + delta (|C| + |O| + r) + g3 (nu |C| + |p|) + 6 phi``.       (*)
-3. The budget of a bundle. :class:`~raplas_hdl.host.bundles.RayBundle` encodes normals
+3. The budget of a bundle. :class:`~raplas_hdl.model.bundles.RayBundle` encodes normals
    toward zero (``nu <= 1``), directions with the format's rounding
    (``|D_enc - D| <= u``), and ``p = -(n_enc . O_enc)`` in float64 before encoding it
    (``|p| <= (1+u) |O|``, ``eps_O <= (u + 2**-50) |O| + phi``). Hence

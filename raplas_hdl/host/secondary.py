@@ -52,7 +52,7 @@ import math
 
 import numpy as np
 
-from .bundles import bundle_geometry
+from ..model.bundles import bundle_geometry
 from .shading import light_hits, phong, shadow_bundles
 from .tracing import any_hit_pass, nearest_pass
 

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .bundles import RayBundle, bundle_geometry
+from ..model.bundles import RayBundle, bundle_geometry
 from .scene import AreaLight, Material
 
 __all__ = [
@@ -202,7 +202,7 @@ class ShadowPlan:
 
     @property
     def bundles(self) -> list:
-        """The bundles as :class:`~raplas_hdl.host.bundles.RayBundle` objects (one per
+        """The bundles as :class:`~raplas_hdl.model.bundles.RayBundle` objects (one per
         point; for inspection, the renderer uses the arrays)."""
         return [RayBundle(o, self.centre, self.col_axis, self.row_axis, self.rows, self.cols)
                 for o in self.origins]

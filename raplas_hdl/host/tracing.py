@@ -159,7 +159,7 @@ def nearest_pass(backend: Backend, origins, centres, col_axes, row_axes, rows: i
     backend : Backend
         With the scene loaded.
     origins, centres, col_axes, row_axes : array_like (B, 3)
-        The bundles (:func:`raplas_hdl.host.bundles.bundle_geometry`).
+        The bundles (:func:`raplas_hdl.model.bundles.bundle_geometry`).
     rows, cols : int
     tally : Tally
         Counts the pass under ``kind``.

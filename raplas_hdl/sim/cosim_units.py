@@ -581,7 +581,7 @@ class ArrayCosim(_PlaneCosim):
                                      ("col_mask", self.cols))))
 
     def random(self, n, seed, per_bundle=48):
-        from raplas_hdl.host.bundles import RayBundle
+        from raplas_hdl.model.bundles import RayBundle
 
         rng = np.random.default_rng([seed, 37])
         g = -(-n // per_bundle)

@@ -89,7 +89,7 @@ def random_bundle(config: UnitConfig, seed: int = 0, disable: float = 0.0,
                   origin=None, spread: float = 0.5, target=None) -> BundleMemory:
     """A bundle from near ``(0, 0, -10)`` looking at ``target`` (default: a random point
     near the scene's centre); ``disable`` of the rays are switched off."""
-    from raplas_hdl.host.bundles import RayBundle
+    from raplas_hdl.model.bundles import RayBundle
 
     rng = np.random.default_rng(seed)
     fmt = config.fmt

@@ -351,7 +351,7 @@ def random_bundle(rng):
     """A random bundle: 1..8 rows and columns, ``|O|`` from 1e-3 to 0.95 ``O_MAX``, screen at
     1e-2..10, axes 45..90 degrees apart, half extents 1e-3..1 of the distance (as the
     test of the culling proof)."""
-    from ..host.bundles import RayBundle
+    from ..model.bundles import RayBundle
     rows, cols = (int(x) for x in rng.integers(1, 9, 2))
     o_norm = 10 ** rng.uniform(-3, math.log10(O_MAX * 0.95))
     origin = rng.normal(size=3)
@@ -431,7 +431,7 @@ def culling_shard(shard: Shard) -> dict:
     (``_CULL_COUNTS``)."""
     from ..fp import model as fpm
     from ..model import plane_sphere as ps_model
-    from ..host.bundles import encode_bundles
+    from ..model.bundles import encode_bundles
     from ..host.culling import CullingBudget, bundle_slacks, encode_spheres
 
     fmt = parse_format(shard.fmt)
@@ -591,7 +591,7 @@ def run_campaign(params: CampaignParams, out_dir="build/campaign", jobs=None,
         if todo and executor.kind != "serial" and executor.local:
             # compile the kernels the shards use once, here, so that the workers only load
             # numba's disk cache (each would otherwise compile them again)
-            from ..engine.warm import default_lock, warm
+            from ..host.warm import default_lock, warm
 
             warm(engine=False, lock=default_lock())
         for shard, doc in executor.run(compute_shard, todo):

@@ -53,9 +53,9 @@ def _generic():
 
 
 def _engine(fmt, mode):
-    from ..host.backends import make_backend
-    from ..host.render import RenderSettings, render
-    from ..host.scenes import get_scene
+    from .backends import make_backend
+    from .render import RenderSettings, render
+    from .scenes import get_scene
 
     backend = make_backend("float64") if fmt is None else make_backend("model", fmt, mode=mode)
     render(get_scene("soup", n=24), backend,

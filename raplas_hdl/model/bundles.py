@@ -1,4 +1,4 @@
-"""Ray bundles and their row and column planes (host side, NumPy).
+"""Ray bundles and their row and column planes: the bundle the unit takes (NumPy).
 
 A bundle is an origin ``O`` and a ``rows`` x ``cols`` lattice on a virtual screen with
 centre ``S`` and two axis vectors: ``col_axis`` (``a``, along a row, from column to
