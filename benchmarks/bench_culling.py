@@ -25,8 +25,8 @@ from pathlib import Path
 import numpy as np
 
 from raplas_hdl.fp import FP24, parse_format
-from raplas_hdl.model.bundles import RayBundle, encode_bundles
 from raplas_hdl.host.culling import CullingBudget, encode_spheres
+from raplas_hdl.model.bundles import RayBundle, encode_bundles
 from raplas_hdl.model.plane_sphere import tester_flags
 
 IMAGE = 64

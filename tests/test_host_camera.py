@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from raplas_hdl.model.bundles import RayBundle
 from raplas_hdl.host.camera import Camera
+from raplas_hdl.model.bundles import RayBundle
 
 
 @pytest.mark.parametrize("w, h, rows, cols", [(16, 16, 8, 8), (13, 7, 4, 3), (5, 9, 8, 8)])

@@ -16,11 +16,11 @@ import pytest
 
 from raplas_hdl.fp import FP16, FP24
 from raplas_hdl.host.backends import Float64Backend, ModelBackend
-from raplas_hdl.model.bundles import RayBundle
 from raplas_hdl.host.exact import exact_intersect
 from raplas_hdl.host.scenes import get_scene
 from raplas_hdl.host.shading import face_normals
 from raplas_hdl.host.spheres import build_sphere_tree, cull_tree, unit_margin
+from raplas_hdl.model.bundles import RayBundle
 from raplas_hdl.model.ray_triangle import intersect
 
 # scene, options, largest fraction of brute-force pairs the culled path may issue in

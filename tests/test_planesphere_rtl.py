@@ -24,8 +24,8 @@ from amaranth.sim import Simulator
 
 from raplas_hdl.fp import FP24, FPFormat
 from raplas_hdl.fp import model as fpm
-from raplas_hdl.model.bundles import RayBundle
 from raplas_hdl.host.culling import CullingBudget, encode_spheres
+from raplas_hdl.model.bundles import RayBundle
 from raplas_hdl.model.plane_sphere import sphere_masks
 from raplas_hdl.model.records import PLANE, PS_RESULT, SPHERE
 from raplas_hdl.rtl.plane_sphere import PlaneSphereArray, PlaneSphereTester, build_plane_sphere
@@ -302,6 +302,50 @@ def _check_parameters():
     arr = build_plane_sphere(FP24, rows=64, cols=64, testers=16)
     assert arr.passes == 8 and arr.testers == 16 and arr.latency == 26
     assert build_plane_sphere(FPFormat(5, 10), rows=4, cols=4, testers=32).testers == 8
+
+
+@pytest.mark.parametrize("fmt", [SMALL, FP24], ids=["E5M6", "FP24"])
+def test_comparator_equals_the_model_on_every_class(fmt):
+    """``abs_gt(d, radius_terms(r))`` is the model's ``lt(r, |d|)`` for every sign and
+    exponent class of both operands (zero, denormal, normal, max finite, inf, NaN)."""
+    from amaranth.hdl import Module, Signal
+
+    from raplas_hdl.rtl.plane_sphere import abs_gt, radius_terms
+
+    rng = np.random.default_rng(5)
+    mb, top = fmt.man_bits, fmt.exp_max_field
+    pats = []
+    for exp in (0, 1, 2, top // 2, top - 1, top):
+        for frac in (0, 1, int(rng.integers(2, 1 << mb)), (1 << mb) - 1):
+            for sign in (0, fmt.sign_bit):
+                pats.append(sign | exp << mb | frac)
+    pats = np.array(pats, np.uint32)
+    d = np.concatenate([np.repeat(pats, len(pats)),
+                        rng.integers(0, 1 << fmt.width, 3000, dtype=np.uint32)])
+    r = np.concatenate([np.tile(pats, len(pats)),
+                        rng.integers(0, 1 << fmt.width, 3000, dtype=np.uint32)])
+    near = rng.integers(0, 3000, 1000)              # |d| and r a unit or two apart
+    d = np.concatenate([d, r[-3000:][near] + rng.integers(0, 3, 1000).astype(np.uint32)])
+    r = np.concatenate([r, r[-3000:][near]])
+    d &= np.uint32((1 << fmt.width) - 1)
+    want = fpm.lt(r, d & np.uint32(~fmt.sign_bit & ((1 << fmt.width) - 1)), fmt)
+
+    m = Module()
+    d_s, r_s = Signal(fmt.width), Signal(fmt.width)
+    gt = abs_gt(m, d_s, radius_terms(m, r_s, fmt), fmt)
+    got = []
+
+    async def bench(ctx):
+        for a, b in zip(d.tolist(), r.tolist()):
+            ctx.set(d_s, a)
+            ctx.set(r_s, b)
+            got.append(ctx.get(gt))
+
+    sim = Simulator(m)
+    sim.add_testbench(bench)
+    sim.run()
+    bad = np.flatnonzero(np.array(got, bool) != np.asarray(want, bool))
+    assert bad.size == 0, [(hex(d[i]), hex(r[i])) for i in bad[:5]]
 
 
 def test_parameters_checked():

@@ -100,24 +100,34 @@ def _check_int(name, value, low):
         raise ValueError(f"{name} must be an integer >= {low}, not {value!r}")
 
 
-def abs_gt(m: Module, d, r, fmt):
-    """``|d| > r`` as an ordered comparison of the contract (NaN: False; denormal
-    patterns compare as zero); a combinational value."""
+def radius_terms(m: Module, r, fmt):
+    """What :func:`abs_gt` needs of the radius ``r``: ``Cat(mag, nan, neg)``, its magnitude
+    (denormal patterns as zero), whether it is a NaN and whether it is below zero; a
+    combinational value, formed where ``r`` enters so that it travels the delay line
+    already decoded."""
     w, mb = fmt.width, fmt.man_bits
-    e_all = fmt.exp_max_field
+    exp, frac = r[mb:w - 1], r[:mb]
+    mag = Signal(w - 1, name="r_mag")
+    m.d.comb += mag.eq((exp != 0).replicate(w - 1) & r[:w - 1])
+    nan = (exp == fmt.exp_max_field) & (frac != 0)
+    return Cat(mag, nan, r[w - 1] & (mag != 0))
 
-    def parts(x):
-        exp = x[mb:w - 1]
-        frac = x[:mb]
-        nan = (exp == e_all) & (frac != 0)
-        mag = (exp != 0).replicate(w - 1) & x[:w - 1]
-        return nan, mag
 
-    d_nan, d_mag = parts(d)
-    r_nan, r_mag = parts(r)
-    r_neg = r[w - 1] & (r_mag != 0)
+def abs_gt(m: Module, d, r_terms, fmt):
+    """``|d| > r`` as an ordered comparison of the contract (NaN: False; denormal
+    patterns compare as zero), ``r`` given by :func:`radius_terms`; a combinational value.
+
+    ``d``'s bits meet the comparison's carry chain straight from its register: a denormal
+    ``d`` (exponent field 0) is below every nonzero magnitude, so ``d``'s exponent is tested
+    beside the chain instead of masking ``d``'s bits in front of it (placed and routed, the
+    decoding of both operands in front of the chain made the tester's comparison the
+    certified whole unit's path, 12.1 ns at ECP5 speed 6)."""
+    w, mb = fmt.width, fmt.man_bits
+    r_mag, r_nan, r_neg = r_terms[:w - 1], r_terms[w - 1], r_terms[w]
+    exp, frac = d[mb:w - 1], d[:mb]
+    d_nan = (exp == fmt.exp_max_field) & (frac != 0)
     gt = Signal(name="abs_gt")
-    m.d.comb += gt.eq(~d_nan & ~r_nan & (r_neg | (d_mag > r_mag)))
+    m.d.comb += gt.eq(~d_nan & ~r_nan & (r_neg | ((exp != 0) & (d[:w - 1] > r_mag))))
     return gt
 
 
@@ -251,7 +261,7 @@ class PlaneSphereTester(wiring.Component):
                          u.i_valid.eq(self.i_valid), u.en.eq(en)]
         lat_m, lat_a = mul_x.latency, add_s1.latency
         sel_m = delay(m, self.sel, lat_m, en=en, name="sel_dly")
-        r_d = delay(m, self.r, lat_m + 2 * lat_a, en=en, name="r_dly")
+        r_d = delay(m, radius_terms(m, self.r, fmt), lat_m + 2 * lat_a, en=en, name="r_dly")
         # Stages 4-7: s1 = mx + my, s2 = mz + p.
         m.d.comb += [
             add_s1.a.eq(mul_x.o), add_s1.b.eq(mul_y.o), add_s1.sub.eq(0),
