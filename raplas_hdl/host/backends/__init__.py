@@ -1,0 +1,83 @@
+"""Intersection backends behind one interface: ``float64``, ``model`` and ``rtl``.
+
+The renderer talks to the accelerator only through :class:`Backend`, a pass at a time:
+
+1. :meth:`Backend.load` writes a scene: triangle records and the leaf spheres of a
+   :class:`~raplas_hdl.host.spheres.SphereTree` (the Sphere Memory), and keeps the inner
+   nodes' spheres for the host's hierarchy test;
+2. :meth:`Backend.batch` turns ``B`` bundles of one size, given as arrays (origins, screen
+   centres and axes, enable bits), into a :class:`~raplas_hdl.engine.passes.BundleBatch`:
+   Plane Memory and Ray Memory in the backend's arithmetic, and the *keep-all* bit of
+   every bundle whose quantisation slack is over the culling budget
+   (:mod:`raplas_hdl.host.culling`): neither the host nor the unit culls with it;
+3. :meth:`Backend.cull` is the hierarchy cull of the whole batch, with the same arithmetic
+   as the unit's plane-sphere testers;
+4. :meth:`Backend.trace` runs the unit over the batch's runs and folds each ray's nearest
+   accepted hit; :meth:`Backend.stream` gives the runs' pair streams instead (the unit's
+   result beats with ``t, u, v`` divided on the host), for checks and analyses.
+
+Backends:
+
+- ``float64``: the reference with no quantisation: float64 planes and spheres,
+  ``|n.C + p| <= r`` with a float64-rounding allowance, and the division-free
+  Moller-Trumbore decision of ``docs/raplas.md`` evaluated in float64 on the original
+  geometry (exact-inequality mode). No event flags.
+- ``model``: the bit-accurate golden model of the intersection unit in any format,
+  rounding and ray-triangle mode, with the radius inflation of
+  :mod:`raplas_hdl.host.culling`. Its passes run in the compiled kernels of
+  :mod:`raplas_hdl.engine`; its streams come from
+  :func:`raplas_hdl.model.intersection.run_runs`, the model's side of the interface the RTL
+  driver has (``config, scene, runs``).
+- ``rtl``: the same memories run through the Verilog of the unit under cocotb (Icarus or
+  Verilator) with the driver's ``run_runs``; it raises :class:`BackendUnavailable` with what
+  is missing when the simulator or the unit's driver is not there.
+
+Nothing here imports Amaranth.
+"""
+
+from __future__ import annotations
+
+from ...fp.format import FP24, FPFormat
+from .base import COUNTERS, Backend, BackendUnavailable, RunResult, runs_of
+from .float64 import Float64Backend
+from .model import ModelBackend
+from .rtl import RtlBackend
+
+__all__ = [
+    "BACKENDS",
+    "Backend",
+    "BackendUnavailable",
+    "COUNTERS",
+    "Float64Backend",
+    "ModelBackend",
+    "RtlBackend",
+    "RunResult",
+    "make_backend",
+    "runs_of",
+]
+
+BACKENDS = ("float64", "model", "rtl")
+
+
+def make_backend(name: str, fmt: FPFormat = FP24, mode: str = "conservative",
+                 sim: str = "icarus", testers=None, reduce: bool = False) -> Backend:
+    """A backend by name (``float64``, ``model``, ``rtl``); ``reduce``: through the unit
+    built with the on-chip reduction (model and rtl).
+
+    Raises
+    ------
+    ValueError
+        For an unknown name, or ``reduce`` where it does not apply.
+    BackendUnavailable
+        For ``rtl`` when the simulator or the unit's driver is missing.
+    """
+    if name == "float64":
+        if reduce:
+            raise ValueError("the float64 backend has no unit to reduce on: use --backend "
+                             "model or rtl with --reduce")
+        return Float64Backend()
+    if name == "model":
+        return ModelBackend(fmt, mode, testers, reduce=reduce)
+    if name == "rtl":
+        return RtlBackend(fmt, mode, testers, sim=sim, reduce=reduce)
+    raise ValueError(f"unknown backend {name!r}: use one of {', '.join(BACKENDS)}")

@@ -1,0 +1,193 @@
+"""What every backend shares: the pass protocol (:class:`Backend`), a run's result
+(:class:`RunResult`) and :class:`BackendUnavailable`; the package docstring says how the
+renderer drives a backend."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ...engine.passes import (COUNTER_NAMES, Arithmetic, BundleBatch, EngineScene, cull_pass,
+                              round_runs, trace_pass)
+from ...fp.format import FPFormat
+from ...model.bundles import RayBundle
+from ..spheres import SphereTree
+
+#: The unit's counters (one definition: :data:`raplas_hdl.model.config.COUNTER_NAMES`).
+COUNTERS = COUNTER_NAMES
+
+
+class BackendUnavailable(RuntimeError):
+    """A backend cannot run here; the message says what is missing and how to get it."""
+
+
+@dataclass
+class RunResult:
+    """The pairs one run issued, in stream order, with their outcome.
+
+    ``t, u, v`` are ``t'/det, u'/det, v'/det`` in float64 (NaN where not a hit).
+    ``outcome``: a certified unit's per pair (0 miss, 1 certain hit, 2 uncertain), else None.
+    """
+
+    ray_id: np.ndarray
+    tri_id: np.ndarray
+    hit: np.ndarray
+    t: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    flags: np.ndarray
+    counters: dict = field(default_factory=dict)
+    outcome: np.ndarray | None = None
+
+    @classmethod
+    def empty(cls, counters=None) -> RunResult:
+        z = np.zeros(0, np.int64)
+        f = np.zeros(0)
+        return cls(z, z.copy(), np.zeros(0, bool), f, f.copy(), f.copy(),
+                   np.zeros(0, np.uint8), dict(counters or {}))
+
+
+def runs_of(run_b, run_start, run_sph):
+    return [(int(b), run_sph[run_start[u]:run_start[u + 1]]) for u, b in enumerate(run_b)]
+
+
+class Backend:
+    """Common part of the backends (the protocol: :mod:`raplas_hdl.host.backends`)."""
+
+    name = "?"
+    fmt: FPFormat | None = None
+    mode = "paper"
+
+    def __init__(self):
+        self.tree: SphereTree | None = None
+        self.tris: np.ndarray | None = None
+        self.scene: EngineScene | None = None
+
+    # -- interface ------------------------------------------------------------------------
+    def usable(self, tris: np.ndarray) -> tuple[np.ndarray, dict]:
+        """Which triangles this backend can load: ``(bool mask (F,), skipped counts by
+        reason)``. The default keeps finite triangles of non-zero area."""
+        tris = np.asarray(tris, dtype=np.float64)
+        finite = np.isfinite(tris).all(axis=(1, 2))
+        safe = np.where(finite[:, None, None], tris, 0.0)
+        area = np.linalg.norm(np.cross(safe[:, 1] - safe[:, 0], safe[:, 2] - safe[:, 0]),
+                              axis=1)
+        ok = finite & (area > 0)
+        return ok, {"nonfinite": int((~finite).sum()), "degenerate": int((finite & ~ok).sum())}
+
+    def load(self, tris: np.ndarray, tree: SphereTree, bound: float) -> dict:
+        """Write a scene. ``tris`` (F, 3, 3) float64 scene coordinates; ``bound`` the
+        normalisation bound. Returns a report dict (counts of skipped items etc.)."""
+        self.tris = np.asarray(tris, dtype=np.float64)
+        self.tree = tree
+        self.bound = float(bound)
+        return {}
+
+    def warm_pass(self, origins, centres, col_axes, row_axes, rows: int, cols: int) -> float:
+        """Run a throw-away pass of the given bundles (one is enough) through the cull and the
+        trace of the loaded scene, so that the kernels are compiled (or loaded from numba's
+        disk cache) before the real passes; returns the seconds it took."""
+        t0 = time.perf_counter()
+        saved = dict(getattr(self, "certified", {}))     # a throw-away pass counts nothing
+        beats = dict(getattr(self, "beats", {}))
+        batch = self.batch(origins, centres, col_axes, row_axes, rows, cols)
+        cr = self.cull(batch)
+        best_t = np.full((batch.n_bundles, batch.n_rays), np.inf)
+        best_tri = np.full(best_t.shape, -1, np.int64)
+        self.trace(batch, *round_runs(cr.start, cr.leaves, None, 0), best_t, best_tri, 0.0,
+                   np.full(best_t.shape, np.inf), np.full(batch.n_bundles, -1, np.int64))
+        if saved:
+            self.certified.update(saved)
+        if beats:
+            self.beats.update(beats)
+        return time.perf_counter() - t0
+
+    def batch(self, origins, centres, col_axes, row_axes, rows: int, cols: int,
+              enable=None) -> BundleBatch:
+        """``B`` bundles of ``rows`` x ``cols`` rays from arrays (B, 3) (see
+        :func:`raplas_hdl.model.bundles.bundle_geometry`); ``enable`` (B, rows*cols) bool."""
+        raise NotImplementedError
+
+    def cull(self, batch: BundleBatch, hierarchy: bool = True):
+        """The hierarchy cull of a batch (:func:`raplas_hdl.engine.passes.cull_pass`)."""
+        return cull_pass(self._arith(), self.scene, batch, hierarchy)
+
+    def trace(self, batch: BundleBatch, run_b, run_start, run_sph, best_t, best_tri,
+              tmin: float = 0.0, tmax=None, exclude=None, any_hit: bool = False) -> np.ndarray:
+        """Runs of a batch folded into each ray's nearest hit
+        (:func:`raplas_hdl.engine.passes.trace_pass`); counters (U, 8). ``any_hit``: only
+        whether a ray is blocked matters (shadow rays); the certified mode then stops at the
+        first hit it is sure of, the other modes fold the nearest all the same."""
+        return trace_pass(self._arith(), self.scene, batch, run_b, run_start, run_sph,
+                          best_t, best_tri, tmin, tmax, exclude)
+
+    def stream(self, batch: BundleBatch, runs) -> list[RunResult]:
+        """The pair stream of each run ``(bundle index, sphere ids)`` of a batch."""
+        raise NotImplementedError
+
+    def describe(self) -> str:
+        return self.name
+
+    # -- one bundle at a time (tests and exploration) ---------------------------------------
+    def prepare(self, bundle: RayBundle, enable=None) -> BundleBatch:
+        """A batch of one :class:`~raplas_hdl.model.bundles.RayBundle`."""
+        en = None if enable is None else self._enable(bundle, enable)[None]
+        return self.batch(bundle.origin[None], bundle.centre[None], bundle.col_axis[None],
+                          bundle.row_axis[None], bundle.rows, bundle.cols, en)
+
+    def touched(self, batch: BundleBatch, nodes) -> np.ndarray:
+        """The host's hierarchy test of nodes against bundle 0 of a batch (bool array)."""
+        nodes = np.asarray(nodes, np.int64)
+        keep = np.empty(nodes.size, np.bool_)
+        arith = self._arith()
+        arith.cull(batch.pn, batch.pp, batch.rows, batch.n_planes,
+                   np.zeros(nodes.size, np.int64), nodes, self.scene.node_c, self.scene.node_r,
+                   0, nodes.size, keep, *arith.cull_tail)
+        return keep
+
+    def run(self, batch: BundleBatch, sphere_ids) -> RunResult:
+        """One run of bundle 0 of a batch: its pair stream."""
+        return self.stream(batch, [(0, np.asarray(sphere_ids, np.int64))])[0]
+
+    # -- helpers --------------------------------------------------------------------------
+    def _arith(self) -> Arithmetic:
+        raise NotImplementedError
+
+    def _enable(self, bundle, enable):
+        if enable is None:
+            return np.ones(bundle.n_rays, dtype=bool)
+        en = np.asarray(enable, dtype=bool).reshape(-1)
+        if en.shape != (bundle.n_rays,):
+            raise ValueError(f"enable must have {bundle.n_rays} entries, not {en.size}")
+        return en.copy()
+
+    @staticmethod
+    def _enable_array(enable, b, r):
+        if enable is None:
+            return np.ones((b, r), bool)
+        en = np.ascontiguousarray(enable, dtype=bool)
+        if en.shape != (b, r):
+            raise ValueError(f"enable must have shape ({b}, {r}), not {en.shape}")
+        return en.copy()
+
+    def _scene_tree(self, tree, node_c, node_r, sc, sr, v0, e1, e2, nn):
+        lists = tree.leaf_tris
+        return EngineScene(
+            node_c=np.ascontiguousarray(node_c), node_r=np.ascontiguousarray(node_r),
+            child_start=tree.child_start.astype(np.int64),
+            child_index=tree.child_index.astype(np.int64),
+            node_leaf=tree.node_leaf.astype(np.int64), depth=tree.depth.astype(np.int64),
+            node_tris=tree.node_tris.astype(np.int64), sc=np.ascontiguousarray(sc),
+            sr=np.ascontiguousarray(sr), tcount=(lists >= 0).sum(axis=1).astype(np.int64),
+            tlist=np.ascontiguousarray(np.where(lists >= 0, lists, 0), np.int64),
+            v0=np.ascontiguousarray(v0), e1=np.ascontiguousarray(e1),
+            e2=np.ascontiguousarray(e2), nn=np.ascontiguousarray(nn), levels=tree.levels)
+
+
+def result_beats(counters) -> int:
+    """Beats of the unreduced result stream of runs with these counters (U, 8): one per
+    issued pair, one (empty) for a run that issued none."""
+    pairs = np.asarray(counters)[:, COUNTERS.index("pairs_issued")]
+    return int(np.maximum(pairs, 1).sum())
