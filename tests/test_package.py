@@ -163,3 +163,36 @@ def test_clean_venv_install(wheel, tmp_path):
     assert (cwd / "build" / "sim").is_dir()
     assert not (Path(site).parents[1] / "build").exists()   # nothing built in site-packages
     print(json.dumps({"seconds (wall, CPU of children)": times}, indent=1))
+
+
+def _api_table() -> list[tuple[str, list[str]]]:
+    """(module, names) of each row of docs/integration.md's public API table."""
+    text = (ROOT / "docs" / "integration.md").read_text()
+    section = text.split("## The Python API: what to import", 1)[1].split("\n## ", 1)[0]
+    rows = []
+    for line in section.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) == 3 and cells[0].startswith("`raplas_hdl"):
+            rows.append((cells[0].strip("`"),
+                         [n.strip().strip("`") for n in cells[1].split(",")]))
+    return rows
+
+
+def test_the_documented_api_is_importable_and_exported():
+    import importlib
+
+    rows = _api_table()
+    assert len(rows) >= 15, rows
+    for module, names in rows:
+        mod = importlib.import_module(module)
+        for name in names:
+            assert hasattr(mod, name), f"{module} has no {name}"
+            assert name in getattr(mod, "__all__", ()), f"{name} not in {module}.__all__"
+
+
+def test_the_api_example_runs(capsys):
+    text = (ROOT / "docs" / "integration.md").read_text()
+    section = text.split("## The Python API: what to import", 1)[1].split("\n## ", 1)[0]
+    code = section.split("```python\n", 1)[1].split("```", 1)[0]
+    exec(compile(code, "docs/integration.md", "exec"), {})
+    assert capsys.readouterr().out.strip() == "(32, 32, 3)"

@@ -37,7 +37,8 @@ import numpy as np
 from raplas_hdl.fp import FPFormat
 from raplas_hdl.fp import model as fpm
 
-__all__ = ["RayBundle", "encode_toward_zero", "encode_bundles"]
+__all__ = ["RayBundle", "bundle_geometry", "encode_toward_zero", "encode_bundle_arrays",
+           "encode_bundles"]
 
 #: A bundle whose origin is closer to the screen plane than this fraction of the
 #: screen's size (or whose axes are closer to parallel than this sine) is degenerate.
