@@ -29,7 +29,7 @@ from raplas_hdl.model.intersection import result_dtype, run_runs
 from raplas_hdl.model.config import UnitConfig
 from raplas_hdl.model.records import OUTCOME_HIT, OUTCOME_UNCERTAIN
 from raplas_hdl.model.reduction import candidates, first_answers, reduce_run
-from raplas_hdl.sim.cosim_units import unit_cosim
+from raplas_hdl.sim.cosim import unit_cosim
 
 #: a format with many uncertain pairs on the cosim's random scenes (about 2.5 % of pairs)
 COARSE = FPFormat(6, 8)

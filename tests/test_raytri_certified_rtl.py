@@ -5,7 +5,7 @@ bound_variant="exp"``), every output bit: the outcome (0 miss, 1 hit, 2 uncertai
 t', u', v', det, flags, the per-pair event counts and the IDs, in order.
 
 It runs through the batch harness of ``raplas-hdl cosim ray-triangle --mode certified``
-(:class:`raplas_hdl.sim.cosim_units.RayTriangleCosim`: random gaps in ``i.valid`` and
+(:class:`raplas_hdl.sim.cosim.RayTriangleCosim`: random gaps in ``i.valid`` and
 back-pressure on ``o.ready``). The pairs: every stress family (edge, vertex, grazing,
 flush, ... with special patterns mixed in, :func:`raplas_hdl.verify.stress.vectors`), the
 pairs with known event counts and uniformly random patterns. ``make test`` runs FP24 rtz
@@ -20,7 +20,7 @@ from amaranth.hdl import Fragment
 from raplas_hdl.fp import FP16, FP20, FP24, FPFormat
 from raplas_hdl.model.ray_triangle import intersect
 from raplas_hdl.rtl.ray_triangle import RayTriangleUnit
-from raplas_hdl.sim.cosim_units import RayTriangleCosim, compare
+from raplas_hdl.sim.cosim import RayTriangleCosim, compare
 from raplas_hdl.verify.stress import vectors
 from test_raytri_model import event_pairs
 from test_raytri_rtl import NAMES

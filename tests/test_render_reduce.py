@@ -151,7 +151,7 @@ def test_verilog_reduce_builds_reduced_unit():
 def test_cosim_compares_answers():
     """The cosim of the reduced unit flags a changed ANSWER field and an any-hit counter
     above the model's, and accepts fewer issued pairs in an any-hit run."""
-    from raplas_hdl.sim.cosim_units import unit_cosim
+    from raplas_hdl.sim.cosim import unit_cosim
 
     u = unit_cosim("intersection-unit", FP24, {"rows": 2, "cols": 2, "tris_per_sphere": 2,
                                                "reduce": True})

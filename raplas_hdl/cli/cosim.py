@@ -228,7 +228,7 @@ def check(args) -> None:
         else:
             n = DEFAULT_CASES[args.unit] if args.random is None else args.random
     else:
-        from ..sim.cosim_units import unit_cosim
+        from ..sim.cosim import unit_cosim
 
         _check_build(args)
         args.unit_cosim = unit_cosim(args.unit, args.fmt, args.options)
@@ -287,7 +287,7 @@ def run(args) -> int:
         shown = u.mismatches(expected, got)
         bad = [k for k, lines in enumerate(shown) if lines]
     else:
-        from ..sim.cosim_units import compare
+        from ..sim.cosim import compare
 
         bad = list(compare(expected, got, getattr(u, "compared", u.outputs)))
     opts = " ".join(f"{k}={v}" for k, v in u.options.items())

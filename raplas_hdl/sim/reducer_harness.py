@@ -96,7 +96,7 @@ def cosim_reducer(simulator: str, cfg: UnitConfig, runs, *, seed: int = 1,
     (structured arrays of ``ANSWER``, ``ANSWER_CERTIFIED`` in certified mode) of the RTL and
     of the model."""
     from ..rtl.emit import emit_verilog
-    from .cosim_units import words64
+    from .cosim import words64
     from .harness import HarnessSpec
 
     top = ReducerTop(cfg)
@@ -118,7 +118,7 @@ def cosim_reducer(simulator: str, cfg: UnitConfig, runs, *, seed: int = 1,
 
 
 def _batch_n(simulator, spec, text, key, columns, valid_density, stall_density, seed, n_out):
-    from .cosim_units import VERILATOR_ARGS
+    from .cosim import VERILATOR_ARGS
     from .harness import run_batch
     from .unit_driver import ICARUS_ARGS, verilator_pch_fix
 

@@ -133,26 +133,22 @@ def verilator_pch_fix(simulator):
 
 
 def unit_verilog_digest(config: UnitConfig, multiplier: str = "generic",
-                   adder: str = "generic") -> str:
+                        adder: str = "generic") -> str:
+    """The cache key of the unit's Verilog: its parameters, the targets, Amaranth's version
+    and every source it is emitted from (:func:`~raplas_hdl.sim.sources.rtl_sources_digest`)."""
     import hashlib
 
     import amaranth
 
-    import raplas_hdl
+    from .sources import rtl_sources_digest
 
-    root = Path(raplas_hdl.__file__).resolve().parent
     h = hashlib.sha256(json.dumps(config.params(), sort_keys=True).encode())
     if multiplier != "generic":
         h.update(multiplier.encode())
     if adder != "generic":
         h.update(b"adder-" + adder.encode())
     h.update(amaranth.__version__.encode())
-    # every RTL source, the stages of rtl/unit/ too (a changed stage must not reuse the text)
-    for path in sorted((root / "rtl").rglob("*.py")) + [root / "model" / "memory_image.py",
-                                                        root / "model" / "records.py",
-                                                        root / "fp" / "format.py"]:
-        h.update(path.name.encode())
-        h.update(path.read_bytes())
+    h.update(rtl_sources_digest().encode())
     return h.hexdigest()[:16]
 
 

@@ -1,0 +1,55 @@
+"""Co-simulation of the plane-sphere, ray-triangle and intersection units against the model.
+
+``raplas-hdl cosim`` drives every unit at full clock rate with no Python per cycle:
+
+``ray-triangle``
+    The batch harness of :mod:`raplas_hdl.sim.harness` around the unit's streams (``i`` a
+    packed :data:`~raplas_hdl.model.records.PAIR`, ``o`` a
+    :data:`~raplas_hdl.model.records.RT_RESULT`), random gaps in ``i.valid`` (held until
+    taken) and random back-pressure on ``o.ready``.
+``plane-sphere-tester``, ``plane-sphere``
+    The same harness around a generated wrapper (:func:`plane_wrapper_verilog`) whose input
+    vector is the plane(s) and one sphere. The wrapper keeps the unit's drain rule: when a
+    vector brings other planes than the loaded ones, it stops taking spheres, waits until
+    nothing is in flight, writes the planes (one per clock) and goes on. The tester's clock
+    enable is the output's ready (a held pipeline holds its result).
+``intersection-unit``
+    A live session of :mod:`raplas_hdl.sim.unit_harness` (scene by backdoor, runs through
+    the op stream, results decoded in bulk); a case is one run (a bundle against a list of
+    spheres) and every field of every result beat and every counter is compared. With
+    ``--waves`` the per-cycle cocotb driver (:func:`raplas_hdl.sim.unit_driver.run_runs`)
+    runs instead, as ``render --waves`` does.
+
+Each unit is a :class:`UnitCosim`: its random cases (seeded), the model's expected results,
+its vectors file (:mod:`raplas_hdl.sim.vectors`; docs/cosim.md), the simulation and the
+comparison of every output field. With ``target="virtex4"`` the units' multipliers are
+DSP48 primitives and Yosys's DSP48 model (:func:`raplas_hdl.rtl.dsp48.dsp48_sim_model`) is
+appended to the simulated text.
+"""
+
+from __future__ import annotations
+
+from .base import (RT_ID_BITS, SPHERE_ID_BITS, VERILATOR_ARGS, UnitCosim, compare, unit_verilog,
+                   words64)
+from .intersection import IntersectionCosim
+from .plane_sphere import ArrayCosim, TesterCosim, plane_wrapper_verilog
+from .ray_triangle import RayTriangleCosim
+
+__all__ = ["COSIM_UNITS", "ArrayCosim", "IntersectionCosim", "RT_ID_BITS", "RayTriangleCosim",
+           "SPHERE_ID_BITS", "TesterCosim", "UnitCosim", "VERILATOR_ARGS", "compare",
+           "plane_wrapper_verilog", "unit_cosim", "unit_verilog", "words64"]
+
+_CLASSES = {c.name: c for c in (TesterCosim, ArrayCosim, RayTriangleCosim,
+                                IntersectionCosim)}
+#: The units this module co-simulates (the FP units go through :mod:`raplas_hdl.sim.tb_fp`).
+COSIM_UNITS = tuple(_CLASSES)
+
+
+def unit_cosim(name: str, fmt, options: dict) -> UnitCosim:
+    """The :class:`UnitCosim` of unit ``name`` with ``options`` (None: default)."""
+    try:
+        cls = _CLASSES[name]
+    except KeyError:
+        raise ValueError(f"unit must be one of {', '.join(COSIM_UNITS)}, not {name!r}") \
+            from None
+    return cls(fmt, options)

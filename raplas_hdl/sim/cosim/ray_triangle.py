@@ -1,0 +1,116 @@
+"""``ray-triangle``: the batch harness around the unit's pair and result streams."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..vectors import LineKind, columns_of
+from .base import (RT_ID_BITS, UnitCosim, as_u64, cosim_key, run_cosim_batch, unit_verilog,
+                   words32, words64)
+
+
+class RayTriangleCosim(UnitCosim):
+    """``ray-triangle``: one untagged line per pair, inputs then the expected result (the
+    certified mode: the record's fields and ``outcome``, the 2 bits above them, compared
+    with the model's ``bound_variant="exp"``, the variant the RTL has)."""
+
+    name = "ray-triangle"
+
+    def __init__(self, fmt, options):
+        super().__init__(fmt, options)
+        from raplas_hdl.model.records import PAIR, RT_RESULT
+
+        self.mode = self.options.get("mode", "paper")
+        self.header_params = {"mode": self.mode}
+        ids = {"ray_id_bits": RT_ID_BITS, "tri_id_bits": RT_ID_BITS}
+        self.pair = PAIR.bind(fmt, **ids)
+        self.res = RT_RESULT.bind(fmt, **ids)
+        ins = [(n, w) for n, (_, w) in self.pair.offsets().items()]
+        outs = [(n, w) for n, (_, w) in self.res.offsets().items()
+                if n not in ("ray_id", "tri_id")]
+        self.certified = self.mode == "certified"
+        if self.certified:
+            outs.append(("outcome", 2))
+        self.outputs = tuple(n for n, _ in outs)
+        self.compared = ("ray_id", "tri_id") + self.outputs
+        self.kinds = (LineKind(None, tuple(ins + outs)),)
+
+    def _split(self, cols: dict, layout) -> dict:
+        """Leaf columns (``o.x``) -> record fields (``o``: (n, 3))."""
+        out = {}
+        for s in layout.fields:
+            if s.parts:
+                out[s.name] = np.stack([cols[f"{s.name}.{p}"] for p in s.parts], axis=1)
+            else:
+                out[s.name] = cols[s.name]
+        return out
+
+    def random(self, n, seed):
+        from raplas_hdl.verify.stress import vectors
+
+        vec = vectors(self.fmt, n, seed)
+        rng = np.random.default_rng([seed, 7])
+        cases = {"ray_id": rng.integers(0, 1 << RT_ID_BITS, n).astype(np.uint64),
+                 "tri_id": rng.integers(0, 1 << RT_ID_BITS, n).astype(np.uint64)}
+        for k, v in vec.items():
+            for j, p in enumerate("xyz"):
+                cases[f"{k}.{p}"] = v[:, j].astype(np.uint64)
+        return cases
+
+    def expected(self, cases):
+        from raplas_hdl.model.ray_triangle import intersect
+
+        f = self._split(cases, self.pair)
+        ref = intersect(*(f[k].astype(np.uint32) for k in ("o", "d", "v0", "e1", "e2", "n")),
+                        self.fmt, mode=self.mode,
+                        bound_variant="exp" if self.certified else None)
+        out = {"ray_id": as_u64(cases["ray_id"]), "tri_id": as_u64(cases["tri_id"])}
+        for k in ("hit", "t", "u", "v", "det", "flags") + ("outcome",) * self.certified:
+            out[k] = as_u64(ref[k])
+        for j, ev in enumerate(("overflow", "underflow", "invalid")):
+            out[f"n_{ev}"] = as_u64(ref["event_counts"][:, j])
+        return out
+
+    def from_items(self, path, items):
+        cols = columns_of(items, self.kinds[0])
+        cases = {n: cols[n] for n in self.pair.offsets()}
+        exp = {n: cols[n] for n in self.outputs}
+        exp["ray_id"], exp["tri_id"] = cases["ray_id"], cases["tri_id"]
+        return cases, exp
+
+    def blocks(self, cases, expected):
+        return [(self.kinds[0], {**cases, **expected})]
+
+    def show(self, cases, expected, got, i):
+        return super().show(cases, expected, got, i) + [
+            f"    {k:12s} expected {int(expected[k][i]):x}, got {int(got[k][i]):x}"
+            "   <- differs" for k in ("ray_id", "tri_id")
+            if int(expected[k][i]) != int(got[k][i])]
+
+    def simulate(self, cases, simulator, *, valid_density, stall_density, seed,
+                 timeout_s=None):
+        from ..harness import HarnessSpec
+
+        text, latency = unit_verilog(self.name, self.fmt, self.options, "ray_triangle")
+        out_bits = self.res.size + 2 * self.certified
+        spec = HarnessSpec(dut="ray_triangle", inputs=[("i__payload", self.pair.size)],
+                           outputs=[("o__payload", out_bits)], i_valid="i__valid",
+                           o_valid="o__valid", i_ready="i__ready", o_ready="o__ready")
+        words = self.pair.pack_words(self._split(cases, self.pair))
+        out, info = run_cosim_batch(simulator, spec, text,
+                           cosim_key("ray_triangle", self.fmt.name, self.mode, self.targets),
+                           {"i__payload": words32(words, self.pair.size)}, valid_density,
+                           stall_density, seed, timeout_s)
+        words = words64(out["o__payload"], out_bits)
+        rec = self.res.unpack_words(words)
+        got = {}
+        for s in self.res.fields:
+            got[s.name] = rec[s.name]
+        if self.certified:              # the 2 bits above the record (maybe across a word)
+            lo, sh = divmod(self.res.size, 64)
+            both = words[:, lo] >> np.uint64(sh)
+            if sh == 63:
+                both |= (words[:, lo + 1] & np.uint64(1)) << np.uint64(1)
+            got["outcome"] = both & np.uint64(3)
+        info["latency"] = latency
+        return got, info
