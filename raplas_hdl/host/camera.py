@@ -21,16 +21,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..model.bundles import vec3
+
 __all__ = ["Camera", "Tile"]
-
-
-def _vec(value, name) -> np.ndarray:
-    v = np.asarray(value, dtype=np.float64)
-    if v.shape != (3,):
-        raise ValueError(f"{name} must be a 3-vector, not shape {v.shape}")
-    if not np.all(np.isfinite(v)):
-        raise ValueError(f"{name} must be finite, not {v.tolist()}")
-    return v
 
 
 @dataclass(frozen=True)
@@ -110,9 +103,9 @@ class Camera:
     fov: float = 40.0
 
     def __post_init__(self):
-        p = _vec(self.position, "position")
-        la = _vec(self.look_at, "look_at")
-        _vec(self.up, "up")
+        p = vec3("position", self.position)
+        la = vec3("look_at", self.look_at)
+        vec3("up", self.up)
         if not 0.0 < float(self.fov) < 180.0:
             raise ValueError(f"fov must be between 0 and 180 degrees, not {self.fov}")
         if np.linalg.norm(la - p) == 0.0:
@@ -121,13 +114,13 @@ class Camera:
 
     @property
     def direction(self) -> np.ndarray:
-        d = _vec(self.look_at, "look_at") - _vec(self.position, "position")
+        d = vec3("look_at", self.look_at) - vec3("position", self.position)
         return d / np.linalg.norm(d)
 
     def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Orthonormal ``(forward, right, up)``; right = forward x up."""
         f = self.direction
-        r = np.cross(f, _vec(self.up, "up"))
+        r = np.cross(f, vec3("up", self.up))
         n = np.linalg.norm(r)
         if n < 1e-12:
             raise ValueError("up is parallel to the viewing direction")
@@ -137,17 +130,17 @@ class Camera:
 
     def transformed(self, translation, scale: float) -> Camera:
         """The same camera after the scene map ``x -> (x + translation) * scale``."""
-        t = _vec(translation, "translation")
-        return Camera(tuple((_vec(self.position, "position") + t) * scale),
-                      tuple((_vec(self.look_at, "look_at") + t) * scale),
-                      tuple(_vec(self.up, "up")), self.fov)
+        t = vec3("translation", translation)
+        return Camera(tuple((vec3("position", self.position) + t) * scale),
+                      tuple((vec3("look_at", self.look_at) + t) * scale),
+                      tuple(vec3("up", self.up)), self.fov)
 
     def _screen(self, width: int, height: int):
         if int(width) < 1 or int(height) < 1:
             raise ValueError(f"image size must be at least 1x1, not {width}x{height}")
         f, r, u = self.basis()
         s = 2.0 * np.tan(np.radians(float(self.fov)) / 2.0) / height
-        p = _vec(self.position, "position")
+        p = vec3("position", self.position)
         corner = p + f + (0.5 - width / 2.0) * s * r - (0.5 - height / 2.0) * s * u
         return p, corner, -s * u, s * r
 

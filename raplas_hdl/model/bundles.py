@@ -38,7 +38,7 @@ from raplas_hdl.fp import FPFormat
 from raplas_hdl.fp import model as fpm
 
 __all__ = ["RayBundle", "bundle_geometry", "encode_toward_zero", "encode_bundle_arrays",
-           "encode_bundles"]
+           "encode_bundles", "vec3"]
 
 #: A bundle whose origin is closer to the screen plane than this fraction of the
 #: screen's size (or whose axes are closer to parallel than this sine) is degenerate.
@@ -53,7 +53,8 @@ def encode_toward_zero(x, fmt: FPFormat) -> np.ndarray:
     return np.where(x < 0, up, down).astype(np.uint32)
 
 
-def _vec3(name, value):
+def vec3(name, value) -> np.ndarray:
+    """``value`` as a finite float64 3-vector, else ``ValueError`` naming ``name``."""
     v = np.asarray(value, dtype=np.float64)
     if v.shape != (3,):
         raise ValueError(f"{name} must be a 3-vector, not shape {v.shape}")
@@ -110,10 +111,10 @@ class RayBundle:
             if value < 1:
                 raise ValueError(f"{name} must be at least 1, not {value}")
         self.rows, self.cols = int(rows), int(cols)
-        self.origin = _vec3("origin", origin)
-        self.centre = _vec3("centre", centre)
-        a = self.col_axis = _vec3("col_axis", col_axis)
-        b = self.row_axis = _vec3("row_axis", row_axis)
+        self.origin = vec3("origin", origin)
+        self.centre = vec3("centre", centre)
+        a = self.col_axis = vec3("col_axis", col_axis)
+        b = self.row_axis = vec3("row_axis", row_axis)
         la, lb = np.linalg.norm(a), np.linalg.norm(b)
         if la == 0.0:
             raise ValueError("col_axis has zero length")
