@@ -339,8 +339,14 @@ def render(runs: list) -> str:
             "the unit places at 104.1 MHz at speed 6 (107.1 / 101.0 / 104.1 over seeds "
             "1-3; 19,668 LUT4, 23,820 FF); seed 2's path is now the ray-triangle unit's "
             "credit count through `i.ready` into the pair FIFO's read pointer (5.1 ns of "
-            "it one route). Not re-measured on this RTL: speed 8, `--reduce` and two "
-            "copies.", "",
+            "it one route). With the pair FIFO in banks, `i.ready` from registers and the "
+            "plane-sphere array's credit read registered (below, for the certified unit), "
+            "the unit places at 109.6 MHz at speed 6 (108.5 / 109.6 / 109.7, seeds 1-3; "
+            "20,249 LUT4, 23,919 FF) and at 139.8 MHz at speed 8 (143.7 / 139.7 / 139.8: "
+            "the median 0.2 MHz short of the 140 MHz target; it was 142.3 before this "
+            "retiming). The plane-sphere tester and array gain from the comparison fed "
+            "straight from registers (rtz tester 123.7 -> 134.2 MHz, array 114.6 -> 126.9). "
+            "Not re-measured on this RTL: `--reduce`, two copies, the ray-triangle unit.", "",
             "**The certified mode.** Its bound datapath "
             "(`raplas_hdl/rtl/certified_bound.py`) computed each bound operation in one "
             "cycle: the rounding term from the result's exponent, then a bound-float add "
