@@ -165,12 +165,16 @@ def test_clean_venv_install(wheel, tmp_path):
     print(json.dumps({"seconds (wall, CPU of children)": times}, indent=1))
 
 
+def _api_section() -> str:
+    """docs/integration.md's section on the public Python API."""
+    text = (ROOT / "docs" / "integration.md").read_text()
+    return text.split("## The Python API: what to import", 1)[1].split("\n## ", 1)[0]
+
+
 def _api_table() -> list[tuple[str, list[str]]]:
     """(module, names) of each row of docs/integration.md's public API table."""
-    text = (ROOT / "docs" / "integration.md").read_text()
-    section = text.split("## The Python API: what to import", 1)[1].split("\n## ", 1)[0]
     rows = []
-    for line in section.splitlines():
+    for line in _api_section().splitlines():
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
         if len(cells) == 3 and cells[0].startswith("`raplas_hdl"):
             rows.append((cells[0].strip("`"),
@@ -191,8 +195,6 @@ def test_the_documented_api_is_importable_and_exported():
 
 
 def test_the_api_example_runs(capsys):
-    text = (ROOT / "docs" / "integration.md").read_text()
-    section = text.split("## The Python API: what to import", 1)[1].split("\n## ", 1)[0]
-    code = section.split("```python\n", 1)[1].split("```", 1)[0]
+    code = _api_section().split("```python\n", 1)[1].split("```", 1)[0]
     exec(compile(code, "docs/integration.md", "exec"), {})
     assert capsys.readouterr().out.strip() == "(32, 32, 3)"
