@@ -7,7 +7,8 @@ Usage::
     python tools/cli_reference.py            # rewrite docs/cli.md
     python tools/cli_reference.py --check    # exit 1 if docs/cli.md is not what --help gives
 
-``tests/test_cli_reference.py`` runs the check, so the reference cannot drift from ``--help``.
+``tests/project/test_cli_reference.py`` runs the check, so the reference cannot drift from
+``--help``.
 """
 
 from __future__ import annotations

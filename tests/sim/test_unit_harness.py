@@ -1,0 +1,125 @@
+"""The intersection unit's job-stream harness (a live simulation) against the model.
+
+The scene of the cocotb test (200 FP24 triangles, spheres of up to 4) is loaded once,
+through the backdoor (``$readmemh`` of the memory images) or through the unit's write port
+at full rate from the op stream; then several rounds of runs
+go through the same live simulation, with random back-pressure on the result stream: the
+cocotb test's seven runs, an early-out round that disables rays of the same bundles
+between rounds (enable bits rewritten only), and a round of overlapped runs. Every stream
+and every run's counters (the round's totals with overlap) must equal the model's
+``run_runs``, bit for bit. A missing simulator is an error, not a skip.
+"""
+
+import numpy as np
+import pytest
+
+from raplas_hdl.fp import FP24
+from raplas_hdl.model.config import UnitConfig
+from raplas_hdl.model.records import RESULT
+from raplas_hdl.sim.unit_harness import (
+    HarnessError,
+    UnitSession,
+    encode_ops,
+    ops_bytes,
+    parse_hex,
+    scene_images,
+)
+from tests.support.unit_scenes import (
+    assert_keep_all,
+    assert_operation_events,
+    check_against_model,
+    scene_and_runs,
+    with_enable,
+)
+
+CFG = UnitConfig(fmt=FP24, rows=4, cols=4, testers=4, tris_per_sphere=4, max_triangles=256,
+                 max_spheres=128, fifo_depth=8)
+
+
+@pytest.fixture(scope="module")
+def scene_runs():
+    return scene_and_runs(CFG, 200, seed=11)
+
+
+def _early_out(runs, rng):
+    """The first runs again with about half of each bundle's enabled rays switched off."""
+    out = []
+    for b, ids in runs[:3]:
+        out.append((with_enable(b, b.enable & (rng.random(CFG.n_rays) < 0.5)), ids))
+    return out
+
+
+@pytest.mark.parametrize("backdoor", [True, False], ids=["backdoor", "write-port"])
+@pytest.mark.parametrize("simulator", ["icarus", "verilator"])
+def test_session_rounds_match_model(simulator, backdoor, scene_runs):
+    scene, runs = scene_runs
+    rng = np.random.default_rng(5)
+    with UnitSession(simulator, CFG, scene, seed=7, ready_density=0.5,
+                     backdoor=backdoor) as s:
+        assert s.rounds == 1                  # the scene load is round 0
+        assert (s.load_cycles > 0) != backdoor
+        ref = check_against_model(CFG, scene, runs, s.run(runs))
+        assert_keep_all(CFG, scene, runs, ref)
+        assert_operation_events(ref)
+        assert sum(r[1]["pairs_skipped"] for r in ref) > 0
+        early = _early_out(runs, rng)
+        ref2 = check_against_model(CFG, scene, early, s.run(early))
+        assert sum(r[1]["pairs_skipped"] for r in ref2) > sum(r[1]["pairs_skipped"]
+                                                            for r in ref[:3])
+        res = s.run(runs, overlap=True)
+        check_against_model(CFG, scene, runs, res, overlap=True)
+        assert res[-1][1]["_max_fifo_level"] == CFG.fifo_depth
+        assert s.run([]) == []
+        assert s.rounds == 4 and s.runs_done == 2 * len(runs) + len(early)
+    with pytest.raises(HarnessError, match="closed"):
+        s.run(runs)
+
+
+def test_harness_reports_a_stall(scene_runs):
+    """A wait without progress for longer than MAX_STALL clocks ends the simulation with
+    an error that names it (here: a bound far too small for the first run)."""
+    scene, runs = scene_runs
+    s = UnitSession("icarus", CFG, scene, max_stall=3, backdoor=False)
+    with pytest.raises(HarnessError, match="no progress"):
+        s.run(runs[:1])
+    s.close()
+
+
+def test_scene_images_are_the_write_port_words(scene_runs):
+    """The backdoor images hold, per word, the lanes the write port stores."""
+    scene, _ = scene_runs
+    img = scene_images(CFG, scene)
+    w = CFG.fmt.width
+    tri = [int(x, 16) for x in img["TRI_INIT"].split()]
+    assert len(tri) == scene.n_triangles
+    fields = np.concatenate([scene.v0, scene.e1, scene.e2, scene.n], axis=1)   # 12 per row
+    for k in (0, 7, len(tri) - 1):
+        assert [(tri[k] >> (w * j)) & ((1 << w) - 1) for j in range(12)] == \
+            [int(x) for x in fields[k]]
+    cnt = [int(x, 16) for x in img["CNT_INIT"].split()]
+    assert cnt == [int(c) for c in scene.tri_counts]
+    sph = [int(x, 16) for x in img["SPH_INIT"].split()]
+    assert (sph[3] >> (3 * w)) == int(scene.radii[3])
+    tl = [int(x, 16) for x in img["TL_INIT"].split()]
+    c = int(scene.tri_counts[0])
+    assert tl[:c] == [int(x) for x in scene.tri_lists[0][:c]]
+
+
+def test_ops_and_hex_round_trip(scene_runs):
+    scene, runs = scene_runs
+    op, addr, data = encode_ops(CFG, scene, runs)
+    text = ops_bytes(op, addr, data)
+    lines = text.decode().splitlines()
+    assert len(lines) == op.size and all(len(x) == 19 for x in lines)
+    back = parse_hex(b"".join(x.replace(" ", "").encode() + b"\n" for x in lines), 17)
+    assert np.array_equal(back[:, 0] & np.uint64(0xFFFFFFFF), data)
+    assert np.array_equal(back[:, 0] >> np.uint64(32), addr)
+    assert np.array_equal(back[:, 1], op)
+    lay = RESULT.bind(CFG)
+    vals = np.random.default_rng(0).integers(0, 1 << 62, (50, lay.n_words)).astype(np.uint64)
+    vals[:, -1] &= np.uint64((1 << (lay.size - 64 * (lay.n_words - 1))) - 1)
+    digits = -(-lay.size // 4)
+    hexed = b"".join(f"{int(v[1]) << 64 | int(v[0]):0{digits}x}\n".encode() for v in vals)
+    assert np.array_equal(parse_hex(hexed, digits), vals)
+    with pytest.raises(HarnessError, match="not hex"):
+        parse_hex(b"x" * digits + b"\n", digits)

@@ -1,0 +1,1 @@
+"""Tests of ``raplas_hdl.synth``."""
