@@ -45,8 +45,10 @@ import numpy as np
 from numba import njit
 
 from ..fp.numba_cache import drop_stale_cache
+from ..parallel import run_chunks
 from .exact_filter import HIT, MISS, filter_pair
 from .kernels import N_COUNTERS, plane_masks, sphere_rays
+from .passes import pass_arguments
 from ..model.certified import block_pairs, pairs_one
 from ..model.ray_triangle import pairs_loop
 
@@ -233,9 +235,6 @@ def certified_pass(arith, scene, batch, run_b, run_start, run_sph, tri64, best_l
     pending : ndarray (n, 3) int64
         ``(bundle, ray, triangle)`` for the host's exact resolution, in run order.
     """
-    from ..parallel import run_chunks
-    from .passes import pass_arguments
-
     head, run_b, work, tail = pass_arguments(scene, batch, run_b, run_start, run_sph, tmin,
                                              tmax, exclude)
     counters = np.zeros((run_b.size, N_CERT_COUNTERS), np.int64)

@@ -27,7 +27,6 @@ exact ``t = t'/det``.
 
 from __future__ import annotations
 
-import numpy as np
 from numba import njit
 
 from ..fp.numba_cache import drop_stale_cache

@@ -29,7 +29,8 @@ from ..parallel import run_chunks
 from .kernels import N_COUNTERS
 
 __all__ = ["Arithmetic", "BundleBatch", "EngineScene", "CullResult", "cull_pass",
-           "trace_pass", "round_runs", "select_runs", "COUNTER_NAMES"]
+           "trace_pass", "round_runs", "select_runs", "runs_of", "result_beats",
+           "COUNTER_NAMES"]
 
 
 @dataclass
@@ -253,6 +254,19 @@ def select_runs(run_b, run_start, run_sph, keep):
     np.cumsum(cnt, out=start[1:])
     sel = np.repeat(keep, np.diff(run_start))
     return np.asarray(run_b)[keep], start, np.asarray(run_sph)[sel]
+
+
+def runs_of(run_b, run_start, run_sph) -> list:
+    """The runs of ``(run_b, run_start, run_sph)`` as a list of ``(bundle index, sphere
+    ids)``."""
+    return [(int(b), run_sph[run_start[u]:run_start[u + 1]]) for u, b in enumerate(run_b)]
+
+
+def result_beats(counters) -> int:
+    """Beats of the unreduced result stream of runs with these counters (U, 8): one per
+    issued pair, one (empty) for a run that issued none."""
+    pairs = np.asarray(counters)[:, COUNTER_NAMES.index("pairs_issued")]
+    return int(np.maximum(pairs, 1).sum())
 
 
 def pass_arguments(scene: EngineScene, batch: BundleBatch, run_b, run_start, run_sph,

@@ -14,6 +14,9 @@ The float64 reference runs the same formulas in float64 on the original geometry
 
 from __future__ import annotations
 
+import math
+from fractions import Fraction
+
 import numpy as np
 
 from ..fp.format import FPFormat
@@ -42,7 +45,6 @@ def _ratio(num, den):
 
 
 def _scaled(ints, scale):
-    import math
     return np.array([math.ldexp(float(x), int(k)) for x, k in zip(ints, scale)])
 
 
@@ -82,8 +84,6 @@ def exact_t(o, d, v0, v1, v2) -> tuple[np.ndarray, list]:
     t : list of :class:`fractions.Fraction` or None
         ``t'/det`` exactly where R hits, None where it misses.
     """
-    from fractions import Fraction
-
     terms = _exact_terms(o, d, v0, v1, v2)
     if terms is None:
         return np.zeros(0, bool), []

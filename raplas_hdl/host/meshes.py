@@ -61,7 +61,7 @@ class MeshBuilder:
 
 
 def box_mesh(size, transform, subdiv: int):
-    import trimesh
+    import trimesh     # lazy: trimesh loads only to read a mesh file
 
     m = trimesh.creation.box(extents=size, transform=transform)
     for _ in range(max(0, subdiv)):
@@ -84,7 +84,7 @@ def load_mesh(path) -> tuple[np.ndarray, np.ndarray]:
         For an unsupported suffix, a file trimesh cannot parse, or one with no triangles
         (an empty file, points or lines only).
     """
-    import trimesh
+    import trimesh     # lazy: trimesh loads only to read a mesh file
 
     path = os.fspath(path)
     if os.path.isdir(path):

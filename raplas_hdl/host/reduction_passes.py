@@ -17,6 +17,16 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..engine.passes import runs_of
+from ..fp import FP24
+from ..fp import model as fpm
+from ..model.memory_image import Run
+from .backends import ModelBackend
+from .modes import resolve_outcomes
+from .render import render
+from .scenes import get_scene
+from .shading import nearest_hits
+
 __all__ = ["RecordedPass", "recorded_runs", "pass_runs", "host_choice", "resolve_streams"]
 
 
@@ -35,25 +45,18 @@ class RecordedPass:
 
 
 def recorded_runs(scene_name: str, settings, fmt=None, mode: str = "paper", **scene_options):
-    """Render ``scene_name`` through the model backend; return ``(backend, passes)``."""
-    from ..fp import FP24
-    from .backends import ModelBackend, runs_of
-    from .render import render
-    from .scenes import get_scene
-
+    """Render ``scene_name`` through the model backend; return ``(backend, passes)``, every
+    pass the renderer traced (the warm-up's included) as a :class:`RecordedPass`."""
     passes = []
 
-    class Recording(ModelBackend):
-        def trace(self, batch, run_b, run_start, run_sph, best_t, best_tri, tmin=0.0,
-                  tmax=None, exclude=None, any_hit=False):
-            passes.append(RecordedPass(
-                batch, batch.enable.copy(), runs_of(run_b, run_start, run_sph), float(tmin),
-                None if tmax is None else np.array(tmax, np.float64),
-                None if exclude is None else np.array(exclude, np.int64), bool(any_hit)))
-            return super().trace(batch, run_b, run_start, run_sph, best_t, best_tri, tmin,
-                                 tmax, exclude, any_hit)
+    def record(batch, run_b, run_start, run_sph, tmin, tmax, exclude, any_hit):
+        passes.append(RecordedPass(
+            batch, batch.enable.copy(), runs_of(run_b, run_start, run_sph), float(tmin),
+            None if tmax is None else np.array(tmax, np.float64),
+            None if exclude is None else np.array(exclude, np.int64), bool(any_hit)))
 
-    backend = Recording(fmt or FP24, mode)
+    backend = ModelBackend(fmt or FP24, mode)
+    backend.observers.append(record)
     render(get_scene(scene_name, **scene_options), backend, settings)
     return backend, passes
 
@@ -61,9 +64,6 @@ def recorded_runs(scene_name: str, settings, fmt=None, mode: str = "paper", **sc
 def pass_runs(backend, rec: RecordedPass, config):
     """The runs of a recorded pass as ``Run`` objects whose bundles carry the window as
     patterns of ``config.fmt``."""
-    from ..fp import model as fpm
-    from ..model.memory_image import Run
-
     fmt = config.fmt
     saved = rec.batch.enable
     rec.batch.enable = rec.enable
@@ -87,9 +87,6 @@ def host_choice(config, beats, bundle):
     """The host's nearest hit per ray on a run's unreduced ``beats``: ``(tri, index)`` of
     :func:`~raplas_hdl.host.shading.nearest_hits` with ``t = t' * (1/det)`` in float64 as
     the model backend computes it, the window decoded from the bundle's patterns."""
-    from ..fp import model as fpm
-    from .shading import nearest_hits
-
     R = config.n_rays
     if beats["empty"].any():
         return np.full(R, -1, np.int64), np.full(R, -1, np.int64)
@@ -108,9 +105,9 @@ def host_choice(config, beats, bundle):
 
 def resolve_streams(backend, rec: RecordedPass, streams):
     """R's answer per ray of a recorded pass from a certified unit's output, as the reduced
-    certified render resolves it (:meth:`~raplas_hdl.host.backends.ModelBackend._resolve_outcomes`:
-    misses final, the rest through the float64 filter and exact arithmetic), starting from
-    rays without a hit.
+    certified render resolves it (:func:`raplas_hdl.host.modes.resolve_outcomes`: misses
+    final, the rest through the float64 filter and exact arithmetic), starting from rays
+    without a hit.
 
     Parameters
     ----------
@@ -132,6 +129,6 @@ def resolve_streams(backend, rec: RecordedPass, streams):
     for (b, _), beats in zip(rec.runs, streams):
         beats = beats[~beats["empty"].astype(bool)]
         pairs.append((b, beats["ray_id"], beats["tri_id"], beats["outcome"]))
-    backend._resolve_outcomes(rec.batch, pairs, best_t, best_tri, rec.tmin, rec.tmax,
-                              rec.exclude, rec.any_hit)
+    resolve_outcomes(backend, rec.batch, pairs, best_t, best_tri, rec.tmin, rec.tmax,
+                     rec.exclude, rec.any_hit)
     return best_tri, best_t

@@ -30,6 +30,7 @@ from ..engine.exact_filter import HIT, MISS, filter_pair
 from ..parallel import run_chunks
 from .exact import exact_t
 from .resolve import resolve_pending
+from .spheres import build_sphere_tree
 
 __all__ = ["exact_reference", "compare_reference"]
 
@@ -116,8 +117,6 @@ def _tree_candidates(o, d, centres, radii, child_start, child_index, node_leaf, 
 def _safe_tree(tris, ids):
     """A sphere hierarchy over triangles ``ids`` whose radii contain their triangles and
     children in float64 with room (module docstring)."""
-    from .spheres import build_sphere_tree
-
     tree = build_sphere_tree(tris[ids], 8, 8)
     c = tree.centres
     r = np.zeros(len(c))
@@ -223,12 +222,13 @@ def exact_reference(result, tris, method: str = "exact") -> dict:
     rays = result.rays
     tris = np.ascontiguousarray(tris, np.float64)
     ids = np.asarray(rays["loaded"], np.int64)
-    fn = _exact if method == "exact" else _filtered
     if method == "tree":
         tree = _safe_tree(tris, ids)
 
         def fn(*a):
             return _filtered(*a, tree=tree)
+    else:
+        fn = _exact if method == "exact" else _filtered
     po, pd, yx = rays["primary_o"], rays["primary_d"], rays["primary_yx"]
     n = len(po)
     tri_id = np.full(result.tri_id.shape, -1, np.int64)

@@ -41,6 +41,7 @@ import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
 from .backends import Backend
@@ -48,8 +49,8 @@ from .scene_file import MAX_DEPTH, MAX_SECONDARY_LATTICE
 from .scene import Scene
 from .secondary import Tracer, whitted
 from .shading import face_normals, light_hits, phong, shadow_bundles
-from .spheres import build_sphere_tree, unit_margin
-from .tracing import RAY_TYPES, Tally, nearest_pass
+from .spheres import build_sphere_tree
+from .tracing import Tally, nearest_pass
 
 __all__ = [
     "RenderResult",
@@ -240,8 +241,6 @@ def _numba_threads(n: int | None):
     if n is None:
         yield
         return
-    import numba
-
     old = numba.get_num_threads()
     numba.set_num_threads(max(1, min(n, numba.config.NUMBA_NUM_THREADS)))
     try:
@@ -268,7 +267,7 @@ def render(scene: Scene, backend: Backend, settings: RenderSettings | None = Non
 
 
 def _render(scene: Scene, backend: Backend, settings: RenderSettings):
-    from tqdm import tqdm
+    from tqdm import tqdm       # lazy: the progress bar loads only when a render runs
 
     s = settings
     timer = _Timer()
@@ -286,8 +285,7 @@ def _render(scene: Scene, backend: Backend, settings: RenderSettings):
         if usable.size == 0:
             raise ValueError(f"scene {scene.name!r} has no usable triangle ({skipped})")
         o_max = 2.0 * s.bound
-        margin = (np.zeros(usable.size) if backend.fmt is None else
-                  unit_margin(tris[usable], backend.fmt, o_max, backend.mode))
+        margin = backend.sphere_margin(tris[usable], o_max)
         tree = build_sphere_tree(tris[usable], s.tris_per_sphere, s.fanout, margin)
         tree.leaf_tris = np.where(tree.leaf_tris >= 0, usable[tree.leaf_tris.clip(0)], -1)
         stats.update(spheres=tree.n_leaves, sphere_nodes=tree.n_nodes, levels=tree.levels,
@@ -430,13 +428,7 @@ def _render(scene: Scene, backend: Backend, settings: RenderSettings):
                           "triangles_dropped": hier["tris_dropped"].tolist(),
                           "leaves_to_unit": hier["leaves"]}
     stats["pixels_hit"] = int(hit_px.sum())
-    if backend.mode == "certified":
-        cert = dict(getattr(backend, "certified", {}))
-        cert["uncertain_fraction"] = (cert.get("uncertain", 0) / stats["pairs_issued"]
-                                      if stats["pairs_issued"] else 0.0)
-        stats["certified"] = cert
-    if getattr(backend, "reduce", False):       # the unit's on-chip reduction
-        stats["output_beats"] = dict(backend.beats)
+    backend.report(stats)       # the render mode's figures, the on-chip reduction's beats
     rays = None
     if s.record_rays:
         rays = {k: np.concatenate(v) if v else np.zeros((0,)) for k, v in rec.items()}
@@ -454,7 +446,7 @@ def to_uint8(image: np.ndarray, gamma: float = 2.2) -> np.ndarray:
 
 def save_png(image: np.ndarray, path, linear: bool = True):
     """Write an image (float linear colour, or uint8) as PNG with Pillow."""
-    from PIL import Image
+    from PIL import Image      # lazy: Pillow loads only to write an image
 
     arr = to_uint8(image) if linear and image.dtype != np.uint8 else image
     Image.fromarray(arr).save(path)

@@ -585,7 +585,7 @@ def mesh_transform(vertices, faces=None, fit=None, scale=(1.0, 1.0, 1.0),
 
 
 def _primitive(kind: str, params: dict):
-    import trimesh
+    import trimesh     # lazy: trimesh loads only to read a mesh file
 
     if kind == "box":
         m = box_mesh(params["size"], None, params["subdiv"])

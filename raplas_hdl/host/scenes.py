@@ -49,7 +49,7 @@ SCENE_FILES = shipped(SCENE_DIR, SCENE_SUFFIXES)
 def cornell_box(subdiv: int = 4) -> Scene:
     """The Cornell box (the classic 555-unit data, Y up), walls split into ``subdiv`` x
     ``subdiv`` quads (2 triangles each), and the short and tall blocks."""
-    import trimesh
+    import trimesh     # lazy: trimesh loads only to read a mesh file
 
     if subdiv < 1:
         raise ValueError(f"subdiv must be at least 1, not {subdiv}")
@@ -82,7 +82,7 @@ def _floor(b: MeshBuilder, half: float, y: float, n: int, colour=(0.6, 0.6, 0.6)
 
 def spheres_scene(subdivisions: int = 2, floor_subdiv: int = 4) -> Scene:
     """Three meshed spheres (icospheres) and a torus on a floor."""
-    import trimesh
+    import trimesh     # lazy: trimesh loads only to read a mesh file
 
     b = MeshBuilder()
     _floor(b, 4.0, 0.0, floor_subdiv)

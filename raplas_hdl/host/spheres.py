@@ -28,6 +28,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..fp import model as fpm
+from ..model.conservative import margins
+
 __all__ = [
     "CullStats",
     "SphereTree",
@@ -323,9 +326,6 @@ def unit_margin(tris, fmt, o_max: float, mode: str = "conservative",
     """
     if mode in ("paper", "certified"):
         return np.zeros(len(tris))
-    from ..fp import model as fpm
-    from ..model.conservative import margins
-
     tris = np.asarray(tris, dtype=np.float64)
     v0 = tris[:, 0]
     e1, e2 = tris[:, 1] - v0, tris[:, 2] - v0

@@ -25,17 +25,20 @@ from pathlib import Path
 
 import numpy as np
 
+from ..fp import FP24
+from ..fp import model as fpm
+from ..fp.format import FPFormat, parse_format
 from ..locks import file_lock
+from ..model import plane_sphere, ray_triangle
 from ..model.modes import MODES
+from .backends import make_backend
+from .render import RenderSettings, render
+from .scenes import get_scene
 
 __all__ = ["warm", "default_lock"]
 
 
 def _generic():
-    from ..fp import FP24
-    from ..fp import model as fpm
-    from ..model import plane_sphere, ray_triangle
-
     x = np.linspace(-3.0, 3.0, 24)
     a = fpm.encode(x, FP24)
     fpm.encode(x, FP24, direction="up")
@@ -53,10 +56,6 @@ def _generic():
 
 
 def _engine(fmt, mode):
-    from .backends import make_backend
-    from .render import RenderSettings, render
-    from .scenes import get_scene
-
     backend = make_backend("float64") if fmt is None else make_backend("model", fmt, mode=mode)
     render(get_scene("soup", n=24), backend,
            RenderSettings(width=8, height=8, rows=4, cols=4, shadow_rows=2, shadow_cols=2,
@@ -78,8 +77,6 @@ def warm(formats=("FP24/rtz",), modes=MODES, float64: bool = True,
         Hold this file's lock while compiling (default: none). A lock that cannot be
         created (a read-only install) is skipped: each process then compiles on its own.
     """
-    from ..fp.format import FPFormat, parse_format
-
     times = {}
     held = contextlib.nullcontext()
     if lock:

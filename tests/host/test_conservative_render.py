@@ -21,7 +21,7 @@ from raplas_hdl.host.backends import ModelBackend
 from raplas_hdl.host.reference import compare_reference, exact_reference
 from raplas_hdl.host.render import RenderSettings, render
 from raplas_hdl.host.scenes import get_scene
-from tests.support.render import RawConservative
+from tests.support.render import RAW_CONSERVATIVE
 
 SMALL = RenderSettings(width=16, height=16, progress=False, record_rays=True)
 
@@ -37,7 +37,7 @@ def test_conservative_render_equals_exact_reference(name):
     assert compare_reference(result, ref) == {"pixels": 256, "tri_id_differ": 0,
                                               "visibility_differ": 0}
     # the unit's hits really were a superset: folded raw, the same render is not R's
-    raw = render(scene, RawConservative(FP24, mode="conservative"), settings)
+    raw = render(scene, ModelBackend(FP24, mode=RAW_CONSERVATIVE), settings)
     assert compare_reference(raw, exact_reference(raw, scene.triangles, "tree"))[
         "tri_id_differ"] > 0
 

@@ -10,6 +10,7 @@ from raplas_hdl.fp import FP16, FP20, FP24
 from raplas_hdl.fp.format import FPFormat
 from raplas_hdl.fp.kernels import rmode_code
 from raplas_hdl.host.backends import ModelBackend
+from raplas_hdl.host.modes import resolved
 from raplas_hdl.host.render import RenderSettings, render
 from raplas_hdl.host.scenes import get_scene
 from raplas_hdl.model import certified
@@ -115,7 +116,7 @@ def _render(monkeypatch, name, fmt, pairs):
                                                         for a in args[7:10]])))
         return ctr, pend
 
-    monkeypatch.setattr(engine_certified, "certified_pass", recording)
+    monkeypatch.setattr(resolved, "certified_pass", recording)
     result = render(get_scene(name), ModelBackend(fmt, mode="certified"), SMALL)
     monkeypatch.undo()
     return result, seen
@@ -162,7 +163,7 @@ def test_pass_block_equals_pairs_with_pending(monkeypatch, any_hit, lanes):
         lo = np.full((3, 64), np.inf)
         hi = lo.copy()
         best = np.full((3, 64), -1, np.int64)
-        ctr, pend = engine_certified.certified_pass(backend._arith(), backend.scene, batch,
+        ctr, pend = engine_certified.certified_pass(backend.arithmetic(), backend.scene, batch,
                                                     *runs, backend.tris, lo, hi, best,
                                                     any_hit=any_hit, block=block)
         out.append((ctr, pend, lo, hi, best))

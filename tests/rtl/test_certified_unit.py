@@ -287,7 +287,7 @@ def test_rtl_render_equals_model():
     """The unreduced certified unit's RTL stream, every pair resolved on the host, renders as
     the model backend's certified pass (another bound variant: other uncertain pairs)."""
     mb, rb = _rtl_render("icarus", False)
-    assert rb.certified["uncertain"] > 0 and rb.certified["certified_hits"] > 0
+    assert rb.mode_stats["uncertain"] > 0 and rb.mode_stats["certified_hits"] > 0
 
 
 # -- the command line ------------------------------------------------------------------------

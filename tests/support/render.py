@@ -1,12 +1,16 @@
 """Render helpers shared by the render tests (``host/test_conservative_render.py``,
 ``engine/test_certified_render.py``)."""
 
-from raplas_hdl.host.backends import Backend, ModelBackend
+from raplas_hdl.host.modes import PaperMode, register_mode
 
 
-class RawConservative(ModelBackend):
-    """The conservative unit's hits folded as they come (the render before the re-check)."""
+class RawConservative(PaperMode):
+    """The conservative unit's hits folded as they come (the render before the re-check): a
+    render mode registered from the tests alone (``mode=RAW_CONSERVATIVE``)."""
 
-    def trace(self, *args, **kwargs):
-        return Backend.trace(self, *args, **kwargs)
+    name = "test-raw-conservative"
+    unit_mode = "conservative"
 
+
+#: The name the backends know :class:`RawConservative` by.
+RAW_CONSERVATIVE = register_mode(RawConservative()).name

@@ -12,9 +12,11 @@ The renderer talks to the accelerator only through :class:`Backend`, a pass at a
    (:mod:`raplas_hdl.host.culling`): neither the host nor the unit culls with it;
 3. :meth:`Backend.cull` is the hierarchy cull of the whole batch, with the same arithmetic
    as the unit's plane-sphere testers;
-4. :meth:`Backend.trace` runs the unit over the batch's runs and folds each ray's nearest
-   accepted hit; :meth:`Backend.stream` gives the runs' pair streams instead (the unit's
-   result beats with ``t, u, v`` divided on the host), for checks and analyses.
+4. :meth:`Backend.trace` runs the unit over the batch's runs and hands them to the
+   backend's render mode (:mod:`raplas_hdl.host.modes`), which folds each ray's nearest (or
+   any) hit; :meth:`Backend.stream` gives the runs' pair streams instead (the unit's result
+   beats with ``t, u, v`` divided on the host), for checks, analyses and the modes of a
+   backend whose runs are not compiled passes.
 
 Backends:
 
@@ -22,6 +24,8 @@ Backends:
   ``|n.C + p| <= r`` with a float64-rounding allowance, and the division-free
   Moller-Trumbore decision of ``docs/raplas.md`` evaluated in float64 on the original
   geometry (exact-inequality mode). No event flags.
+- ``model`` and ``rtl`` share the unit's host side (:class:`UnitBackend`: memories, batches,
+  the cull in the model's arithmetic) and differ in who runs the unit.
 - ``model``: the bit-accurate golden model of the intersection unit in any format,
   rounding and ray-triangle mode, with the radius inflation of
   :mod:`raplas_hdl.host.culling`. Its passes run in the compiled kernels of
@@ -38,10 +42,11 @@ Nothing here imports Amaranth.
 from __future__ import annotations
 
 from ...fp.format import FP24, FPFormat
-from .base import COUNTERS, Backend, BackendUnavailable, RunResult, runs_of
+from .base import COUNTERS, Backend, BackendUnavailable, RunResult
 from .float64 import Float64Backend
 from .model import ModelBackend
 from .rtl import RtlBackend
+from .unit import UnitBackend
 
 __all__ = [
     "BACKENDS",
@@ -52,8 +57,8 @@ __all__ = [
     "ModelBackend",
     "RtlBackend",
     "RunResult",
+    "UnitBackend",
     "make_backend",
-    "runs_of",
 ]
 
 BACKENDS = ("float64", "model", "rtl")
@@ -61,8 +66,9 @@ BACKENDS = ("float64", "model", "rtl")
 
 def make_backend(name: str, fmt: FPFormat = FP24, mode: str = "conservative",
                  sim: str = "icarus", testers=None, reduce: bool = False) -> Backend:
-    """A backend by name (``float64``, ``model``, ``rtl``); ``reduce``: through the unit
-    built with the on-chip reduction (model and rtl).
+    """A backend by name (``float64``, ``model``, ``rtl``) in a render ``mode``
+    (:func:`raplas_hdl.host.modes.get_mode`; the float64 backend has only ``paper``'s);
+    ``reduce``: through the unit built with the on-chip reduction (model and rtl).
 
     Raises
     ------

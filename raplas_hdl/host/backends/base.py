@@ -10,9 +10,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...engine.passes import (COUNTER_NAMES, Arithmetic, BundleBatch, EngineScene, cull_pass,
-                              round_runs, trace_pass)
+                              round_runs)
 from ...fp.format import FPFormat
 from ...model.bundles import RayBundle
+from ..modes import RenderMode, get_mode
 from ..spheres import SphereTree
 
 #: The unit's counters (one definition: :data:`raplas_hdl.model.config.COUNTER_NAMES`).
@@ -49,21 +50,35 @@ class RunResult:
                    np.zeros(0, np.uint8), dict(counters or {}))
 
 
-def runs_of(run_b, run_start, run_sph):
-    return [(int(b), run_sph[run_start[u]:run_start[u + 1]]) for u, b in enumerate(run_b)]
-
-
 class Backend:
     """Common part of the backends (the protocol: :mod:`raplas_hdl.host.backends`)."""
 
     name = "?"
     fmt: FPFormat | None = None
+    #: the ray-triangle unit the backend runs (:data:`raplas_hdl.model.modes.MODES`)
     mode = "paper"
+    #: what the host does with the unit's runs (:mod:`raplas_hdl.host.modes`)
+    render_mode: RenderMode = get_mode("paper")
+    #: whether the unit is built with the on-chip reduction (one ANSWER beat per ray)
+    reduce = False
+    #: whether the unit's runs go through the compiled passes of :mod:`raplas_hdl.engine`
+    #: (:meth:`arithmetic`); if not, the render mode folds the runs' streams (:meth:`stream`)
+    runs_compiled = True
 
     def __init__(self):
         self.tree: SphereTree | None = None
         self.tris: np.ndarray | None = None
         self.scene: EngineScene | None = None
+        #: callables ``f(batch, run_b, run_start, run_sph, tmin, tmax, exclude, any_hit)``
+        #: told of every pass :meth:`trace` is given, before it runs (warm-up included)
+        self.observers: list = []
+        #: the unit's output traffic of the passes traced since :meth:`load`: ``result``
+        #: the beats of the unreduced result stream (one per issued pair, one for a run
+        #: without any), and with ``reduce`` ``answer`` the ANSWER beats that left the
+        #: unit instead (in ``certified`` mode ``uncertain`` of them were uncertain pairs)
+        self.beats = {"result": 0, "answer": 0, "uncertain": 0}
+        #: the render mode's own counts since :meth:`load` (:meth:`RenderMode.new_stats`)
+        self.mode_stats = self.render_mode.new_stats()
 
     # -- interface ------------------------------------------------------------------------
     def usable(self, tris: np.ndarray) -> tuple[np.ndarray, dict]:
@@ -83,25 +98,31 @@ class Backend:
         self.tris = np.asarray(tris, dtype=np.float64)
         self.tree = tree
         self.bound = float(bound)
+        self.mode_stats = self.render_mode.new_stats()
+        self.beats = dict.fromkeys(self.beats, 0)
         return {}
+
+    def sphere_margin(self, tris: np.ndarray, o_max: float) -> np.ndarray:
+        """Per triangle, what its bounding sphere's radius is widened by so that the unit's
+        arithmetic cannot lose a hit (:func:`raplas_hdl.host.spheres.unit_margin`); none
+        without quantisation."""
+        return np.zeros(len(tris))
 
     def warm_pass(self, origins, centres, col_axes, row_axes, rows: int, cols: int) -> float:
         """Run a throw-away pass of the given bundles (one is enough) through the cull and the
         trace of the loaded scene, so that the kernels are compiled (or loaded from numba's
         disk cache) before the real passes; returns the seconds it took."""
         t0 = time.perf_counter()
-        saved = dict(getattr(self, "certified", {}))     # a throw-away pass counts nothing
-        beats = dict(getattr(self, "beats", {}))
+        saved = dict(self.mode_stats)           # a throw-away pass counts nothing
+        beats = dict(self.beats)
         batch = self.batch(origins, centres, col_axes, row_axes, rows, cols)
         cr = self.cull(batch)
         best_t = np.full((batch.n_bundles, batch.n_rays), np.inf)
         best_tri = np.full(best_t.shape, -1, np.int64)
         self.trace(batch, *round_runs(cr.start, cr.leaves, None, 0), best_t, best_tri, 0.0,
                    np.full(best_t.shape, np.inf), np.full(batch.n_bundles, -1, np.int64))
-        if saved:
-            self.certified.update(saved)
-        if beats:
-            self.beats.update(beats)
+        self.mode_stats.update(saved)
+        self.beats.update(beats)
         return time.perf_counter() - t0
 
     def batch(self, origins, centres, col_axes, row_axes, rows: int, cols: int,
@@ -112,16 +133,19 @@ class Backend:
 
     def cull(self, batch: BundleBatch, hierarchy: bool = True):
         """The hierarchy cull of a batch (:func:`raplas_hdl.engine.passes.cull_pass`)."""
-        return cull_pass(self._arith(), self.scene, batch, hierarchy)
+        return cull_pass(self.arithmetic(), self.scene, batch, hierarchy)
 
     def trace(self, batch: BundleBatch, run_b, run_start, run_sph, best_t, best_tri,
               tmin: float = 0.0, tmax=None, exclude=None, any_hit: bool = False) -> np.ndarray:
-        """Runs of a batch folded into each ray's nearest hit
-        (:func:`raplas_hdl.engine.passes.trace_pass`); counters (U, 8). ``any_hit``: only
-        whether a ray is blocked matters (shadow rays); the certified mode then stops at the
-        first hit it is sure of, the other modes fold the nearest all the same."""
-        return trace_pass(self._arith(), self.scene, batch, run_b, run_start, run_sph,
-                          best_t, best_tri, tmin, tmax, exclude)
+        """Runs of a batch folded into each ray's nearest hit ``best_t, best_tri`` (B, R),
+        in place, by the backend's render mode (:meth:`RenderMode.trace`); counters (U, 8).
+        ``any_hit``: only whether a ray is blocked matters (shadow rays); the certified mode
+        then stops at the first hit it is sure of, the other modes fold the nearest all the
+        same. The :attr:`observers` are told of the pass first."""
+        for observe in self.observers:
+            observe(batch, run_b, run_start, run_sph, tmin, tmax, exclude, any_hit)
+        return self.render_mode.trace(self, batch, run_b, run_start, run_sph, best_t,
+                                      best_tri, tmin, tmax, exclude, any_hit)
 
     def stream(self, batch: BundleBatch, runs) -> list[RunResult]:
         """The pair stream of each run ``(bundle index, sphere ids)`` of a batch."""
@@ -129,6 +153,13 @@ class Backend:
 
     def describe(self) -> str:
         return self.name
+
+    def report(self, stats: dict) -> None:
+        """Add the render mode's figures and, with the on-chip reduction, the unit's output
+        beats to a finished render's ``stats``."""
+        self.render_mode.report(self, stats)
+        if self.reduce:
+            stats["output_beats"] = dict(self.beats)
 
     # -- one bundle at a time (tests and exploration) ---------------------------------------
     def prepare(self, bundle: RayBundle, enable=None) -> BundleBatch:
@@ -141,7 +172,7 @@ class Backend:
         """The host's hierarchy test of nodes against bundle 0 of a batch (bool array)."""
         nodes = np.asarray(nodes, np.int64)
         keep = np.empty(nodes.size, np.bool_)
-        arith = self._arith()
+        arith = self.arithmetic()
         arith.cull(batch.pn, batch.pp, batch.rows, batch.n_planes,
                    np.zeros(nodes.size, np.int64), nodes, self.scene.node_c, self.scene.node_r,
                    0, nodes.size, keep, *arith.cull_tail)
@@ -151,9 +182,12 @@ class Backend:
         """One run of bundle 0 of a batch: its pair stream."""
         return self.stream(batch, [(0, np.asarray(sphere_ids, np.int64))])[0]
 
-    # -- helpers --------------------------------------------------------------------------
-    def _arith(self) -> Arithmetic:
+    def arithmetic(self) -> Arithmetic:
+        """The compiled kernels and constants of the backend's arithmetic (the cull's, and
+        the trace's where :attr:`runs_compiled`)."""
         raise NotImplementedError
+
+    # -- helpers --------------------------------------------------------------------------
 
     def _enable(self, bundle, enable):
         if enable is None:
@@ -185,9 +219,3 @@ class Backend:
             v0=np.ascontiguousarray(v0), e1=np.ascontiguousarray(e1),
             e2=np.ascontiguousarray(e2), nn=np.ascontiguousarray(nn), levels=tree.levels)
 
-
-def result_beats(counters) -> int:
-    """Beats of the unreduced result stream of runs with these counters (U, 8): one per
-    issued pair, one (empty) for a run that issued none."""
-    pairs = np.asarray(counters)[:, COUNTERS.index("pairs_issued")]
-    return int(np.maximum(pairs, 1).sum())

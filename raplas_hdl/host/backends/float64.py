@@ -7,6 +7,8 @@ import numpy as np
 from ...engine.kernels import F64_SLACK, cull_f64, trace_f64
 from ...engine.passes import Arithmetic, BundleBatch
 from ...model.bundles import bundle_geometry
+from ...model.intersection import enumerate_pairs
+from ..exact import float64_intersect
 from .base import COUNTERS, Backend, RunResult
 
 
@@ -29,7 +31,7 @@ class Float64Backend(Backend):
                                       e1, e2, nn)
         return rep
 
-    def _arith(self):
+    def arithmetic(self):
         return Arithmetic("float64", cull_f64, trace_f64, ())
 
     def batch(self, origins, centres, col_axes, row_axes, rows, cols, enable=None):
@@ -57,9 +59,6 @@ class Float64Backend(Backend):
         return np.abs(d) <= self.scene.sr[ids][:, None] + slack
 
     def stream(self, batch, runs):
-        from ...model.intersection import enumerate_pairs
-        from ..exact import float64_intersect
-
         out = []
         sc = self.scene
         for b, ids in runs:

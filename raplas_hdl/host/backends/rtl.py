@@ -1,24 +1,26 @@
-"""The ``rtl`` backend: the Verilog of the intersection unit, simulated, behind the model
-backend's host side."""
+"""The ``rtl`` backend: the Verilog of the intersection unit, simulated, behind the unit's
+host side (:class:`~raplas_hdl.host.backends.unit.UnitBackend`, which the model backend
+shares)."""
 
 from __future__ import annotations
 
 import contextlib
 import importlib
+import os
 import time
-
-import numpy as np
+from pathlib import Path
 
 from ...fp.format import FP24, FPFormat
-from ..shading import nearest_hits
-from .base import COUNTERS, BackendUnavailable, result_beats, runs_of
-from .model import ModelBackend
+from .base import BackendUnavailable
+from .unit import UnitBackend
 
 
-class RtlBackend(ModelBackend):
+class RtlBackend(UnitBackend):
     """The Verilog of the intersection unit, simulated (Icarus or Verilator).
 
-    The host side (memories, hierarchy test, pair order) is the model backend's. The runs go
+    The host side (memories, hierarchy test, pair order) is the model backend's
+    (:class:`~raplas_hdl.host.backends.unit.UnitBackend`); the render mode folds the runs'
+    streams (:meth:`stream`) or, with ``reduce``, the unit's answers. The runs go
     through live simulations of the unit (:class:`raplas_hdl.sim.unit_harness.UnitSession`):
     one per unit configuration a render needs (the primary and the shadow bundle sizes),
     started on first use with the scene loaded once, then fed one round of runs per
@@ -34,12 +36,13 @@ class RtlBackend(ModelBackend):
     """
 
     name = "rtl"
+    runs_compiled = False
     DRIVER = "raplas_hdl.sim.unit_harness"
 
     def __init__(self, fmt: FPFormat = FP24, mode: str = "conservative", testers=None,
                  margin_scale: int = 1, sim: str = "icarus", reduce: bool = False):
         super().__init__(fmt, mode, testers, margin_scale, reduce)
-        try:
+        try:    # lazy: the simulator side loads only for an rtl render
             from raplas_hdl.sim.runner import SimulatorNotFound, require_simulator
         except ImportError as exc:
             raise BackendUnavailable(
@@ -70,7 +73,7 @@ class RtlBackend(ModelBackend):
         self.record_dir = None
 
     def describe(self):
-        return (f"{self.name} ({self.sim}) {self.fmt} {self.mode}"
+        return (f"{self.name} ({self.sim}) {self.fmt} {self.render_mode.name}"
                 + (" reduce" if self.reduce else ""))
 
     def load(self, tris, tree, bound):
@@ -81,8 +84,6 @@ class RtlBackend(ModelBackend):
         """The live simulation of ``config`` (started, and the scene loaded, on first use)."""
         s = self._sessions.get(config)
         if s is None:
-            from pathlib import Path
-
             record = None
             if self.record_dir is not None:
                 Path(self.record_dir).mkdir(parents=True, exist_ok=True)
@@ -95,12 +96,10 @@ class RtlBackend(ModelBackend):
                                           "rounds_s": 0.0}
         return s
 
-    def _run_runs(self, config, runs):
-        import os
-
+    def run_runs(self, config, runs):
         if os.environ.get("WAVES", "") not in ("", "0"):
             # waveforms (render --waves): the per-cycle cocotb driver, which records them
-            from raplas_hdl.sim.unit_driver import run_runs
+            from raplas_hdl.sim.unit_driver import run_runs    # lazy: cocotb
 
             return run_runs(self.sim, config, self.scene_memory, runs)
         s = self.session(config)
@@ -124,45 +123,3 @@ class RtlBackend(ModelBackend):
     def warm_pass(self, *args, **kwargs) -> float:
         """Nothing to compile on the host side (the simulator builds on first use)."""
         return 0.0
-
-    def trace(self, batch, run_b, run_start, run_sph, best_t, best_tri, tmin=0.0, tmax=None,
-              exclude=None, any_hit=False):
-        """The runs through the simulated unit (one round of the configuration's live
-        simulation), each run's stream folded into the nearest hits on the host; with
-        ``reduce`` the unit's answers (:meth:`ModelBackend._trace_reduced`)."""
-        if self.reduce:
-            return self._trace_reduced(batch, run_b, run_start, run_sph, best_t, best_tri,
-                                       tmin, tmax, exclude, any_hit)
-        runs = runs_of(run_b, run_start, run_sph)
-        counters = np.zeros((len(runs), len(COUNTERS)), np.int64)
-        R = batch.n_rays
-        if runs and self.mode in ("conservative", "certified"):
-            # conservative: the unit's hits are a superset of R's; certified: its hits and
-            # uncertain pairs. Either way the model's filter and exact resolution
-            # (ModelBackend.trace) on the stream, in stream order
-            pairs = []
-            for k, ((b, _), res) in enumerate(zip(runs, self.stream(batch, runs))):
-                counters[k] = [res.counters.get(n, 0) for n in COUNTERS]
-                out = (np.where(res.hit, 2, 0) if res.outcome is None else res.outcome)
-                pairs.append((b, res.ray_id, res.tri_id, out))
-            saved = dict(self.certified)
-            self._resolve_outcomes(batch, pairs, best_t, best_tri, tmin, tmax, exclude,
-                                   any_hit)
-            if self.mode == "certified":
-                self.certified["certified_hits"] += int(
-                    counters[:, COUNTERS.index("hits")].sum())
-            else:
-                self.certified = saved
-        elif runs:
-            for k, ((b, _), res) in enumerate(zip(runs, self.stream(batch, runs))):
-                counters[k] = [res.counters.get(n, 0) for n in COUNTERS]
-                hi = np.inf if tmax is None else np.asarray(tmax)[b]
-                ex = None if exclude is None else int(np.asarray(exclude)[b])
-                tri, t, _ = nearest_hits(R, res.ray_id, res.tri_id, res.hit, res.t, tmin, hi,
-                                         ex)
-                better = (tri >= 0) & ((t < best_t[b]) | ((t == best_t[b])
-                                                          & (tri < best_tri[b])))
-                best_t[b] = np.where(better, t, best_t[b])
-                best_tri[b] = np.where(better, tri, best_tri[b])
-        self.beats["result"] += result_beats(counters)
-        return counters
