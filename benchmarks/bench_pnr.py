@@ -299,7 +299,7 @@ def render(runs: list) -> str:
             "(`raplas_hdl/pnr/dsp_registers.py`; the multiplier's operand registers hold "
             "raw significands so that they are plain registers; the packed netlist is "
             "simulated against the RTL and the golden model, "
-            "`tests/test_pnr_dsp_registers.py`). Then the product's way out of the block "
+            "`tests/pnr/test_dsp_registers.py`). Then the product's way out of the block "
             "was critical (block output register -> 2-3 ns of routing -> normalise, round, "
             "pack: 10.4 ns, 96.3 MHz): `step_delays` adds that measured route to "
             "`normalise`, and the multiplier got a stage more (4 in rtz and chop, 5 in "

@@ -14,7 +14,7 @@ bits = beats x the record's width for the pass's unit configuration. The reduced
 checked against the host's choice on the unreduced stream, ray for ray (``host_choice``),
 and the count of rays where they differ is reported (expected 0). Early-out: pairs of an
 any-hit run issued after their ray's first accepted hit (``early_out_saving``, the saving of
-an early-out without latency; the RTL saves at most this, ``tests/test_reduction_unit.py``).
+an early-out without latency; the RTL saves at most this, ``tests/rtl/test_reduction_unit.py``).
 
 With ``--certified`` each scene is also rendered in ``certified`` mode and its passes go
 through the certified unit (``UnitConfig(mode="certified")``): without the reduction one

@@ -9,7 +9,7 @@ float64 (PSNR, fraction of pixels whose nearest triangle differs).
 
 **The limit**: the same arithmetic on flat arrays, without the render around it. After each
 render, the pairs of a sample of the frame's runs (recorded as the render traces them,
-:class:`raplas_hdl.bench.sweep.RunSampler`) go through the flat pair kernel in one call (on
+:class:`raplas_hdl.bench.instrumented.RunSampler`) go through the flat pair kernel in one call (on
 the render's threads):
 :func:`raplas_hdl.model.ray_triangle.intersect` for the model,
 :func:`raplas_hdl.host.exact.float64_intersect` for float64 (NumPy, not compiled: slower than
@@ -49,7 +49,7 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from raplas_hdl.bench.sweep import RunSampler  # noqa: E402
+from raplas_hdl.bench.instrumented import RunSampler  # noqa: E402
 from raplas_hdl.cli.grammar import jsonable, lattice, size  # noqa: E402
 from raplas_hdl.fp import parse_format  # noqa: E402
 from raplas_hdl.host.backends import COUNTERS, BackendUnavailable, make_backend  # noqa: E402

@@ -4,7 +4,7 @@ Each scene is rendered through the FP24 golden model (``paper`` mode, 4x4 primar
 4x4 shadow bundles); every run the unit is given (primary and shadow passes, early-out
 rounds, in the renderer's order) is recorded, and the cycle model
 (:mod:`raplas_hdl.model.throughput`, checked against the RTL's ``cycles`` counter in
-``tests/test_throughput.py``) runs them back to back, the host never the limit, for
+``tests/rtl/unit/test_lanes.py``) runs them back to back, the host never the limit, for
 ``testers`` 8 and 4 and ``lanes`` 1 to 4:
 
 - ``pairs_per_cycle``: the unit as built (``results="stream"``: every pair a result beat,

@@ -55,9 +55,9 @@ import json
 import math
 from pathlib import Path
 
-from ..fp import FPFormat
+from ..fp import FP24, FPFormat
 from ..model.plane_sphere import n_passes
-from ..synth.report import DEFAULT_OPTIONS, DEVICE, PAPER
+from ..synth.report import DEFAULT_OPTIONS, DEVICE, PAPER, capacity, synth_row
 
 __all__ = ["RT_MULS", "RT_ADDS", "TESTER_MULS", "TESTER_ADDS", "RESOURCES", "SYNTH_JSON",
            "DEVICE_ROWS", "DEVICE_COLS", "DEVICE_TESTERS", "LAT_MUL", "LAT_ADD",
@@ -149,8 +149,6 @@ def unit_row(unit: str, fmt: FPFormat, *, allow_json: bool = False, run_yosys: b
     LookupError
         When no source has the row.
     """
-    from ..synth.report import synth_row
-
     try:
         row = synth_row(unit, fmt, cache_dir=cache_dir, cached_only=True)
         row["source"] = "yosys (cached)"
@@ -201,8 +199,6 @@ def synth_checks(rounding: str = "rtz", *, full: bool = False, cache_dir=None) -
     cached or committed row exists (never run here: it takes minutes), to compare with the
     composed cost.
     """
-    from ..fp import FP24
-
     fmt = FP24.with_rounding(rounding)
     out = {}
     for unit in ("fp-mul", "plane-sphere-tester"):
@@ -246,9 +242,6 @@ def device_unit(fmt: FPFormat, fmt_cost: dict | None = None, *, fp24_cost: dict 
         When ``docs/results/synthesis.json`` has no intersection unit at FP24 and this
         rounding.
     """
-    from ..fp import FP24
-    from ..synth.report import capacity
-
     label, rnd = _label(fmt), fmt.rounding
     rows = _json_unit_rows("intersection-unit", path)
     iu = next((r for r in rows if r.get("format") == "FP24" and r.get("rounding") == rnd
@@ -273,14 +266,16 @@ def device_unit(fmt: FPFormat, fmt_cost: dict | None = None, *, fp24_cost: dict 
     cap = capacity([{"unit": "intersection-unit", "format": label, "rounding": rnd, **need}],
                    label, rnd, clocks_mhz=CLOCKS_MHZ)
     return {"format": label, "rounding": rnd, "basis": basis, **need,
-            "source": f"{_rel(path)} (intersection-unit FP24/{rnd}, rows {DEVICE_ROWS}, "
+            "source": f"{rel_path(path)} (intersection-unit FP24/{rnd}, rows {DEVICE_ROWS}, "
                       f"cols {DEVICE_COLS})", "rows": DEVICE_ROWS, "cols": DEVICE_COLS,
             "testers": DEVICE_TESTERS, "units": int(cap["units"]),
             "binding": cap["binding"], "limits": cap["limits"],
             "units_with_margin": int(cap["units_with_margin"]), "clocks_mhz": dict(CLOCKS_MHZ)}
 
 
-def _rel(path) -> str:
+def rel_path(path) -> str:
+    """``path`` relative to the project's folder where it lies inside it (results name the
+    project's files, not a machine's)."""
     root = Path(__file__).resolve().parents[2]
     try:
         return str(Path(path).resolve().relative_to(root))

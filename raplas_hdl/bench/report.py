@@ -10,6 +10,11 @@ import os
 import platform
 from pathlib import Path
 
+import numba
+import numpy
+
+from . import cost as dev
+from .metrics import missing_metrics
 from .pareto import COSTS, ERRORS, aggregate, fronts
 
 __all__ = ["STRESS_CAMPAIGN_JSON", "jsonable", "load_results", "write_csv", "write_json",
@@ -53,9 +58,6 @@ def load_results(path) -> dict:
 
 
 def machine() -> dict:
-    import numba
-    import numpy
-
     return {"platform": platform.platform(), "processor": platform.processor() or
             platform.machine(), "cpus": os.cpu_count(), "python": platform.python_version(),
             "numpy": numpy.__version__, "numba": numba.__version__}
@@ -114,7 +116,7 @@ def plot(results: dict, out_dir) -> list[Path]:
     """``pareto_time.png``, ``pareto_hw.png``, ``pareto_device.png`` (each: both errors
     against one cost, the front marked) and ``error_by_format.png`` (per scene, error against
     the format)."""
-    import matplotlib
+    import matplotlib      # lazy: matplotlib loads only to draw the plots
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -245,7 +247,7 @@ _CLUSTER_SECTION = [
     "a float64 reference and the model points that share its scene, bundle size and bound. "
     "The client puts the rows back in plan order. Every result equals the in-process sweep's "
     "and only the timings differ: each point's are those of the worker that rendered it "
-    "(`raplas_hdl.bench.sweep.results_of`, `tests/test_cluster.py`). The `--rtl` point and "
+    "(`raplas_hdl.bench.sweep.results_of`, `tests/project/test_cluster.py`). The `--rtl` point and "
     "the Yosys costs stay on the client ([docs/cluster.md](cluster.md)).", ""]
 
 
@@ -307,8 +309,6 @@ def _mega(v, unit=1e6):
 def _device_section(results: dict, rows: list) -> list[str]:
     """``## Frame time on the device``: the model, the device unit per format, the figures
     per configuration and per point, the capped points."""
-    from . import cost as dev
-
     d = results.get("device") or {}
     clocks = d.get("clocks_mhz") or dict(dev.CLOCKS_MHZ)
     lat = d.get("rt_latency") or {m: dev.rt_latency(m) for m in ("paper", "conservative")}
@@ -552,8 +552,6 @@ def render_markdown(results: dict, plots: list, md_path, *, command: str,
                    _f(r["r_false_hits"]), _f(r["r_false_misses"]), _f(r["r_leaks"])]
                   for r in sorted(rows, key=lambda r: (r["format"], r["rounding"], r["mode"]))]),
           ""]
-
-    from .sweep import missing_metrics
 
     holes = [(p, missing_metrics(p)) for p in pts if missing_metrics(p)]
     n_capped = sum(1 for p in model if p.get("capped"))

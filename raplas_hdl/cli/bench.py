@@ -115,8 +115,8 @@ def _list(text, name, known=None):
 
 
 def spec_from_args(args):
-    """The :class:`~raplas_hdl.bench.sweep.BenchSpec` an argument namespace asks for."""
-    from ..bench.sweep import full_spec, quick_spec
+    """The :class:`~raplas_hdl.bench.plan.BenchSpec` an argument namespace asks for."""
+    from ..bench.plan import full_spec, quick_spec
 
     kw = {}
     if args.format:

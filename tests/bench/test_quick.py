@@ -14,7 +14,7 @@ import pytest
 
 from raplas_hdl.bench.pareto import pareto_front
 from raplas_hdl.bench.report import load_results
-from raplas_hdl.bench.sweep import CAPPED_METRICS, MODEL_METRICS, missing_metrics
+from raplas_hdl.bench.metrics import CAPPED_METRICS, MODEL_METRICS, missing_metrics
 from raplas_hdl.cli import main
 from raplas_hdl.model.records import RESULT
 
@@ -210,7 +210,7 @@ def test_bench_report_handles_capped_points_in_every_grid(quick, tmp_path):
 
     from raplas_hdl.bench.pareto import aggregate, fronts
     from raplas_hdl.bench.report import write_outputs
-    from raplas_hdl.bench.sweep import CAPPED_METRICS
+    from raplas_hdl.bench.metrics import CAPPED_METRICS
 
     _, _, results = quick
     res = copy.deepcopy(results)

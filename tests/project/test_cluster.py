@@ -103,7 +103,8 @@ def test_cli_campaign_on_an_existing_scheduler(dask_ex, serial_run, tmp_path, ca
 
 
 def test_bench_slice_on_two_dask_workers_equals_one_process(dask_ex):
-    from raplas_hdl.bench.sweep import quick_spec, results_of, run_sweep
+    from raplas_hdl.bench.plan import quick_spec
+    from raplas_hdl.bench.sweep import results_of, run_sweep
 
     # two formats (two bounds, so two groups of one scene) and the capped probe point
     spec = quick_spec(formats=["FP16", "FP24"], scenes=["cornell"], size=(16, 16),
