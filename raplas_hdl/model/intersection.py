@@ -32,7 +32,10 @@ import numpy as np
 
 from .config import COUNTER_NAMES, UnitConfig
 from .memory_image import BundleMemory, Run, SceneMemory, as_run
+from .plane_sphere import tester_flags
+from .ray_triangle import EVENTS, intersect
 from .records import RESULT, result_record
+from .reduction import reduce_run
 
 __all__ = ["RESULT_DTYPE", "UNIT_BOUND_VARIANT", "result_dtype", "run_bundle", "run_runs",
            "enumerate_pairs", "empty_counters", "event_counters"]
@@ -189,9 +192,6 @@ def run_runs(config: UnitConfig, scene: SceneMemory, runs) -> list:
     ValueError
         When the scene or a bundle does not fit ``config``, or sphere IDs are invalid.
     """
-    from .plane_sphere import tester_flags
-    from .ray_triangle import intersect
-
     scene.check(config)
     certified = config.mode == "certified"
     parts = []
@@ -250,8 +250,6 @@ def run_runs(config: UnitConfig, scene: SceneMemory, runs) -> list:
         out.append((beats, c))
         pos += n
     if config.reduce:
-        from .reduction import reduce_run
-
         out = [(reduce_run(config, beats, p[0]), c) for (beats, c), p in zip(out, parts)]
     return out
 
@@ -259,7 +257,5 @@ def run_runs(config: UnitConfig, scene: SceneMemory, runs) -> list:
 def event_counters(event_counts) -> dict:
     """The ``overflow``, ``underflow``, ``invalid`` counters from the ray-triangle model's
     per-pair ``event_counts`` (n, 3): operations with each event, summed over the pairs."""
-    from .ray_triangle import EVENTS
-
     totals = np.asarray(event_counts, dtype=np.int64).reshape(-1, 3).sum(axis=0)
     return {name: int(v) for name, v in zip(EVENTS, totals)}

@@ -50,6 +50,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..fp.format import FPFormat
 from .config import COUNTER_NAMES, UnitConfig
 
 __all__ = ["Field", "Record", "Layout", "Slot", "unit_params", "words_to_ints",
@@ -262,8 +263,6 @@ def _params_of(source) -> dict:
         return {}
     if isinstance(source, Mapping):
         return dict(source)
-    from ..fp.format import FPFormat
-
     if isinstance(source, UnitConfig):
         return unit_params(source)
     if isinstance(source, FPFormat):

@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..fp import model as fpm
 from .records import ANSWER, OUTCOME_HIT, OUTCOME_UNCERTAIN, answer_record
 
 __all__ = ["ANSWER_DTYPE", "answer_dtype", "uncertain_pairs", "check_reduce_format",
@@ -106,8 +107,6 @@ def candidates(fmt, beats, tmin: int, tmax, exclude: int) -> np.ndarray:
     ``beats``: :data:`~raplas_hdl.model.records.RESULT` beats; ``tmin``: a pattern;
     ``tmax``: per ray patterns (indexed by ``ray_id``); ``exclude``: a triangle ID or -1.
     """
-    from ..fp import model as fpm
-
     if beats.size == 0 or beats["empty"].any():
         return np.zeros(beats.size, bool)
     t = fpm.decode(beats["t"], fmt)
@@ -126,8 +125,6 @@ def candidates(fmt, beats, tmin: int, tmax, exclude: int) -> np.ndarray:
 
 def _ratio(fmt, beats):
     """``fl(t'/det)``: a key with the exact order and the exact ties of ``t'/det``."""
-    from ..fp import model as fpm
-
     with np.errstate(divide="ignore", invalid="ignore"):
         return fpm.decode(beats["t"], fmt) / fpm.decode(beats["det"], fmt)
 

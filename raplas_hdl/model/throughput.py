@@ -46,6 +46,7 @@ import numpy as np
 from numba import njit
 from .config import UnitConfig
 from .memory_image import as_run
+from .plane_sphere import tester_flags
 
 __all__ = ["Timing", "Profile", "profile_runs", "profile_arrays", "simulate",
            "pairs_per_cycle", "RESULT_PATHS"]
@@ -158,8 +159,6 @@ def profile_arrays(config: UnitConfig, runs) -> Profile:
     (S, 3), inflated radii (S,) and triangle counts (S,) (bit patterns as the memories hold
     them), the bundle's enable bits (rows*cols,), the ``keep_all`` bit, and a key equal
     between runs of one bundle (a new key loads planes)."""
-    from .plane_sphere import tester_flags
-
     slots, jobs_per, job_slot, job_pairs, loads, n_items = [], [], [], [], [], []
     pairs = spheres = 0
     prev = object()

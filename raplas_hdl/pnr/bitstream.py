@@ -26,6 +26,7 @@ import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
+from ..rtl.emit import emit_verilog
 from .board import BOARD, check_lpf, lpf_text, ulx3s_pins
 from .ecp5 import run_tool, check_device, route_seeds, synthesize_ecp5
 from .fit import check_fit
@@ -75,7 +76,7 @@ def bitstream_unit(unit: str, fmt, options: dict, out_dir, *, device: str = "LFE
 
     ``ValueError`` when a port has no pin or the design cannot fit ``device``;
     ``RuntimeError`` when a tool fails or its result is not what was asked for."""
-    from ..rtl.emit import emit_verilog
+    # lazy: rtl.serial_wrapper loads Amaranth, needed only to build the design
     from ..rtl.serial_wrapper import CLOCK_PORT, SerialWrapper
 
     check_device(device, speed)

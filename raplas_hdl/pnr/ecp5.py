@@ -33,6 +33,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..paths import build_root
 from .dsp_registers import pack_netlist_file
 from .report import RouteResult, parse_report, summarise_seeds, synth_counts
 from .tools import nextpnr_command, tool_versions, yosys_command
@@ -78,8 +79,6 @@ def check_device(device: str, speed) -> None:
 
 def default_pnr_dir() -> Path:
     """``$RAPLAS_BUILD/pnr`` when that is set, else ``build/pnr`` (:func:`..paths.build_root`)."""
-    from ..paths import build_root
-
     root = os.environ.get("RAPLAS_BUILD")
     return Path(root) / "pnr" if root else build_root() / "pnr"
 

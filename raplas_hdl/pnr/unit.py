@@ -17,6 +17,8 @@ import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
+from ..rtl.emit import emit_verilog
+from ..rtl.units import UNITS, build_unit
 from .ecp5 import PACKAGE, run_flow, synthesize_ecp5
 from .fit import check_fit
 
@@ -27,8 +29,8 @@ __all__ = ["pnr_unit", "design", "unit_verilog", "flow_record", "check_copies",
 def design(unit: str, fmt, options: dict, copies: int = 1) -> tuple:
     """``(component, module, params)`` of ``unit`` built with ``options`` as ``verilog``
     builds it; ``copies`` > 1: that many side by side (module ``<unit>_x<copies>``)."""
+    # lazy: rtl.copies loads Amaranth, needed only to build the unit
     from ..rtl.copies import Copies
-    from ..rtl.units import UNITS, build_unit
 
     spec, comp, opts = build_unit(unit, fmt, **options)
     params = {"exp_bits": fmt.exp_bits, "man_bits": fmt.man_bits, "rounding": fmt.rounding,
@@ -46,8 +48,6 @@ def design(unit: str, fmt, options: dict, copies: int = 1) -> tuple:
 def unit_verilog(unit: str, fmt, options: dict, copies: int = 1) -> tuple[str, str, int | None]:
     """``(verilog, module, latency)`` of ``unit`` built with ``options`` as ``verilog`` does
     (``copies`` > 1: :func:`design`'s copies side by side)."""
-    from ..rtl.emit import emit_verilog
-
     comp, module, params = design(unit, fmt, options, copies)
     text, manifest = emit_verilog(comp, module, params)
     return text, module, manifest["latency"]

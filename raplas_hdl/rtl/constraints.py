@@ -33,6 +33,8 @@ import json
 import re
 from pathlib import Path
 
+from .emit import verilog_ports
+
 __all__ = ["PART", "UCF_NAME", "XDC_NAME", "board_ports", "ucf_text", "xdc_text",
            "file_ports", "check_files", "load_pins"]
 
@@ -46,8 +48,8 @@ MODULE = "board_top"
 
 def board_ports(verilog_text: str, module: str = MODULE) -> list[dict]:
     """Ports (name, direction, width) of ``module`` with the clock and reset checked."""
+    # lazy: board_top loads Amaranth and the unit's RTL; the constraints need only its port names
     from .board_top import CLOCK_PORT, RESET_PORT
-    from .emit import verilog_ports
 
     ports = verilog_ports(verilog_text, module)
     names = {p["name"] for p in ports}
@@ -58,6 +60,7 @@ def board_ports(verilog_text: str, module: str = MODULE) -> list[dict]:
 
 
 def _roles(ports):
+    # lazy: board_top loads Amaranth and the unit's RTL; the constraints need only its port names
     from .board_top import CLOCK_PORT, RESET_PORT
 
     ins = [p for p in ports if p["direction"] == "input"

@@ -47,6 +47,7 @@ def emit_verilog(component, name: str, params: dict, *, latency=None,
     latency : int, optional
         Defaults to ``component.latency`` when the component has one.
     """
+    # lazy: amaranth is only needed when emitting Verilog (verilog_ports needs none)
     import amaranth
     from amaranth.back import verilog
 

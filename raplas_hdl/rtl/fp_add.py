@@ -74,6 +74,7 @@ from __future__ import annotations
 from amaranth.hdl import Cat, Const, Module, Mux, Value
 from amaranth.lib import wiring
 
+from .fp_add_dsp48 import LATENCY, STAGE_STEPS, FPAddDSP48, check_dsp48_format
 from .fp_add_front import SPECIALS, adder_ports, classify, keep, order
 from .fp_common import check_format, leading_zeros, pack, round_significand
 from .pipeline import Step, build_pipeline, group_steps, place_registers, wire
@@ -129,8 +130,6 @@ def fp_add_latency(fmt, stages: int | None = None, target: str = "generic") -> i
     ValueError
         As :class:`FPAdd` does.
     """
-    from .fp_add_dsp48 import LATENCY, check_dsp48_format
-
     if stages is None:
         stages = default_add_stages(fmt)
     place_registers(add_weights(fmt), stages)
@@ -220,8 +219,6 @@ class FPAdd(wiring.Component):
     def stage_steps(self) -> tuple[tuple[str, ...], ...]:
         """The names of the combinational steps in each pipeline stage."""
         if self._target == "virtex4":
-            from .fp_add_dsp48 import STAGE_STEPS
-
             return STAGE_STEPS
         return group_steps(self._steps, self._registered)
 
@@ -290,8 +287,6 @@ class FPAdd(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         if self._target == "virtex4":
-            from .fp_add_dsp48 import FPAddDSP48
-
             m.submodules.dsp48 = unit = FPAddDSP48(self._fmt)
             m.d.comb += [getattr(unit, k).eq(getattr(self, k))
                          for k in ("a", "b", "sub", "i_valid", "en")]

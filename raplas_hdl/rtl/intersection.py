@@ -70,8 +70,15 @@ from amaranth.lib.fifo import SyncFIFOBuffered
 from amaranth.lib.wiring import In, Out
 
 from ..model.config import UnitConfig
+from ..model.intersection import UNIT_BOUND_VARIANT
 from ..model.records import CMD, COUNTERS, result_record
-from .ram import SyncRAM
+from ..model.reduction import check_reduce_format
+from ..model.throughput import Timing
+from .fp_add import check_adder
+from .fp_mul import check_multiplier
+from .plane_sphere import PlaneSphereArray
+from .ram import RAM_IMPLS, SyncRAM
+from .ray_triangle import RayTriangleUnit
 from .records import struct_layout
 from .unit.credit_fifo import CreditFIFO
 from .unit.feeder import SphereFeeder
@@ -178,10 +185,6 @@ class IntersectionUnit(wiring.Component):
 
     def __init__(self, config: UnitConfig | None = None, *, multiplier: str = "generic",
                  adder: str = "generic", ram: str = "memory", **params):
-        from .fp_add import check_adder
-        from .fp_mul import check_multiplier
-        from .ram import RAM_IMPLS
-
         self._multiplier = check_multiplier(multiplier)
         self._adder = check_adder(adder)
         if ram not in RAM_IMPLS:
@@ -195,8 +198,6 @@ class IntersectionUnit(wiring.Component):
             raise ValueError(f"config must be a UnitConfig, not {config!r}")
         self._cfg = cfg = config
         if cfg.mode == "certified" and cfg.reduce:
-            from ..model.reduction import check_reduce_format
-
             check_reduce_format(cfg.fmt)
         layouts = port_layouts(cfg)
         self.cmd_layout = layouts["cmd"]
@@ -234,8 +235,6 @@ class IntersectionUnit(wiring.Component):
         """The constants of the cycle model of this unit
         (:class:`raplas_hdl.model.throughput.Timing`): the array's and the ray-triangle
         unit's latencies and depths."""
-        from ..model.throughput import Timing
-
         psa, rtu = self._subunits()
         psa._MustUse__silence = rtu._MustUse__silence = True   # built only to be inspected
         return Timing.of(self._cfg, psa.latency, psa.fifo_depth, rtu.latency, rtu.fifo_depth,
@@ -244,8 +243,6 @@ class IntersectionUnit(wiring.Component):
     # ------------------------------------------------------------------------------------
     def _subunits(self):
         """The plane-sphere array and the (first lane's) ray-triangle unit."""
-        from .plane_sphere import PlaneSphereArray
-
         cfg = self._cfg
         psa = PlaneSphereArray(cfg.fmt, rows=cfg.rows, cols=cfg.cols, testers=cfg.n_testers,
                                sphere_id_bits=cfg.sphere_id_bits + 3,
@@ -255,13 +252,9 @@ class IntersectionUnit(wiring.Component):
     def _ray_triangle_unit(self, tag_bits: int):
         """A ray-triangle unit whose ``ray_id`` carries ``tag_bits`` above the ray: the
         marker (and, in a lane, the job-last bit)."""
-        from .ray_triangle import RayTriangleUnit
-
         cfg = self._cfg
         extra = {}
         if cfg.mode == "certified":
-            from ..model.intersection import UNIT_BOUND_VARIANT
-
             extra["bound_variant"] = UNIT_BOUND_VARIANT
         return RayTriangleUnit(cfg.fmt, mode=cfg.mode, margin_scale=cfg.margin_scale,
                                **extra, ray_id_bits=cfg.ray_id_bits + tag_bits,

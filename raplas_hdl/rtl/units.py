@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..fp import FP24, FPFormat
+from .emit import write_unit
 
 __all__ = ["Unit", "UNITS", "build_unit", "emit_all", "TARGET_OPTION", "ADDER_OPTION"]
 
@@ -124,8 +125,6 @@ def build_unit(name: str, fmt: FPFormat = FP24, **options):
 
 def emit_all(outdir, fmt: FPFormat = FP24, names=None) -> list[Path]:
     """Emit every registered unit (or ``names``) at their defaults into ``outdir``."""
-    from .emit import write_unit
-
     written = []
     for name in names or UNITS:
         unit, comp, opts = build_unit(name, fmt)

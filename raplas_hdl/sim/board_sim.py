@@ -18,9 +18,14 @@ from pathlib import Path
 
 import numpy as np
 
+import raplas_hdl
+from raplas_hdl.locks import file_lock
 from raplas_hdl.model.intersection import RESULT_DTYPE
 from raplas_hdl.model.config import UnitConfig
 from raplas_hdl.model.memory_image import BundleMemory, Run, SceneMemory, as_run
+from raplas_hdl.rtl.emit import emit_verilog
+from raplas_hdl.sim.runner import BUILD_ROOT, run_cocotb
+from raplas_hdl.sim.unit_driver import ICARUS_ARGS, unit_verilog_digest
 
 __all__ = ["board_verilog", "run_board", "encode_stimulus", "decode_stimulus", "TOPLEVEL"]
 
@@ -34,10 +39,6 @@ _BUNDLE_FIELDS = ("plane_n", "plane_p", "ray_o", "ray_d", "enable")
 
 
 def _digest(config: UnitConfig) -> str:
-    from raplas_hdl.sim.unit_driver import unit_verilog_digest
-
-    import raplas_hdl
-
     h = hashlib.sha256(unit_verilog_digest(config).encode())
     h.update((Path(raplas_hdl.__file__).parent / "model" / "board_map.py").read_bytes())
     return h.hexdigest()[:16]
@@ -49,9 +50,6 @@ def board_verilog(config: UnitConfig) -> str:
     Cached in memory and on disk, keyed by the parameters and the RTL sources; a file lock
     makes concurrent callers (pytest-xdist workers) wait for one emission.
     """
-    from raplas_hdl.locks import file_lock
-    from raplas_hdl.sim.runner import BUILD_ROOT
-
     if config in _VERILOG_CACHE:
         return _VERILOG_CACHE[config]
     path = BUILD_ROOT / "verilog" / f"{TOPLEVEL}-{_digest(config)}.v"
@@ -59,8 +57,8 @@ def board_verilog(config: UnitConfig) -> str:
         if path.exists():
             text = path.read_text()
         else:
+            # lazy: board_top loads Amaranth, needed only when the cached Verilog is missing
             from raplas_hdl.rtl.board_top import BoardTop
-            from raplas_hdl.rtl.emit import emit_verilog
 
             text, _ = emit_verilog(BoardTop(config), TOPLEVEL, config.params())
             tmp = path.with_suffix(f".{os.getpid()}.tmp")
@@ -129,9 +127,6 @@ def run_board(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
     AssertionError
         When a cocotb test fails (a bus error, a protocol check, a timeout).
     """
-    from raplas_hdl.sim.runner import run_cocotb
-    from raplas_hdl.sim.unit_driver import ICARUS_ARGS
-
     runs = list(runs)
     if not runs:
         raise ValueError("runs is empty")

@@ -37,10 +37,13 @@ low in a cycle) and ``+SEED=s``.
 from __future__ import annotations
 
 import json
+import tempfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from .runner import run_cocotb
 
 __all__ = ["Port", "HarnessSpec", "harness_verilog", "pack_lines", "unpack_lines",
            "write_vectors", "read_results", "batch_plusargs", "to_words", "from_words"]
@@ -473,10 +476,6 @@ def run_batch(simulator: str, spec: HarnessSpec, dut_verilog: str, build_key: st
         ``{output port: values}`` in beat order, and ``info`` with ``n``, ``cycles``,
         ``run_s`` (simulator wall time), ``vectors_per_s``, ``build_s``, ``build_dir``.
     """
-    import tempfile
-
-    from .runner import run_cocotb
-
     n = len(np.asarray(columns[spec.inputs[0].name]))
     with tempfile.TemporaryDirectory(prefix="raplas-batch-", dir=workdir) as tmp:
         tmp = Path(tmp)
@@ -513,10 +512,6 @@ def run_percycle(simulator: str, spec: HarnessSpec, dut_verilog: str, build_key:
     vector, ``stall`` that ``en``/``o_ready`` is low in a cycle. Returns ``(outputs, info)``
     as :func:`run_batch` does (port values up to 64 bits; wider ones as Python ints).
     """
-    import tempfile
-
-    from .runner import run_cocotb
-
     n = len(np.asarray(columns[spec.inputs[0].name]))
     with tempfile.TemporaryDirectory(prefix="raplas-pc-", dir=workdir) as tmp:
         tmp = Path(tmp)

@@ -20,6 +20,11 @@ from ..model.config import UnitConfig
 from ..model.memory_image import REGIONS, bundle_writes
 from ..model.records import answer_record, result_record
 from ..model.reduction import reduce_run
+from ..rtl.emit import emit_verilog
+from ..rtl.unit.reducer import Reducer, answer_layout
+from .cosim import VERILATOR_ARGS, words64
+from .harness import HarnessSpec, run_batch
+from .unit_driver import ICARUS_ARGS, verilator_pch_fix
 
 __all__ = ["ReducerTop", "stimulus", "expected", "cosim_reducer"]
 
@@ -34,15 +39,11 @@ class ReducerTop(wiring.Component):
     """The reducer behind one input stream (see the module docstring)."""
 
     def __init__(self, config: UnitConfig, ram: str = "memory"):
-        from ..rtl.unit.reducer import answer_layout
-
         self._cfg, self._ram = config, ram
         super().__init__({"i": In(stream.Signature(_word_layout(config))),
                           "o": Out(stream.Signature(answer_layout(config)))})
 
     def elaborate(self, platform):
-        from ..rtl.unit.reducer import Reducer
-
         m = Module()
         m.submodules.red = red = Reducer(self._cfg, ram=self._ram)
         w = self.i.payload
@@ -95,10 +96,6 @@ def cosim_reducer(simulator: str, cfg: UnitConfig, runs, *, seed: int = 1,
     """Run ``runs`` through the reducer's Verilog; return ``(got, want, info)``: the answers
     (structured arrays of ``ANSWER``, ``ANSWER_CERTIFIED`` in certified mode) of the RTL and
     of the model."""
-    from ..rtl.emit import emit_verilog
-    from .cosim import words64
-    from .harness import HarnessSpec
-
     top = ReducerTop(cfg)
     text, _ = emit_verilog(top, "reducer_top", cfg.params())
     width = _word_layout(cfg).size
@@ -118,10 +115,6 @@ def cosim_reducer(simulator: str, cfg: UnitConfig, runs, *, seed: int = 1,
 
 
 def _batch_n(simulator, spec, text, key, columns, valid_density, stall_density, seed, n_out):
-    from .cosim import VERILATOR_ARGS
-    from .harness import run_batch
-    from .unit_driver import ICARUS_ARGS, verilator_pch_fix
-
     with verilator_pch_fix(simulator):
         return run_batch(simulator, spec, text, key, columns, valid_density, stall_density,
                          seed, n_out=n_out,

@@ -21,6 +21,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
+import resource
 import shutil
 import subprocess
 import sys
@@ -176,6 +177,7 @@ def _patched_environ(env: dict, drop=("PYTEST_CURRENT_TEST",)):
 
 def _runner(simulator: str, log_file: Path | None, timeout_s: float | None,
             public_all: bool = True):
+    # lazy: cocotb_tools (and cocotb) only to build and run a simulation
     from cocotb_tools.runner import get_runner
 
     runner = get_runner(simulator)
@@ -231,8 +233,6 @@ endmodule
 
 
 def _child_cpu() -> float:
-    import resource
-
     ru = resource.getrusage(resource.RUSAGE_CHILDREN)
     return ru.ru_utime + ru.ru_stime
 

@@ -30,7 +30,9 @@ from cocotb.clock import Clock
 from cocotb.task import bridge, resume
 from cocotb.triggers import FallingEdge, RisingEdge
 
+from raplas_hdl.host.board_driver import BoardDriver
 from raplas_hdl.model.board_map import BOARD_ID, REGISTERS, STATUS_BITS, cmd_start_word
+from raplas_hdl.sim.board_sim import decode_stimulus
 
 
 class BusError(RuntimeError):
@@ -122,8 +124,6 @@ async def _start(dut, meta):
 
 
 def _load(meta):
-    from raplas_hdl.sim.board_sim import decode_stimulus
-
     stim = dict(np.load(os.environ["BOARD_STIM"], allow_pickle=False))
     return decode_stimulus(meta, stim)
 
@@ -131,8 +131,6 @@ def _load(meta):
 @cocotb.test()
 async def run_driver(dut):
     """The host driver loads the scene, runs every run and reads the counters."""
-    from raplas_hdl.host.board_driver import BoardDriver
-
     with open(os.environ["BOARD_META"]) as f:
         meta = json.load(f)
     config, scene, runs = _load(meta)

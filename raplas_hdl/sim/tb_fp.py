@@ -29,7 +29,9 @@ import numpy as np
 from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, ReadOnly, RisingEdge, Timer
 
-from raplas_hdl.sim.harness import HarnessSpec
+from raplas_hdl.fp import FPFormat
+from raplas_hdl.rtl.emit import emit_verilog
+from raplas_hdl.sim.harness import HarnessSpec, run_batch, run_percycle
 
 CLOCK_NS = 10
 
@@ -193,8 +195,7 @@ def fp_verilog(op: str, fmt, stages: int | None = None, multiplier: str = "gener
     with ``"virtex4"`` the text instantiates ``DSP48`` and a simulation needs
     :func:`raplas_hdl.rtl.dsp48.dsp48_sim_model` appended (once per design).
     """
-    from raplas_hdl.rtl.emit import emit_verilog
-
+    # lazy (both): the RTL loads Amaranth, which the testbench in the simulator never needs
     if op == "fp-add":
         from raplas_hdl.rtl.fp_add import FPAdd as cls
     elif op == "fp-mul":
@@ -215,6 +216,7 @@ def fp_verilog(op: str, fmt, stages: int | None = None, multiplier: str = "gener
 
 def fp_expected(op: str, fmt, a, b, sub=None) -> tuple[np.ndarray, np.ndarray]:
     """Golden ``(bits uint32, flags uint8)`` of ``op`` on operand arrays (``sub`` for add)."""
+    # lazy: the golden model loads numba, which the testbench in the simulator never needs
     from raplas_hdl.fp import model
 
     a = np.asarray(a, dtype=np.uint32)
@@ -269,8 +271,6 @@ def fp_cosim(op: str, fmt, a, b, sub=None, *, simulator: str, stages: int | None
         ``expected`` and ``expected_flags``, ``vectors_per_s``, ``cycles``, ``run_s``,
         ``build_s``, ``latency``.
     """
-    from raplas_hdl.sim.harness import run_batch, run_percycle
-
     a = np.asarray(a, dtype=np.uint32)
     b = np.asarray(b, dtype=np.uint32)
     if a.shape != b.shape or a.ndim != 1:
@@ -283,6 +283,7 @@ def fp_cosim(op: str, fmt, a, b, sub=None, *, simulator: str, stages: int | None
     verilog, latency = fp_verilog(op, fmt, stages, multiplier)
     key = f"{spec.dut}-{fmt.name}-s{stages if stages is not None else 'd'}"
     if multiplier != "generic":
+        # lazy: rtl.dsp48 loads Amaranth, which the testbench in the simulator never needs
         from raplas_hdl.rtl.dsp48 import dsp48_sim_model
 
         verilog += "\n" + dsp48_sim_model()
@@ -346,8 +347,6 @@ def fp_bundle(exp_bits: int, man_bits: int, roundings=("rtz", "rne", "chop"),
 
     Returns ``(spec, verilog, units)`` with ``units = {output suffix: (op, FPFormat)}``.
     """
-    from raplas_hdl.fp import FPFormat
-
     if isinstance(multipliers, str):
         multipliers = (multipliers,)
     units, texts, lat = {}, [], {}
@@ -407,6 +406,7 @@ def fp_bundle(exp_bits: int, man_bits: int, roundings=("rtz", "rne", "chop"),
         lines = [ln.replace(", input wire sub", "") for ln in lines]
     spec = HarnessSpec(dut="fp_bundle", inputs=ins, outputs=outputs, en="en")
     if "fp-mul" in ops and set(multipliers) - {"generic"}:
+        # lazy: rtl.dsp48 loads Amaranth, which the testbench in the simulator never needs
         from raplas_hdl.rtl.dsp48 import dsp48_sim_model
 
         texts.append(dsp48_sim_model())

@@ -15,6 +15,7 @@ of :data:`raplas_hdl.model.intersection.RESULT_DTYPE`) and the counters, exactly
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import os
 import tempfile
@@ -23,10 +24,15 @@ from pathlib import Path
 import numpy as np
 
 from raplas_hdl.fp import model as fpm
+from raplas_hdl.model.bundles import RayBundle
 from raplas_hdl.model.config import UnitConfig
 from raplas_hdl.model.memory_image import (BundleMemory, SceneMemory, as_run, bundle_writes,
                                            run_list_writes, scene_writes)
 from raplas_hdl.model.records import COUNTERS, output_record
+from raplas_hdl.rtl.emit import emit_verilog
+from raplas_hdl.sim.runner import BUILD_ROOT, run_cocotb
+
+from .sources import rtl_sources_digest
 
 __all__ = ["random_scene", "random_bundle", "unit_verilog", "run_runs", "encode_runs",
            "decode_results"]
@@ -89,8 +95,6 @@ def random_bundle(config: UnitConfig, seed: int = 0, disable: float = 0.0,
                   origin=None, spread: float = 0.5, target=None) -> BundleMemory:
     """A bundle from near ``(0, 0, -10)`` looking at ``target`` (default: a random point
     near the scene's centre); ``disable`` of the rays are switched off."""
-    from raplas_hdl.model.bundles import RayBundle
-
     rng = np.random.default_rng(seed)
     fmt = config.fmt
     o = np.array([0.0, 0.0, -10.0]) + rng.normal(0, 1.0, 3) if origin is None else origin
@@ -136,11 +140,8 @@ def unit_verilog_digest(config: UnitConfig, multiplier: str = "generic",
                         adder: str = "generic") -> str:
     """The cache key of the unit's Verilog: its parameters, the targets, Amaranth's version
     and every source it is emitted from (:func:`~raplas_hdl.sim.sources.rtl_sources_digest`)."""
-    import hashlib
-
+    # lazy: amaranth only for its version; importers such as the board testbench need none
     import amaranth
-
-    from .sources import rtl_sources_digest
 
     h = hashlib.sha256(json.dumps(config.params(), sort_keys=True).encode())
     if multiplier != "generic":
@@ -162,8 +163,6 @@ def unit_verilog(config: UnitConfig, multiplier: str = "generic",
     cached in memory and on disk under ``build/sim/verilog/``, keyed by the parameters and
     the contents of the RTL sources.
     """
-    from raplas_hdl.sim.runner import BUILD_ROOT
-
     if (config, multiplier, adder) in _VERILOG_CACHE:
         return _VERILOG_CACHE[config, multiplier, adder]
     digest = unit_verilog_digest(config, multiplier, adder)
@@ -171,7 +170,7 @@ def unit_verilog(config: UnitConfig, multiplier: str = "generic",
     if path.exists():
         text = path.read_text()
     else:
-        from raplas_hdl.rtl.emit import emit_verilog
+        # lazy (here and below): the RTL loads Amaranth, only when the cached Verilog is missing
         from raplas_hdl.rtl.intersection import IntersectionUnit
         from raplas_hdl.rtl.ram import ram_verilog
 
@@ -303,8 +302,6 @@ def run_runs(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
     AssertionError
         When the testbench fails (FIFO overflow flag, a protocol error, a timeout).
     """
-    from raplas_hdl.sim.runner import run_cocotb
-
     runs = [as_run(r) for r in runs]
     if not runs:
         return []

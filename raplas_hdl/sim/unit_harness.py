@@ -58,10 +58,13 @@ from pathlib import Path
 
 import numpy as np
 
+from raplas_hdl.locks import file_lock
 from raplas_hdl.model.config import UnitConfig
-from raplas_hdl.model.memory_image import SceneMemory, as_run, scene_writes
+from raplas_hdl.model.memory_image import REGIONS, SceneMemory, as_run, scene_writes
 from raplas_hdl.model.records import CMD, COUNTERS, output_record
 from raplas_hdl.sim.harness import HEX_DIGITS, HEX_VALUES  # the hex digit tables, defined once
+from raplas_hdl.sim.runner import BUILD_ROOT, build_plain_verilator, simulator_env
+from raplas_hdl.sim.unit_driver import encode_runs, unit_verilog
 
 __all__ = [
     "BACKDOOR",
@@ -237,10 +240,6 @@ def build_harness(simulator: str, config: UnitConfig, build_key: str | None = No
     no tracing, the plain C++ main). Icarus: ``iverilog -g2005``, run with ``vvp -n``. Both
     are built once per Verilog hash under ``build/sim/``.
     """
-    from raplas_hdl.locks import file_lock
-    from raplas_hdl.sim.runner import BUILD_ROOT, build_plain_verilator, simulator_env
-    from raplas_hdl.sim.unit_driver import unit_verilog
-
     text = harness_verilog(config) + unit_verilog(config, multiplier, adder)
     key = build_key or f"unit-harness-{config.fmt.name}-{config.rows}x{config.cols}"
     if simulator == "verilator":
@@ -320,8 +319,6 @@ def encode_ops(config: UnitConfig, scene: SceneMemory, runs, *, first_run: int =
                overlap: bool = False):
     """Ops ``(op, addr, data)`` of one round of ``runs`` (see the module docstring); run
     numbers count from ``first_run`` (the runs of earlier rounds)."""
-    from raplas_hdl.sim.unit_driver import encode_runs
-
     stim = encode_runs(config, scene, runs, overlap=overlap, with_scene=False)
     cmd = CMD.bind(config)
     banks, offs = stim["run_bank"], stim["run_offsets"]
@@ -366,8 +363,6 @@ def scene_images(config: UnitConfig, scene: SceneMemory) -> dict:
     """``$readmemh`` text of the scene memories, ``{plusarg: bytes}``: exactly the words the
     write port would store for :func:`~raplas_hdl.model.memory_image.scene_writes` (the
     same address decoding, lanes and truncation as the unit's write port)."""
-    from raplas_hdl.model.memory_image import REGIONS
-
     w = config.fmt.width
     wa, wd = scene_writes(config, scene)
     wa = np.asarray(wa, np.int64)
@@ -459,8 +454,6 @@ class UnitSession:
         self._counters = COUNTERS.bind(config)
         self._last_bit = self._result["last"].offset
         cmd = build_harness(simulator, config, build_key, multiplier, adder)
-        from raplas_hdl.sim.runner import simulator_env
-
         t0 = time.monotonic()
         self._dir = Path(tempfile.mkdtemp(prefix="raplas-unit-session-"))
         ctl, st = self._dir / "ctl", self._dir / "status"
@@ -633,8 +626,6 @@ def replay(simulator: str, config: UnitConfig, ops_path, *, seed: int = 1,
     flush; the memory images ``<ops_path>.<PLUSARG>.hex`` a backdoor session recorded are
     loaded). Returns ``cycles`` (clock cycles), ``wall_s`` and the beats file size."""
     cmd = build_harness(simulator, config, build_key)
-    from raplas_hdl.sim.runner import simulator_env
-
     with tempfile.TemporaryDirectory(prefix="raplas-unit-replay-") as tmp:
         tmp = Path(tmp)
         st = tmp / "status"

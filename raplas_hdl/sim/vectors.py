@@ -21,6 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..fp import parse_format
+
 __all__ = ["MAX_LINES", "UNIT_NAMES", "LineKind", "check_header", "columns_of", "hex_fields", "match_header",
            "read_lines", "text_lines", "write_lines"]
 
@@ -72,8 +74,6 @@ def check_header(path, lineno, m, unit, fmt=None, params=None) -> None:
     if m.group(1) != unit:
         raise ValueError(f"{path}:{lineno}: the file holds {m.group(1)} vectors, not {unit}")
     if m.group(2) and fmt is not None:
-        from ..fp import parse_format
-
         try:
             ffmt = parse_format(m.group(2))
         except ValueError:

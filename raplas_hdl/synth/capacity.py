@@ -38,11 +38,16 @@ route of several whole units side by side (``docs/results/pnr.json``), or *not m
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
+from ..rtl.emit import emit_verilog
 from .capacity_ecp5 import ecp5_rows, render_ecp5
 from .rates import pairs_per_cycle
+from .report import report_format_label, synth_row
+from .yosys import count_cells, synthesize
 
 __all__ = ["DEVICES", "Config", "CONFIGS", "bram_blocks", "compose", "capacity_row",
            "capacity_table", "validate", "PAPER_PAIRS_PER_SECOND", "CLOCK_MHZ"]
@@ -102,6 +107,7 @@ def _bram_lane(width: int, depth: int) -> int:
 def bram_blocks(config, lanes: int = 1) -> dict:
     """18 Kbit blocks per memory of ``config`` (a :class:`UnitConfig`), ``K = lanes`` copies
     of the lanes' memories; ``{"total": n, memory: n, ...}`` (model, uncalibrated)."""
+    # lazy: rtl.unit.memories loads Amaranth and the model's numba kernels
     from ..rtl.unit.memories import memory_geometry
 
     out = {}
@@ -115,6 +121,7 @@ def bram_blocks(config, lanes: int = 1) -> dict:
 def unit_config(fmt, n_triangles: int, testers: int = 8, lanes: int = 1):
     """The :class:`UnitConfig` of a 4x4 unit with Triangle Memory for ``n_triangles`` (and
     Sphere Memory for one sphere per 4 triangles, the ratio of the unit's defaults: 1,024 and 256)."""
+    # lazy: model.config loads numba; the capacity tables need no kernels
     from ..model.config import UnitConfig
 
     spheres = max(1, math.ceil(n_triangles / 4))
@@ -138,8 +145,6 @@ def compose(array: dict, rtu: dict, rest: dict, lanes: int, family: str = "xc4v"
     ``cells`` (and the cell counts of every part, ``cells_by_type``) the cells are summed
     and the slice estimate is taken of the sum (:func:`.yosys.summarize`'s formula)."""
     if cells and _with_cells(array, rtu, rest):
-        from .yosys import count_cells
-
         types = set(array["cells_by_type"]) | set(rtu["cells_by_type"]) | set(rest["cells_by_type"])
         cells = {t: array["cells_by_type"].get(t, 0) + lanes * rtu["cells_by_type"].get(t, 0)
                  + rest["cells_by_type"].get(t, 0) for t in types}
@@ -209,9 +214,6 @@ def validate(predicted: dict, actual: dict) -> dict:
 
 def load_throughput(path) -> list[dict]:
     """Rows of the throughput results (a list, or ``{"rows": [...]}``)."""
-    import json
-    from pathlib import Path
-
     data = json.loads(Path(path).read_text())
     rows = data["rows"] if isinstance(data, dict) else data
     need = {"scene", "testers", "lanes", "pairs_per_cycle"}
@@ -323,10 +325,9 @@ def needed_runs(families=("xc4v", "xc7")) -> list[tuple]:
 def unit_row(fmt, options: dict, family: str = "xc4v", *, cached_only: bool = False) -> dict:
     """:func:`.report.synth_row` for ``intersection-unit`` with ``UnitConfig`` fields the
     unit registry has no option for (``reduce``): the unit built directly."""
+    # lazy: the unit's RTL loads Amaranth and model.config numba, only to build the unit
     from ..model.config import UnitConfig
-    from ..rtl.emit import emit_verilog
     from ..rtl.intersection import IntersectionUnit
-    from .yosys import synthesize
 
     o = dict(options)
     targets = {"multiplier": o.pop("target", "generic"), "adder": o.pop("adder", "generic")}
@@ -344,8 +345,6 @@ def gather(fmt, *, rows=(), cached_only: bool = True, progress=None, runs=None) 
     """Synthesis rows for :func:`needed_runs`: from ``rows`` (an earlier report's rows), the
     Yosys cache, or (``cached_only`` False) a Yosys run. ``{(unit, options key, family):
     row}`` and the runs that had no result under ``"missing"``."""
-    from .report import synth_row
-
     found, missing = {}, []
     for unit, options, family in runs or needed_runs():
         key = (unit, tuple(sorted(_norm(unit, options).items())), family)
@@ -444,8 +443,6 @@ def build_capacity(fmt, found: dict, throughput_rows, n_triangles: dict, *,
         "array": {n: _brief(a) for n, a in p["array"].items()}, "rtu": _brief(p["rtu"]),
         "rest": {k: v for k, v in p["rest"].items() if k != "cells_by_type"}}
         for (fam, target), p in parts.items()}
-    from .report import report_format_label
-
     return {"format": f"{report_format_label(fmt)}/{fmt.rounding}", "table": table,
             "validation": validation, "inputs": inputs,
             "bram_calibration": cal,

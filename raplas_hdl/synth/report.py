@@ -22,6 +22,9 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from ..fp import ROUNDINGS, FPFormat
+from ..rtl.emit import emit_verilog
+from ..rtl.units import build_unit
+from .yosys import synthesize
 
 __all__ = ["PAPER", "DEVICE", "TARGETS", "DEFAULT_OPTIONS", "unit_verilog", "synth_row",
            "build_report", "capacity", "dsp48_option_rows", "adder_option_rows",
@@ -70,9 +73,6 @@ def unit_verilog(name: str, fmt: FPFormat, **options) -> tuple[str, str, int | N
     (verilog, module, latency, options)
         ``options`` are the options the unit was built with (defaults dropped).
     """
-    from ..rtl.emit import emit_verilog
-    from ..rtl.units import build_unit
-
     unit, comp, opts = build_unit(name, fmt, **options)
     params = {"exp_bits": fmt.exp_bits, "man_bits": fmt.man_bits, "rounding": fmt.rounding,
               **opts}
@@ -85,8 +85,6 @@ def synth_row(name: str, fmt: FPFormat, options: dict | None = None, *, cache_di
               family: str = "xc4v") -> dict:
     """Synthesise one unit at one format and return its report row (a flat dict);
     ``family``: ``synth_xilinx -family`` (:data:`.yosys.FAMILIES`)."""
-    from .yosys import synthesize
-
     opts = dict(DEFAULT_OPTIONS.get(name, {}))
     opts.update(options or {})
     t0 = time.monotonic()
@@ -116,10 +114,10 @@ def dsp48_option_rows(formats, *, adder_roundings=ROUNDINGS, cache_dir=None,
     each of ``adder_roundings``, for the formats whose significand fits a DSP48 operand.
     Rows without a cached result are left out under ``cached_only``.
     """
+    # lazy: amaranth (and rtl.dsp48, built on it) only to elaborate the multipliers
     from amaranth.back import verilog
 
     from ..rtl.dsp48 import make_multiplier, multiplier_latency
-    from .yosys import synthesize
 
     rows = []
     for fmt in formats:
@@ -173,6 +171,7 @@ def adder_option_rows(formats, roundings=ROUNDINGS, *, cache_dir=None, use_cache
                       cached_only: bool = False, progress=None) -> list[dict]:
     """``component = "fp-add"`` rows of :func:`dsp48_option_rows`: the generic adder and the
     DSP48 adder (``target="virtex4"``) of each format (``man_bits <= 16``) and rounding."""
+    # lazy: rtl.fp_add_dsp48 loads Amaranth; the report's other paths need none
     from ..rtl.fp_add_dsp48 import check_dsp48_format
 
     rows = []

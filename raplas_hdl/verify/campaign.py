@@ -173,6 +173,7 @@ class CampaignParams:
     certified_scale: float = 1.0
 
     def __post_init__(self):
+        # lazy: verify.stress loads numba; importing the campaign (CLI, merge) needs none
         from .stress import FAMILIES
         if not self.families:
             object.__setattr__(self, "families", FAMILIES)
@@ -320,6 +321,7 @@ def raytri_shard(shard: Shard) -> dict:
     dict
         mode -> counts (``_RT_COUNTS``), ``t_rel_max``, ``t_rel_hist``.
     """
+    # lazy: verify.stress loads numba; importing the campaign (CLI, merge) needs none
     from . import stress
 
     fmt = parse_format(shard.fmt)
@@ -329,7 +331,7 @@ def raytri_shard(shard: Shard) -> dict:
     for mode in MODES:
         scale = shard.scale if mode == "certified" else 1.0
         row = stress.evaluate(cases, enc, mode, scale)[shard.group]
-        hit, t = stress._unit(enc, mode, scale)
+        hit, t = stress.unit_hits(enc, mode, scale)
         ok = enc.cert_in_domain if mode == "certified" else enc.in_domain
         both = (ok & hit & enc.r_hit & np.isfinite(t) & np.isfinite(enc.r_t)
                 & (enc.r_t != 0))
@@ -351,6 +353,7 @@ def random_bundle(rng):
     """A random bundle: 1..8 rows and columns, ``|O|`` from 1e-3 to 0.95 ``O_MAX``, screen at
     1e-2..10, axes 45..90 degrees apart, half extents 1e-3..1 of the distance (as the
     test of the culling proof)."""
+    # lazy: the model loads numba; importing the campaign (CLI, merge) needs none
     from ..model.bundles import RayBundle
     rows, cols = (int(x) for x in rng.integers(1, 9, 2))
     o_norm = 10 ** rng.uniform(-3, math.log10(O_MAX * 0.95))
@@ -429,6 +432,7 @@ _CULL_COUNTS = ("bundles", "bundles_out_of_budget", "spheres", "spheres_out_of_d
 def culling_shard(shard: Shard) -> dict:
     """The culling proof over the shard's bundles and spheres of its kind: counts
     (``_CULL_COUNTS``)."""
+    # lazy: the model loads numba; importing the campaign (CLI, merge) needs none
     from ..fp import model as fpm
     from ..model import plane_sphere as ps_model
     from ..model.bundles import encode_bundles
@@ -584,6 +588,7 @@ def run_campaign(params: CampaignParams, out_dir="build/campaign", jobs=None,
         executor = SerialExecutor()
     bar = None
     if progress and todo:
+        # lazy: tqdm costs tens of ms, only for a progress bar
         from tqdm import tqdm
         bar = tqdm(total=len(todo), unit="shard", desc="stress campaign", smoothing=0.05)
     done = 0
@@ -591,6 +596,7 @@ def run_campaign(params: CampaignParams, out_dir="build/campaign", jobs=None,
         if todo and executor.kind != "serial" and executor.local:
             # compile the kernels the shards use once, here, so that the workers only load
             # numba's disk cache (each would otherwise compile them again)
+            # lazy: host.warm loads the model and the renderer (numba)
             from ..host.warm import default_lock, warm
 
             warm(engine=False, lock=default_lock())
@@ -722,6 +728,7 @@ def results_of(doc: dict) -> dict:
 
 
 def _domain_text(name: str) -> str:
+    # lazy: the model loads numba; importing the campaign (CLI, merge) needs none
     from ..model.conservative import domain
     d = domain(parse_format(name))
     return f"{name}: P = {d.pos_exp}, Lmin = {d.min_edge_exp}"

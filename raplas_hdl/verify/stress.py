@@ -367,14 +367,14 @@ def reference(cases: StressCases, fmt: FPFormat) -> Encoded:
                    kept, in_domain, r_hit, r_t, cert_ok)
 
 
-def _unit(enc: Encoded, mode, margin_scale):
+def unit_hits(enc: Encoded, mode, margin_scale):
     """The unit's hit and ``t`` per pair (all pairs; not kept: no hit, NaN)."""
     hit, t, _ = unit_outcome(enc, mode, margin_scale)
     return hit, t
 
 
 def unit_outcome(enc: Encoded, mode, margin_scale=1.0):
-    """:func:`_unit` and the certified outcome per pair (uint8; 2 where not kept; None in
+    """:func:`unit_hits` and the certified outcome per pair (uint8; 2 where not kept; None in
     the other modes)."""
     k = enc.kept
     res = intersect(enc.o_bits[k], enc.d_bits[k], enc.v0_bits, enc.e1_bits, enc.e2_bits,

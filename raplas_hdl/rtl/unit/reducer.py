@@ -67,6 +67,7 @@ from amaranth.lib.wiring import In, Out
 from ...model.config import UnitConfig
 from ...model.memory_image import REGIONS
 from ...model.records import OUTCOME_HIT, OUTCOME_UNCERTAIN, answer_record
+from ...model.reduction import check_reduce_format
 from ..ram import SyncRAM
 from ..records import struct_layout
 from .selector import lowest_set
@@ -183,8 +184,6 @@ class Reducer(wiring.Component):
     """
 
     def __init__(self, config: UnitConfig, ram: str = "memory", seq_bits: int = SEQ_BITS):
-        from ...model.reduction import check_reduce_format
-
         check_reduce_format(config.fmt)
         self._cfg = config
         self._ram = ram

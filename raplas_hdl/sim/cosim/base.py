@@ -9,6 +9,11 @@ import os
 
 import numpy as np
 
+from raplas_hdl.rtl.emit import emit_verilog
+from raplas_hdl.rtl.units import build_unit
+
+from ..harness import run_batch
+from ..runner import BUILD_ROOT
 from ..sources import rtl_sources_digest
 from ..vectors import read_lines, write_lines
 
@@ -45,8 +50,6 @@ def unit_verilog(unit: str, fmt, options: dict, module: str) -> tuple[str, int]:
     """``(verilog, latency)`` of a registered unit (:func:`raplas_hdl.rtl.units.build_unit`)
     with ``options``; cached on disk by the parameters and the RTL sources. With
     ``target="virtex4"`` Yosys's DSP48 model is appended."""
-    from ..runner import BUILD_ROOT
-
     opts = {k: v for k, v in options.items() if v is not None}
     key = hashlib.sha256(repr((unit, fmt.name, sorted(opts.items()), rtl_sources_digest()))
                          .encode()).hexdigest()[:16]
@@ -55,9 +58,6 @@ def unit_verilog(unit: str, fmt, options: dict, module: str) -> tuple[str, int]:
     if path.exists() and meta.exists():
         text, latency = path.read_text(), int(meta.read_text())
     else:
-        from raplas_hdl.rtl.emit import emit_verilog
-        from raplas_hdl.rtl.units import build_unit
-
         _, comp, used = build_unit(unit, fmt, **opts)
         params = {"exp_bits": fmt.exp_bits, "man_bits": fmt.man_bits,
                   "rounding": fmt.rounding, **used}
@@ -69,6 +69,7 @@ def unit_verilog(unit: str, fmt, options: dict, module: str) -> tuple[str, int]:
             tmp.write_text(content)
             os.replace(tmp, p)
     if "virtex4" in (opts.get("target"), opts.get("adder")):
+        # lazy: rtl.dsp48 loads Amaranth; importing raplas_hdl.sim.cosim needs none
         from raplas_hdl.rtl.dsp48 import dsp48_sim_model
 
         text += "\n" + dsp48_sim_model()
@@ -175,7 +176,7 @@ class UnitCosim:
 
 def run_cosim_batch(simulator, spec, text, key, columns, valid_density, stall_density, seed,
            timeout_s):
-    from ..harness import run_batch
+    # lazy: unit_driver loads the model (numba); importing raplas_hdl.sim.cosim needs none
     from ..unit_driver import ICARUS_ARGS, verilator_pch_fix
 
     with verilator_pch_fix(simulator):

@@ -4,9 +4,11 @@ result beat and counter compared."""
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
+from ..runner import waves_requested
 from ..vectors import LineKind
 from .base import UnitCosim
 
@@ -29,6 +31,7 @@ class IntersectionCosim(UnitCosim):
 
     def __init__(self, fmt, options):
         super().__init__(fmt, options)
+        # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
         from raplas_hdl.model.config import UnitConfig
 
         kw = {k: self.options[k] for k in ("rows", "cols", "testers", "tris_per_sphere",
@@ -45,6 +48,7 @@ class IntersectionCosim(UnitCosim):
                               **({"reduce": True} if self.config.reduce else {})}
 
     def random(self, n, seed):
+        # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
         from raplas_hdl.fp import model as fpm
 
         from ..unit_driver import random_bundle, random_scene
@@ -80,8 +84,7 @@ class IntersectionCosim(UnitCosim):
         """``bundle`` with a random window: ``tmin`` 0, 0.05 or 0.1; ``tmax`` 6 to 20 (the
         scene lies 6 to 14 away), 40 % of the rays +infinity; two runs in three exclude a
         triangle the scene lists; odd runs any-hit."""
-        from dataclasses import replace
-
+        # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
         from raplas_hdl.fp import model as fpm
         from raplas_hdl.model.reduction import inf_pattern
 
@@ -97,6 +100,7 @@ class IntersectionCosim(UnitCosim):
         return len(cases["runs"])
 
     def expected(self, cases):
+        # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
         from raplas_hdl.model.intersection import run_runs
 
         return {"runs": run_runs(self.config, cases["scene"], cases["runs"]),
@@ -105,6 +109,7 @@ class IntersectionCosim(UnitCosim):
     def _kinds(self):
         """T, S (the scene), B, PL, RAY (a bundle), RUN, SPH (a run and its sphere list),
         BEAT, CTR (its expected result stream and counters)."""
+        # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
         from raplas_hdl.model.records import COUNTERS, result_record
 
         cfg, w = self.config, self.config.fmt.width
@@ -129,6 +134,7 @@ class IntersectionCosim(UnitCosim):
         return tuple(self._kinds().values())
 
     def from_items(self, path, items):
+        # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
         from raplas_hdl.model.memory_image import BundleMemory, SceneMemory
         from raplas_hdl.model.records import result_record
 
@@ -242,10 +248,9 @@ class IntersectionCosim(UnitCosim):
 
     def simulate(self, cases, simulator, *, valid_density, stall_density, seed,
                  timeout_s=None):
-        from ..runner import waves_requested
-
         t0 = time.monotonic()
         if waves_requested():       # the per-cycle cocotb driver records waveforms
+            # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
             from ..unit_driver import run_runs
 
             got = run_runs(simulator, self.config, cases["scene"], cases["runs"], seed=seed,
@@ -255,6 +260,7 @@ class IntersectionCosim(UnitCosim):
             build_s = 0.0
             run_s = time.monotonic() - t0
         else:
+            # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
             from ..unit_harness import UnitSession
 
             with UnitSession(simulator, self.config, cases["scene"], seed=seed,
@@ -273,6 +279,7 @@ class IntersectionCosim(UnitCosim):
 
     def mismatches(self, expected, got) -> list:
         """Per run: None when equal, else the lines that show the differences."""
+        # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
         from raplas_hdl.model.records import COUNTERS
 
         out = []

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..harness import HarnessSpec
 from ..vectors import LineKind
 from .base import (SPHERE_ID_BITS, UnitCosim, as_u64, cosim_key, run_cosim_batch, unit_verilog,
                    words32, words64)
@@ -76,6 +77,7 @@ class _PlaneCosim(UnitCosim):
 
     def _random_planes(self, rng, n_groups, n_planes):
         """Unit normals and offsets of ``n_groups`` groups of ``n_planes`` planes."""
+        # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
         from raplas_hdl.fp import model as fpm
 
         nrm = rng.normal(size=(n_groups, n_planes, 3))
@@ -86,6 +88,7 @@ class _PlaneCosim(UnitCosim):
     def _random_spheres(self, rng, pn, pp, group):
         """Spheres near the planes of their group (distance within a few radii, some at
         r(1 +- 2^-M)) and raw bit patterns (specials included)."""
+        # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
         from raplas_hdl.fp import model as fpm
 
         f = self.fmt
@@ -188,6 +191,7 @@ class TesterCosim(_PlaneCosim):
                 "cz": c[:, 2], "r": r}
 
     def expected(self, cases):
+        # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
         from raplas_hdl.model.plane_sphere import tester_flags
 
         flag = np.zeros(len(cases["group"]), np.uint64)
@@ -206,8 +210,6 @@ class TesterCosim(_PlaneCosim):
 
     def simulate(self, cases, simulator, *, valid_density, stall_density, seed,
                  timeout_s=None):
-        from ..harness import HarnessSpec
-
         w = self.fmt.width
         text, latency = unit_verilog(self.name, self.fmt, self.options, "plane_sphere_tester")
         text += "\n" + plane_wrapper_verilog("tester", 1, w, 4 * w, 1)
@@ -258,6 +260,7 @@ class ArrayCosim(_PlaneCosim):
                                      ("col_mask", self.cols))))
 
     def random(self, n, seed, per_bundle=48):
+        # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
         from raplas_hdl.model.bundles import RayBundle
 
         rng = np.random.default_rng([seed, 37])
@@ -280,6 +283,7 @@ class ArrayCosim(_PlaneCosim):
                 "cx": c[:, 0], "cy": c[:, 1], "cz": c[:, 2], "r": r}
 
     def expected(self, cases):
+        # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
         from raplas_hdl.model.plane_sphere import sphere_masks
 
         n = len(cases["group"])
@@ -307,9 +311,8 @@ class ArrayCosim(_PlaneCosim):
 
     def simulate(self, cases, simulator, *, valid_density, stall_density, seed,
                  timeout_s=None):
+        # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
         from raplas_hdl.model.records import PS_RESULT, SPHERE
-
-        from ..harness import HarnessSpec
 
         w, p = self.fmt.width, self.rows + self.cols
         opts = {**self.options, "rows": self.rows, "cols": self.cols}

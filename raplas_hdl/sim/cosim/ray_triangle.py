@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..harness import HarnessSpec
 from ..vectors import LineKind, columns_of
 from .base import (RT_ID_BITS, UnitCosim, as_u64, cosim_key, run_cosim_batch, unit_verilog,
                    words32, words64)
@@ -18,6 +19,7 @@ class RayTriangleCosim(UnitCosim):
 
     def __init__(self, fmt, options):
         super().__init__(fmt, options)
+        # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
         from raplas_hdl.model.records import PAIR, RT_RESULT
 
         self.mode = self.options.get("mode", "paper")
@@ -46,6 +48,7 @@ class RayTriangleCosim(UnitCosim):
         return out
 
     def random(self, n, seed):
+        # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
         from raplas_hdl.verify.stress import vectors
 
         vec = vectors(self.fmt, n, seed)
@@ -58,6 +61,7 @@ class RayTriangleCosim(UnitCosim):
         return cases
 
     def expected(self, cases):
+        # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
         from raplas_hdl.model.ray_triangle import intersect
 
         f = self._split(cases, self.pair)
@@ -89,8 +93,6 @@ class RayTriangleCosim(UnitCosim):
 
     def simulate(self, cases, simulator, *, valid_density, stall_density, seed,
                  timeout_s=None):
-        from ..harness import HarnessSpec
-
         text, latency = unit_verilog(self.name, self.fmt, self.options, "ray_triangle")
         out_bits = self.res.size + 2 * self.certified
         spec = HarnessSpec(dut="ray_triangle", inputs=[("i__payload", self.pair.size)],
