@@ -28,7 +28,7 @@ compare it with the golden model on every operand pair of a small format.
 the exact significand product as one ``bvmul``, normalised, rounded, saturated, flushed.
 That is the form the multiplier proofs use (:mod:`.cut` replaces the product, on both
 sides, by one uninterpreted function); its equality with the FloatingPoint-theory form is
-proved at small formats and checked against the golden model (``tests/test_formal.py``).
+proved at small formats and checked against the golden model (``tests/formal/test_formal.py``).
 """
 
 from __future__ import annotations

@@ -180,7 +180,7 @@ def _chunks(kernel, n, *args):
 #   2. only in blocks that hold a sentinel: those elements again through the generic
 #      integer kernels ``add_int_k``/``mul_int_k`` (the reference for every case).
 # Flags of common-case elements are 0. The result is the integer kernels' bit for bit and
-# flag for flag (tests/test_fp_model_fastpath.py holds the fast loop to the generic one).
+# flag for flag (tests/fp/test_model_fastpath.py holds the fast loop to the generic one).
 # The blocks of a large array are split across threads (numba releases the GIL).
 _BLOCK = 4096             # elements per pass-1/pass-2 block (stays in L1/L2)
 _FAST_MIN = 1 << 15       # smaller arrays take the generic loops (no compile per format)

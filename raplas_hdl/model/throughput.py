@@ -33,7 +33,7 @@ job (one enabled ray of one sphere) at a time in a compiled loop:
 runs) or the total of a round of back-to-back runs (``overlap``: the host never the limit).
 The stage constants (:class:`Timing`) come from the RTL's latencies (the bench and the
 tests read them from the built components); the model is checked against the RTL's
-``cycles`` counter in ``tests/test_throughput.py``.
+``cycles`` counter in ``tests/rtl/unit/test_lanes.py``.
 """
 
 from __future__ import annotations
@@ -66,7 +66,7 @@ class Timing:
     ``fifo_depth``, ``rt_latency`` and ``rt_fifo_depth`` the ray-triangle unit's; the small
     offsets are the stage registers between them (the credit pipelines of the feeder and
     the fetch, the selector's stall pipeline, the FIFOs' read latency), fixed by the RTL's
-    structure. Each is checked against the RTL's ``cycles`` counter in ``tests/test_lanes.py``
+    structure. Each is checked against the RTL's ``cycles`` counter in ``tests/rtl/unit/test_lanes.py``
     (the credits with runs where they bind), except ``lane_slack``: a lane's capacity behind
     the fetch's credits binds only when the merger starves, which the one-per-cycle merger
     never lets happen in a test run; and ``slice_return`` and ``array_capacity``, which bind

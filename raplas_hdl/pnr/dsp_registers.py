@@ -24,7 +24,7 @@ to 0, and wires each ``A``/``B`` bit to its flip-flop's ``DI`` (the block's inpu
 takes the flip-flop's place) and each ``P`` bit to its flip-flop's ``Q`` net. A flip-flop left
 without a load is removed, so an input register shared by several multipliers (Yosys merges
 equal registers) becomes one register per block. Every cycle's values are those of the
-netlist before packing: the same registers, moved (``tests/test_pnr_dsp_registers.py``
+netlist before packing: the same registers, moved (``tests/pnr/test_dsp_registers.py``
 simulates a packed multiplier against the golden model, with a block model of its own).
 """
 

@@ -8,7 +8,7 @@ Two components with one interface, so that a unit picks its target with a parame
 * :class:`PipelinedMul` is the same pipeline written as an inferred ``a * b`` with fabric
   registers: the generic target, and the reference the DSP48 version is checked against
   (bit for bit, under Icarus with the ``DSP48`` model Yosys ships in
-  ``share/xilinx/cells_sim.v``: ``tests/test_dsp48.py``).
+  ``share/xilinx/cells_sim.v``: ``tests/rtl/test_dsp48.py``).
 
 :func:`dsp48` is the one place that instantiates the primitive (its ports and attributes
 as Yosys's ``cells_sim.v`` models them): the plain multiply of :class:`DSP48Mul`, or

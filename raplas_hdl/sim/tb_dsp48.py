@@ -1,6 +1,6 @@
 """cocotb testbench: the DSP48 multiplier and the inferred one side by side, every cycle.
 
-The top (built in ``tests/test_dsp48.py``) has inputs ``a``, ``b``, ``en`` and outputs
+The top (built in ``tests/rtl/test_dsp48.py``) has inputs ``a``, ``b``, ``en`` and outputs
 ``p_dsp`` (:class:`raplas_hdl.rtl.dsp48.DSP48Mul`) and ``p_ref``
 (:class:`raplas_hdl.rtl.dsp48.PipelinedMul`). The TB applies the vectors of
 ``RAPLAS_TB_IN`` (an ``.npz`` with ``a``, ``b``, ``en``: one entry per cycle) and writes the

@@ -1,6 +1,6 @@
 """cocotb testbench of ``PlaneSphereArray`` (Verilog top ``plane_sphere``).
 
-The pytest side (``tests/test_planesphere_rtl.py``) passes the stimulus in an ``.npz``
+The pytest side (``tests/rtl/test_plane_sphere.py``) passes the stimulus in an ``.npz``
 named by ``RAPLAS_PS_IN``:
 
 ``planes``

@@ -1,6 +1,6 @@
 """cocotb testbench of the ray-triangle unit (stream in ``i``, stream out ``o``).
 
-The pytest side (``tests/test_raytri_cocotb.py``) writes the packed input payloads, one
+The pytest side (``tests/rtl/test_ray_triangle_cocotb.py``) writes the packed input payloads, one
 hexadecimal line per pair, and names the files in environment variables:
 
 ``RAPLAS_RT_IN``     input payloads (hex lines), in order;

@@ -1,6 +1,6 @@
 """cocotb testbench: delay lines in ``SRL16E`` beside flip-flop ones, every cycle.
 
-The top (built in ``tests/test_srl16.py``) has inputs ``i`` and ``en`` and one output per
+The top (built in ``tests/rtl/test_srl16.py``) has inputs ``i`` and ``en`` and one output per
 delay line. The TB applies the vectors of ``RAPLAS_TB_IN`` (an ``.npz`` with ``i`` and
 ``en``: one entry per cycle) and writes the value of every output named in
 ``RAPLAS_TB_PORTS`` (comma-separated), seen after each rising edge, to ``RAPLAS_TB_OUT`` (an

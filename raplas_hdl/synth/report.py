@@ -484,7 +484,7 @@ def _render_dsp48_option(opt) -> list[str]:
            "instead of 28 (two multiplies on its critical path). The `en` stall and the "
            "valid bit behave as in the generic unit (the DSP48 clock enables follow `en`).",
            "",
-           "Verified in `tests/test_dsp48_target.py`, simulating the primitive with the "
+           "Verified in `tests/rtl/test_dsp48_target.py`, simulating the primitive with the "
            "`DSP48` model Yosys ships (`share/xilinx/cells_sim.v`): FP24 `FPMul` in rtz and "
            "rne, generic and virtex4 side by side in one DUT, under Icarus (12,000 random "
            "and special operand pairs) and Verilator (100,000), with random gaps and stalls, "
@@ -496,7 +496,7 @@ def _render_dsp48_option(opt) -> list[str]:
            "latency (30) equals `latency`; a time-shared FP24 plane-sphere array (2 x 3 "
            "planes on 2 testers, 120 spheres) is checked the same way. Yosys maps the FP24 "
            "virtex4 `FPMul` to exactly one DSP48, with fewer fabric flip-flops than the generic unit (the "
-           "operand and product registers are inside the DSP48). `tests/test_dsp48.py` "
+           "operand and product registers are inside the DSP48). `tests/rtl/test_dsp48.py` "
            "checks the primitive multiplier alone.",
            ]
     if units:
@@ -513,7 +513,7 @@ def _render_dsp48_option(opt) -> list[str]:
     if sig:
         out += ["", "The significand multiplier alone (`raplas_hdl.rtl.dsp48`: `DSP48Mul`, and "
                 "`PipelinedMul`, the same pipeline as an inferred multiply; checked bit for bit "
-                "against each other in `tests/test_dsp48.py`). With the primitive, the "
+                "against each other in `tests/rtl/test_dsp48.py`). With the primitive, the "
                 "multiply's pipeline registers leave the fabric:", "",
                 "| format | operand bits | target | latency | DSP48 | FF | LUT | carry | "
                 "slices~ |", "|---|---|---|---|---|---|---|---|---|"]
@@ -534,7 +534,7 @@ def _render_dsp48_adder(rows) -> list[str]:
            "cancellation as a multiplication by `2^lzc` and the `rne` round-up as its "
            "carry-in. The fabric keeps the operand ordering, two small decoders, the "
            "leading-zero count, a 3:1 multiplexer and the packing. Results and flags bit "
-           "for bit those of the generic adder (`tests/test_fp_add_dsp48.py`: E4M3 every "
+           "for bit those of the generic adder (`tests/rtl/test_fp_add_dsp48.py`: E4M3 every "
            "pair in all roundings under Verilator and Icarus with Yosys's `DSP48` model; "
            "FP16, FP20, FP24 100,000 random and special pairs each under Verilator and FP24 "
            "8,000 under Icarus as `full` tests, all with random gaps and clock-enable "

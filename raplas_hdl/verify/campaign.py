@@ -10,7 +10,7 @@ Two tasks, over every format and rounding asked for (default FP16, FP20, FP24, F
     times ``certified_scale``: 1 for the guarantee, below 1 for the negative control). R
     does not depend on the mode, so one shard computes it once and evaluates every mode.
 ``culling``
-    The plane-culling proof of ``tests/test_planesphere_culling.py`` at scale: seeded random
+    The plane-culling proof of ``tests/model/test_plane_culling.py`` at scale: seeded random
     bundles (1 to 8 rows and columns, origin within ``|O| <= O_MAX``) against spheres of
     one *kind*, ``random`` (centres near the origin, along the bundle, behind it; radii
     over four decades) or ``adversarial`` (at distance ``r (1 +- k 2**-M)`` from a ray or a

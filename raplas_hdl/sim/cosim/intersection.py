@@ -37,7 +37,7 @@ class IntersectionCosim(UnitCosim):
         kw = {k: self.options[k] for k in ("rows", "cols", "testers", "tris_per_sphere",
                                            "mode", "lanes", "reduce")
               if self.options.get(k) is not None}
-        # the memories of tests/test_unit_harness.py's unit (one build serves both)
+        # the memories of tests/sim/test_unit_harness.py's unit (one build serves both)
         self.config = UnitConfig(fmt=fmt, max_triangles=256, max_spheres=128, fifo_depth=8,
                                  **kw)
         self.header_params = {"rows": self.config.rows, "cols": self.config.cols,
