@@ -33,6 +33,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..locks import file_lock
 from ..paths import build_root
 from .dsp_registers import pack_netlist_file
 from .report import RouteResult, parse_report, summarise_seeds, synth_counts
@@ -183,10 +184,23 @@ def synthesize_ecp5(verilog: str, top: str, *, base: Path | None = None,
     key = netlist_key(verilog, top)
     work = (base or default_pnr_dir()) / key
     done = work / "synth.json"
-    if use_cache and done.exists() and (work / "net.json").exists():
-        d = json.loads(done.read_text())
-        return EcpSynth(work, top, d["counts"], d["seconds"], True)
-    work.mkdir(parents=True, exist_ok=True)
+
+    def cached():
+        if use_cache and done.exists() and (work / "net.json").exists():
+            d = json.loads(done.read_text())
+            return EcpSynth(work, top, d["counts"], d["seconds"], True)
+        return None
+
+    hit = cached()
+    if hit is not None:
+        return hit
+    # another process may be synthesising the same netlist into the same folder: the
+    # second waits for the first and takes its result
+    with file_lock(work / "synth.lock"):
+        return cached() or _synthesize(verilog, top, work, done, timeout, progress)
+
+
+def _synthesize(verilog, top, work, done, timeout, progress) -> EcpSynth:
     (work / "top.v").write_text(verilog)
     if progress:
         progress(f"{top}: synthesis (yosys synth_ecp5)")
@@ -216,9 +230,25 @@ def place_and_route(syn: EcpSynth, *, device: str = "LFE5U-85F", speed: int = 6,
         name += "-" + _key(*extra)[:8]
     report_file = syn.work / f"{name}.json"
     meta_file = syn.work / f"{name}.meta.json"
-    if use_cache and report_file.exists() and meta_file.exists():
-        meta = json.loads(meta_file.read_text())
-        return parse_report(json.loads(report_file.read_text())), meta["seconds"], True
+
+    def cached():
+        if use_cache and report_file.exists() and meta_file.exists():
+            meta = json.loads(meta_file.read_text())
+            return parse_report(json.loads(report_file.read_text())), meta["seconds"], True
+        return None
+
+    hit = cached()
+    if hit is not None:
+        return hit
+    with file_lock(syn.work / f"{name}.lock"):       # one process routes a seed at a time
+        return cached() or _route(syn, name, device, speed, freq, seed, out_of_context,
+                                  timeout, progress, extra)
+
+
+def _route(syn, name, device, speed, freq, seed, out_of_context, timeout, progress,
+           extra) -> tuple[RouteResult, float, bool]:
+    report_file = syn.work / f"{name}.json"
+    meta_file = syn.work / f"{name}.meta.json"
     cmd = nextpnr_command() + [DEVICES[device], "--package", PACKAGE, "--speed", str(speed),
                                "--json", "net.json", "--freq", f"{freq:g}",
                                "--timing-allow-fail", "--seed", str(seed),

@@ -185,3 +185,19 @@ def test_bench_prune_finds_records_of_an_older_netlist(base):
     older = {**rec, "options": {"stages": 2}}          # the netlist of another pipeline
     moved = {**rec, "work": str(Path(rec["work"]).with_name("0123456789abcdef"))}
     assert bench.stale_records([rec, older, moved]) == [older, moved]
+
+
+def test_one_netlist_is_synthesised_once_by_two_jobs_at_a_time(tmp_path):
+    """Two jobs asking for the same netlist at once (two lanes of the bench, two terminals):
+    the second waits for the first's synthesis and takes it from the cache (it used to read
+    a half-written netlist)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from raplas_hdl.pnr.ecp5 import synthesize_ecp5
+
+    verilog = ("module t(input clk, input [3:0] a, output reg [3:0] q);\n"
+               "  always @(posedge clk) q <= a + 4'd1;\nendmodule\n")
+    with ThreadPoolExecutor(2) as pool:
+        a, b = pool.map(lambda _: synthesize_ecp5(verilog, "t", base=tmp_path), range(2))
+    assert sorted([a.cached, b.cached]) == [False, True]
+    assert a.work == b.work and a.counts == b.counts and a.counts["ff"] == 4
