@@ -106,6 +106,8 @@ STAGES = {s.name: s for s in (
           "unit's job and result FIFOs", 12, "bmc"),
     Stage("credit-fifo", "rtl.unit.credit_fifo.CreditFIFO(width=3, depth=4) behind a writer "
           "with credits: the unit's pair and sphere FIFOs", 12, "bmc"),
+    Stage("credit-fifo-banked", "rtl.unit.credit_fifo.CreditFIFO(width=3, depth=4, banks=3) "
+          "behind a writer with credits: the pair FIFO in banks, one bit each", 12, "bmc"),
     Stage("job-distributor", "rtl.unit.lanes.JobDistributor, 3 lanes", 8,
           probes=(("turn_probe", "dut.turn"),)),
     Stage("result-merger", "rtl.unit.lanes.ResultMerger, 3 lanes", 8,
@@ -136,10 +138,11 @@ def stage_verilog(name: str) -> tuple[str, dict]:
         ports = [f.w_data, f.w_en, f.w_rdy, f.r_data, f.r_en, f.r_rdy, f.level]
         return (verilog.convert(f, name="stage", ports=ports, emit_src=False),
                 {"width": FIFO_SEQ, "depth": 4})
-    if name == "credit-fifo":
+    if name in ("credit-fifo", "credit-fifo-banked"):
         from ..rtl.unit.credit_fifo import CreditFIFO
 
-        f = CreditFIFO(width=FIFO_SEQ, depth=4)
+        f = CreditFIFO(width=FIFO_SEQ, depth=4,
+                       banks=FIFO_SEQ if name == "credit-fifo-banked" else 1)
         return (verilog.convert(f, name="stage", emit_src=False),
                 {"width": FIFO_SEQ, "depth": 4, "credits": True})
     from ..rtl.unit.lanes import JobDistributor, ResultMerger
@@ -348,7 +351,7 @@ endmodule
 
 
 def _check_text(name: str, info: dict) -> str:
-    if name in ("bram-fifo", "sync-fifo-buffered", "credit-fifo"):
+    if name in ("bram-fifo", "sync-fifo-buffered", "credit-fifo", "credit-fifo-banked"):
         return _fifo_check(info["width"], info["depth"], info.get("credits", False))
     if name == "job-distributor":
         return _distributor_check(info)

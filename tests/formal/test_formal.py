@@ -17,9 +17,10 @@ What is checked here, and why each can fail:
 - synthesis: the netlists of ``synth_ecp5`` (with the DSP register packing) and of
   ``synth_xilinx -family xc4v`` proved equal to the RTL, and a netlist synthesised from
   mutated Verilog caught, with the RTL's side agreeing with the golden model;
-- stream stages (SymbiYosys): the block-RAM FIFO and Amaranth's SyncFIFOBuffered
-  (bounded), the job distributor and the result merger (k-induction) keep the stream rule and lose, double or reorder no beat, and
-  a mutant of each gives a counterexample;
+- stream stages (SymbiYosys): the block-RAM FIFO, Amaranth's SyncFIFOBuffered and the
+  credit FIFO, plain and in banks (bounded), the job distributor and the result merger
+  (k-induction) keep the stream rule and lose, double or reorder no beat, and a mutant of
+  each gives a counterexample;
 - the command line: exit codes 0, 1, 3 and 2.
 
 Each proof takes seconds (about 60 s in all on a quiet 2-core machine); the durations are
@@ -454,7 +455,7 @@ def test_virtex4_multiplier_mutant_gives_real_counterexample(work):
 
 # -- stream stages of the intersection unit (SymbiYosys) ------------------------------------
 @pytest.mark.parametrize("stage", ["bram-fifo", "sync-fifo-buffered", "credit-fifo",
-                                   "job-distributor", "result-merger"])
+                                   "credit-fifo-banked", "job-distributor", "result-merger"])
 def test_stream_stage_checked(stage, work):
     from raplas_hdl.formal.streams import STAGES, check_stage
 
@@ -482,4 +483,21 @@ def test_stream_stage_mutants_fail(stage, mutation, work):
     from raplas_hdl.formal.streams import check_stage
 
     res = check_stage(stage, timeout=TIMEOUT, cwd=work, mutate=lambda t: t.replace(*mutation))
+    assert res["result"] == "counterexample", res
+
+
+def test_a_bank_out_of_step_fails(work):
+    """The banked credit FIFO with its last bank's inner read ignoring the reader (it moves
+    a word to its output register only when that is empty): the banks' words part, and the
+    check gives a counterexample."""
+    from raplas_hdl.formal.streams import check_stage
+
+    a, b = "assign \\$3  = \\$2  | r_stream__ready;", "assign \\$3  = \\$2 ;"
+
+    def last_bank(text):
+        assert text.count(a) == 3          # once per bank: mutate bank 2 only
+        i = text.rindex(a)
+        return text[:i] + b + text[i + len(a):]
+
+    res = check_stage("credit-fifo-banked", timeout=TIMEOUT, cwd=work, mutate=last_bank)
     assert res["result"] == "counterexample", res
