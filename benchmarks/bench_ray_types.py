@@ -8,7 +8,7 @@ per bundle, pairs issued against brute force (every ray against every triangle),
 per ray (host hierarchy and unit), pairs per ray, early-out savings and hits. Per render:
 wall and CPU time (``time.process_time``: every thread of the process) and the load average.
 The model against float64: PSNR of the whole image, the fraction of pixels whose primary
-nearest triangle differs, and, per first-bounce layer (:func:`raplas_hdl.host.render.compare`),
+nearest triangle differs, and, per first-bounce layer (:func:`raplas_hdl.host.output.compare`),
 the fraction of pixels (where either render has the ray) whose reflection / refraction
 triangle differs and the mean absolute difference of the glossy hit fraction and of the
 ambient-occlusion factor (where both have it).
@@ -16,7 +16,7 @@ ambient-occlusion factor (where both have it).
 ``--picture WxH`` renders the showcase alone at that size with the scene's own render
 settings (those of ``raplas-hdl render --scene showcase``: the command's defaults under the
 scene's ``[render]`` table) and writes the README picture: ``showcase_model.png``,
-``showcase_float64.png`` and ``showcase_diff.png`` (:func:`raplas_hdl.host.render.difference_image`, x4, magenta
+``showcase_float64.png`` and ``showcase_diff.png`` (:func:`raplas_hdl.host.output.difference_image`, x4, magenta
 where the nearest triangle differs) under ``--images`` and the figures as JSON.
 
 Usage::

@@ -53,14 +53,13 @@ from raplas_hdl.bench.instrumented import RunSampler  # noqa: E402
 from raplas_hdl.cli.grammar import jsonable, lattice, size  # noqa: E402
 from raplas_hdl.fp import parse_format  # noqa: E402
 from raplas_hdl.host.backends import COUNTERS, BackendUnavailable, make_backend  # noqa: E402
-from raplas_hdl.host.render import (  # noqa: E402
-    RenderSettings,
+from raplas_hdl.host.output import (  # noqa: E402
     compare,
     difference_image,
     format_summary,
-    render,
     save_png,
 )
+from raplas_hdl.host.render import RenderSettings, render  # noqa: E402
 from raplas_hdl.host.meshes import MESHES  # noqa: E402
 from raplas_hdl.host.scenes import get_scene  # noqa: E402
 from raplas_hdl.model.modes import MODES  # noqa: E402

@@ -31,7 +31,7 @@ import numpy as np
 from ..fp import FPFormat
 from ..fp.model import decode
 from ..host.exact import float64_intersect
-from ..host.render import compare
+from ..host.output import compare
 from ..model.ray_triangle import intersect
 from ..model.records import RESULT
 from ..verify import stress

@@ -82,7 +82,8 @@ def run(args) -> int:
     scene = get_scene(args.scene, bound=None)   # a bad mesh fails here, before the Verilog
 
     from ..host.backends import make_backend
-    from ..host.render import compare, difference_image, format_summary, render, save_png
+    from ..host.output import compare, difference_image, format_summary, save_png
+    from ..host.render import render
     from .render import settings_from_args
 
     fmt = args.fmt

@@ -322,7 +322,8 @@ def run(args) -> int:
     scene = scene_from_args(args)    # a bad mesh or override fails here, before the rest
 
     from ..host.backends import make_backend
-    from ..host.render import compare, difference_image, format_summary, render, save_ids, save_png
+    from ..host.output import compare, difference_image, format_summary, save_ids, save_png
+    from ..host.render import render
 
     size = args.size
     settings = settings_from_args(args, size, scene.render_defaults)

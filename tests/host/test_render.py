@@ -8,7 +8,8 @@ import pytest
 from raplas_hdl.cli import main
 from raplas_hdl.fp import FP24, FP32
 from raplas_hdl.host.backends import BackendUnavailable, RtlBackend, make_backend
-from raplas_hdl.host.render import RenderSettings, compare, format_summary, render
+from raplas_hdl.host.output import compare, format_summary
+from raplas_hdl.host.render import RenderSettings, render
 from raplas_hdl.host.scenes import get_scene
 
 

@@ -19,7 +19,8 @@ import pytest
 
 from raplas_hdl.fp import FP24
 from raplas_hdl.host.backends import ModelBackend, make_backend
-from raplas_hdl.host.render import RenderSettings, format_summary, render
+from raplas_hdl.host.output import format_summary
+from raplas_hdl.host.render import RenderSettings, render
 from raplas_hdl.host.scenes import get_scene
 
 PIXELS = ("image", "tri_id", "t", "visibility")

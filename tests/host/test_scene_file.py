@@ -384,7 +384,8 @@ def test_override_scene_checks_the_camera():
 
 def test_showcase_renders_through_float64_and_the_model(tmp_path):
     from raplas_hdl.host.backends import make_backend
-    from raplas_hdl.host.render import RenderSettings, compare, render
+    from raplas_hdl.host.output import compare
+    from raplas_hdl.host.render import RenderSettings, render
 
     scene = get_scene("showcase")
     s = RenderSettings(width=16, height=16, rows=8, cols=8, shadow_rows=2, shadow_cols=2,

@@ -14,7 +14,8 @@ from raplas_hdl.cli import main
 from raplas_hdl.host.backends import make_backend
 from raplas_hdl.host.camera import Camera
 from raplas_hdl.host.exact import float64_intersect
-from raplas_hdl.host.render import RenderSettings, compare, format_summary, render
+from raplas_hdl.host.output import compare, format_summary
+from raplas_hdl.host.render import RenderSettings, render
 from raplas_hdl.host.scene_file import SceneFileError, check_scene_file, load_scene_file
 from raplas_hdl.host.meshes import MeshBuilder, box_mesh, quad_grid
 from raplas_hdl.host.scene import AreaLight, Material, Scene

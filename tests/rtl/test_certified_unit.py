@@ -238,7 +238,8 @@ def test_real_passes_resolve_alike():
 @pytest.mark.parametrize("scene, fmt", [("cornell", COARSE), ("stanford-bunny", FP24)])
 def test_model_render_reduce_equals_unreduced(scene, fmt):
     from raplas_hdl.host.backends import make_backend
-    from raplas_hdl.host.render import format_summary, render
+    from raplas_hdl.host.output import format_summary
+    from raplas_hdl.host.render import render
     from raplas_hdl.host.scenes import get_scene
 
     out = {}
