@@ -109,7 +109,7 @@ class SweepBackend(ModelBackend):
     - counts, per bundle size, the runs, spheres and pairs of the unit's runs (the device
       figures; the warm-up pass is left out);
     - stops the render when its pairs go over ``pair_budget`` (:class:`PairBudgetExceeded`;
-      the runs of a pass are traced in slices so that it stops near the budget);
+      the runs of a pass are traced in :meth:`slices` so that it stops near the budget);
     - records a uniform sample of whole runs (:class:`RunSampler`, at most ``sample_pairs``
       pairs) for :func:`~raplas_hdl.bench.metrics.pair_errors` after the render.
     """
@@ -124,6 +124,8 @@ class SweepBackend(ModelBackend):
         self.pairs_issued = 0
         self.sampler = RunSampler(sample_pairs, seed)
         self._warming = False
+        self.on_slice.append(self._count_slice)
+        self.on_pass.append(self._sample_pass)
 
     def usable(self, tris):
         tris = np.asarray(tris, dtype=np.float64)
@@ -146,37 +148,33 @@ class SweepBackend(ModelBackend):
         finally:
             self._warming = False
 
-    def trace(self, batch, run_b, run_start, run_sph, best_t, best_tri, tmin=0.0, tmax=None,
-              exclude=None, any_hit=False):
-        if self._warming:
-            return super().trace(batch, run_b, run_start, run_sph, best_t, best_tri, tmin,
-                                 tmax, exclude, any_hit)
-        run_b = np.ascontiguousarray(run_b, np.int64)
-        run_start = np.ascontiguousarray(run_start, np.int64)
-        run_sph = np.ascontiguousarray(run_sph, np.int64)
-        U = run_b.size
-        counters = np.zeros((U, len(COUNTERS)), np.int64)
-        if U == 0:
-            return counters
-        cut = [0, U]
-        if self.pair_budget is not None:
-            # slices of about ``step`` pairs (upper bound: every ray against every triangle
-            # of the run's spheres) between two checks of the budget
-            cs = np.concatenate([[0], np.cumsum(self.scene.tcount[run_sph])])
-            ub = (cs[run_start[1:]] - cs[run_start[:-1]]) * batch.n_rays
-            step = max(MIN_SLICE_PAIRS, int(self.pair_budget) // 8)
-            sid = (np.cumsum(ub) - ub) // step
-            cut = [0, *(np.flatnonzero(np.diff(sid)) + 1).tolist(), U]
-        for lo, hi in zip(cut[:-1], cut[1:]):
-            rs = run_start[lo:hi + 1]
-            c = super().trace(batch, run_b[lo:hi], rs - rs[0], run_sph[rs[0]:rs[-1]], best_t,
-                              best_tri, tmin, tmax, exclude, any_hit)
-            counters[lo:hi] = c
-            self._account(batch, c)
-            if self.pair_budget is not None and self.pairs_issued > self.pair_budget:
-                raise PairBudgetExceeded(self.pairs_issued, int(self.pair_budget))
-        self.sampler.add(batch, run_b, run_start, run_sph, counters)
-        return counters
+    def slices(self, batch, run_b, run_start, run_sph):
+        """With a budget, slices of about ``step`` pairs (upper bound: every ray against every
+        triangle of the run's spheres) between two checks of the budget."""
+        U = len(run_b)
+        if self._warming or self.pair_budget is None or U == 0:
+            return [0, U]
+        run_start = np.asarray(run_start, np.int64)
+        cs = np.concatenate([[0], np.cumsum(self.scene.tcount[run_sph])])
+        ub = (cs[run_start[1:]] - cs[run_start[:-1]]) * batch.n_rays
+        step = max(MIN_SLICE_PAIRS, int(self.pair_budget) // 8)
+        sid = (np.cumsum(ub) - ub) // step
+        return [0, *(np.flatnonzero(np.diff(sid)) + 1).tolist(), U]
+
+    def _count_slice(self, batch, run_b, run_start, run_sph, c):
+        """A slice's runs counted (not the warm-up's); over the budget, the render stops."""
+        if self._warming or c.shape[0] == 0:
+            return
+        self._account(batch, c)
+        if self.pair_budget is not None and self.pairs_issued > self.pair_budget:
+            raise PairBudgetExceeded(self.pairs_issued, int(self.pair_budget))
+
+    def _sample_pass(self, batch, run_b, run_start, run_sph, counters):
+        """A whole pass's runs offered to the sampler (not the warm-up's)."""
+        if self._warming or len(run_b) == 0:
+            return
+        self.sampler.add(batch, np.asarray(run_b, np.int64), np.asarray(run_start, np.int64),
+                         np.asarray(run_sph, np.int64), counters)
 
     def _account(self, batch, c):
         rows, cols = batch.rows, batch.cols

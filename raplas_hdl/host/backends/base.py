@@ -72,6 +72,12 @@ class Backend:
         #: callables ``f(batch, run_b, run_start, run_sph, tmin, tmax, exclude, any_hit)``
         #: told of every pass :meth:`trace` is given, before it runs (warm-up included)
         self.observers: list = []
+        #: callables ``f(batch, run_b, run_start, run_sph, counters)`` told of each slice of
+        #: a pass (:meth:`slices`) once it ran; one may raise to stop the render there
+        self.on_slice: list = []
+        #: callables ``f(batch, run_b, run_start, run_sph, counters)`` told of each pass
+        #: once all of it ran
+        self.on_pass: list = []
         #: the unit's output traffic of the passes traced since :meth:`load`: ``result``
         #: the beats of the unreduced result stream (one per issued pair, one for a run
         #: without any), and with ``reduce`` ``answer`` the ANSWER beats that left the
@@ -141,11 +147,34 @@ class Backend:
         in place, by the backend's render mode (:meth:`RenderMode.trace`); counters (U, 8).
         ``any_hit``: only whether a ray is blocked matters (shadow rays); the certified mode
         then stops at the first hit it is sure of, the other modes fold the nearest all the
-        same. The :attr:`observers` are told of the pass first."""
+        same. The :attr:`observers` are told of the pass first; the pass runs in the
+        :meth:`slices` the backend cuts it into, :attr:`on_slice` told of each, then
+        :attr:`on_pass` of the whole."""
         for observe in self.observers:
             observe(batch, run_b, run_start, run_sph, tmin, tmax, exclude, any_hit)
-        return self.render_mode.trace(self, batch, run_b, run_start, run_sph, best_t,
-                                      best_tri, tmin, tmax, exclude, any_hit)
+        cuts = self.slices(batch, run_b, run_start, run_sph)
+        if len(cuts) <= 2:
+            counters = self.render_mode.trace(self, batch, run_b, run_start, run_sph, best_t,
+                                              best_tri, tmin, tmax, exclude, any_hit)
+            for told in self.on_slice:
+                told(batch, run_b, run_start, run_sph, counters)
+        else:
+            counters = np.zeros((len(run_b), len(COUNTERS)), np.int64)
+            for lo, hi in zip(cuts[:-1], cuts[1:]):
+                rs = run_start[lo:hi + 1]
+                part = (run_b[lo:hi], rs - rs[0], run_sph[rs[0]:rs[-1]])
+                counters[lo:hi] = c = self.render_mode.trace(
+                    self, batch, *part, best_t, best_tri, tmin, tmax, exclude, any_hit)
+                for told in self.on_slice:
+                    told(batch, *part, c)
+        for told in self.on_pass:
+            told(batch, run_b, run_start, run_sph, counters)
+        return counters
+
+    def slices(self, batch: BundleBatch, run_b, run_start, run_sph) -> list:
+        """Where :meth:`trace` cuts a pass: run indices ``[0, ..., U]`` (default: one slice,
+        the whole pass)."""
+        return [0, len(run_b)]
 
     def stream(self, batch: BundleBatch, runs) -> list[RunResult]:
         """The pair stream of each run ``(bundle index, sphere ids)`` of a batch."""
