@@ -346,7 +346,11 @@ def render(runs: list) -> str:
             "the median 0.2 MHz short of the 140 MHz target; it was 142.3 before this "
             "retiming). The plane-sphere tester and array gain from the comparison fed "
             "straight from registers (rtz tester 123.7 -> 134.2 MHz, array 114.6 -> 126.9). "
-            "Not re-measured on this RTL: `--reduce`, two copies, the ray-triangle unit.", "",
+            "The ray-triangle unit alone (rtz) places at 114.7 MHz (112.9-115.0), the "
+            "certified one at 105.2 MHz (104.2-106.1; 105.3 before `i.ready` was "
+            "registered); in rne the paper unit places at 111.4 MHz (97.6-116.1). Not "
+            "re-measured on this RTL: two copies, the ray-triangle unit in chop and the "
+            "certified one in rne and chop.", "",
             "**The certified mode.** Its bound datapath "
             "(`raplas_hdl/rtl/certified_bound.py`) computed each bound operation in one "
             "cycle: the rounding term from the result's exponent, then a bound-float add "
@@ -424,11 +428,15 @@ def render(runs: list) -> str:
             "median 87.7; was 80.9 and 86.6 on seeds 1 and 3): seed 1's path was the "
             "plane-sphere array's credit count, fed by the FIFO read through the sphere "
             "slice (6.8 ns one route), now registered the same way (`occupied` = in use + "
-            "the last read; not re-measured on the certified unit), and seed 3's an FP "
+            "the last read), and seed 3's an FP "
             "adder's alignment inside the certified ray-triangle unit (11.4 ns, 8.1 of it "
-            "routing: the same logic meets 105 MHz in the ray-triangle unit alone, so the "
-            "remaining gap is placement over a fuller device, the next lever being "
-            "floorplanning or fewer LUTs in the bounds).", "",
+            "routing). With the array's registered read the certified whole unit "
+            "(26,728 LUT4, 5,915 CCU2C, 36,456 FF) places at 84.6 / 89.2 / 89.0 MHz (seeds "
+            "1-3, median 89.0, router2): the median seed's path is now a bound operation "
+            "inside the certified ray-triangle unit (`rtu.bound113` -> `rtu.bound114`, "
+            "11.2 ns, 8.1 of it routing), logic that meets 100 MHz in the ray-triangle "
+            "unit alone, so the remaining gap is placement over a fuller device, the next "
+            "lever being floorplanning or fewer LUTs in the bounds.", "",
             "**The on-chip reduction (`--reduce`).** Its read-modify-write of a ray's kept "
             "hit compared the new and the kept hit's `t'/det` by cross products in one "
             "cycle: the kept record (forwarded or read) -> a MULT18X18D without registers "
@@ -447,7 +455,11 @@ def render(runs: list) -> str:
             "priority encoder over the valid bits into the answer RAM's read (9.9 ns), "
             "seed 2's the ray-triangle unit's credit counter fed by the result FIFO's "
             "level across 6.8 ns of routing (the weak-seed path of the default unit "
-            "too)."]
+            "too). On today's RTL (the pair FIFO in banks, the registered credit reads) it "
+            "places at 99.2 MHz (97.2 / 99.2 / 102.0, seeds 1-3; 20,230 LUT4, 25,596 FF), "
+            "0.8 MHz short of 100: the median seed's path is the reducer's fold, from the "
+            "answer RAM's bank choice into the key register (`reducer.a2.bank` -> "
+            "`reducer.k_lo_r`, 10.1 ns, 5.4 of it routing)."]
     for speed, target in ((6, 100.0), (8, 140.0)):
         iu = find("intersection-unit", speed=speed)
         if iu:
