@@ -348,9 +348,10 @@ def render(runs: list) -> str:
             "straight from registers (rtz tester 123.7 -> 134.2 MHz, array 114.6 -> 126.9). "
             "The ray-triangle unit alone (rtz) places at 114.7 MHz (112.9-115.0), the "
             "certified one at 105.2 MHz (104.2-106.1; 105.3 before `i.ready` was "
-            "registered); in rne the paper unit places at 111.4 MHz (97.6-116.1). Not "
-            "re-measured on this RTL: two copies, the ray-triangle unit in chop and the "
-            "certified one in rne and chop.", "",
+            "registered); the paper unit places at 111.4 MHz in rne (97.6-116.1), 111.8 in "
+            "chop (111.8-113.6) and 147.6 at speed 8 in rtz (144.5-149.1). Not "
+            "re-measured on this RTL: two copies, the certified ray-triangle unit in rne "
+            "and chop.", "",
             "**The certified mode.** Its bound datapath "
             "(`raplas_hdl/rtl/certified_bound.py`) computed each bound operation in one "
             "cycle: the rounding term from the result's exponent, then a bound-float add "
