@@ -265,134 +265,222 @@ def _render(scene: Scene, backend: Backend, settings: RenderSettings):
     timer = _Timer()
     stats: dict = {"backend": backend.describe(), "scene": scene.name,
                    "triangles": scene.n_triangles, "size": f"{s.width}x{s.height}"}
-    W, H = s.width, s.height
-
-    # 1. spheres ---------------------------------------------------------------------
     with timer("spheres"):
-        tris = scene.triangles
-        ok, skipped = backend.usable(tris)
-        usable = np.flatnonzero(ok)
-        stats["skipped_triangles"] = skipped
-        stats["degenerate_triangles"] = int(scene.n_triangles - usable.size)
-        if usable.size == 0:
-            raise ValueError(f"scene {scene.name!r} has no usable triangle ({skipped})")
-        o_max = 2.0 * s.bound
-        margin = backend.sphere_margin(tris[usable], o_max)
-        tree = build_sphere_tree(tris[usable], s.tris_per_sphere, s.fanout, margin)
-        tree.leaf_tris = np.where(tree.leaf_tris >= 0, usable[tree.leaf_tris.clip(0)], -1)
-        stats.update(spheres=tree.n_leaves, sphere_nodes=tree.n_nodes, levels=tree.levels,
-                     sphere_margin_median=float(np.median(margin)))
-    # 2. load ------------------------------------------------------------------------
+        tris, usable, tree = _spheres(scene, backend, s, stats)
     with timer("load"):
         stats.update(backend.load(tris, tree, s.bound) or {})
     normals_all = face_normals(tris)
     tally = Tally(scene.n_triangles, tree.levels, s.hierarchy)
-
-    tiles = scene.camera.tiles(W, H, s.rows, s.cols)
-    t_org = np.array([t.origin for t in tiles])
-    t_cen = np.array([t.centre for t in tiles])
-    t_col = np.array([0.5 * t.cols * t.step_col for t in tiles])
-    t_row = np.array([0.5 * t.rows * t.step_row for t in tiles])
-    t_valid = np.array([t.valid.reshape(-1) for t in tiles])
-    t_y0 = np.array([t.y0 for t in tiles], np.int64)
-    t_x0 = np.array([t.x0 for t in tiles], np.int64)
-    R = s.rows * s.cols
-    ii, jj = np.divmod(np.arange(R), s.cols)
-    tri_img = np.full((H, W), -1, np.int64)
-    t_img = np.full((H, W), np.inf)
-    dir_img = np.zeros((H, W, 3))
-    org = [np.zeros(3)]
-
+    tiles = _Tiles.of(scene, s)
     rec = {k: [] for k in ("primary_o", "primary_d", "primary_yx", "shadow_o", "shadow_d",
                            "shadow_tmax", "shadow_own", "shadow_point")}
     layers: dict = {}
-    bar = tqdm(total=len(tiles), unit="bundle", disable=not s.progress,
+    bar = tqdm(total=tiles.n, unit="bundle", disable=not s.progress,
                desc=f"render {scene.name} [{backend.name}]", leave=False)
     eps = _shadow_eps(backend, s.bound)
     tracer = Tracer(backend, scene, s, tally, normals_all, eps, timer, bar)
     try:
-        # compile (or load from numba's cache) the kernels: its own phase, not a rate
         with timer("compile"):
-            bar.set_description_str(f"render {scene.name} [{backend.name}]: compiling "
-                                    "kernels (once per machine)")
-            backend.warm_pass(t_org[:1], t_cen[:1], t_col[:1], t_row[:1], s.rows, s.cols)
-            bar.set_description_str(f"render {scene.name} [{backend.name}]")
-            bar.reset(total=len(tiles))
-
-        # 3. primary: all tiles, a pass of ``chunk`` bundles at a time -------------------
-        def primary_chunk(lo, hi, batch, best_t, best_tri):
-            v = t_valid[lo:hi]
-            y = (t_y0[lo:hi, None] + ii[None, :])[v]
-            x = (t_x0[lo:hi, None] + jj[None, :])[v]
-            tri_img[y, x] = best_tri[v]
-            t_img[y, x] = best_t[v]
-            dir_img[y, x] = batch.directions[v]
-            org[0] = batch.origin[-1]
-            if s.record_rays:
-                rec["primary_o"].append(np.repeat(batch.origin, v.sum(axis=1), axis=0))
-                rec["primary_d"].append(batch.directions[v])
-                rec["primary_yx"].append(np.stack([y, x], 1))
-
-        nearest_pass(backend, t_org, t_cen, t_col, t_row, s.rows, s.cols, tally=tally,
-                     kind="primary", chunk=s.chunk, enable=t_valid, timer=timer,
-                     progress=bar.update, on_chunk=primary_chunk)
-
-        # 4. shading ---------------------------------------------------------------------
+            _compile(backend, tiles, s, bar, f"render {scene.name} [{backend.name}]")
+        prim = _primary(backend, tiles, s, tally, timer, bar, rec)
         with timer("shading"):
-            hit_px = tri_img >= 0
-            ys, xs = np.nonzero(hit_px)
-            tri_h = tri_img[ys, xs]
-            pts = org[0] + t_img[ys, xs, None] * dir_img[ys, xs]
-            nrm = normals_all[tri_h]
-            flip = np.einsum("ij,ij->i", nrm, dir_img[ys, xs]) > 0
-            nrm[flip] *= -1.0
-
-        # 5. shadows: passes of ``chunk`` bundles, early-out rounds within each ------------
-        def shadow_chunk(lo, hi, batch, blocked):
-            rec["shadow_o"].append(batch.origin)
-            rec["shadow_d"].append(batch.directions)
-            rec["shadow_tmax"].append(plan.tmax[lo:hi])
-            rec["shadow_own"].append(tri_h[plan.point[lo:hi]])
-            rec["shadow_point"].append(plan.point[lo:hi])
-
-        if s.shadows:
-            with timer("shading"):
-                plan = shadow_bundles(pts, nrm, scene.light, s.shadow_rows, s.shadow_cols, eps)
-            stats["points_behind_light"] = plan.behind_light
-            stats["points_facing_away"] = plan.facing_away
-        vis, plan = tracer.shadows(pts, nrm, tri_h, shadow_chunk if s.record_rays else None,
-                                   plan if s.shadows else None)
-
-        # 6. ambient occlusion of the primary points ------------------------------------
-        ao = tracer.occlusion(pts, nrm, tri_h) if s.ao_rows else None
-
-        # 7. image -----------------------------------------------------------------------
+            pt = _Points.of(prim, normals_all)
+        vis = _shadows(tracer, scene, s, pt, stats, timer, rec, eps)
+        ao = tracer.occlusion(pt.pts, pt.nrm, pt.tri) if s.ao_rows else None
         with timer("image"):
-            img = np.empty((H, W, 3))
-            img[:] = np.asarray(scene.background, float)
-            col = phong(pts, nrm, scene.colours[tri_h], np.asarray(scene.camera.position, float),
-                        scene.light, scene.material_at(tri_h), vis, ao)
-            img[ys, xs] = col
-            d = dir_img.reshape(-1, 3)
-            sees = light_hits(np.asarray(scene.camera.position, float), d, scene.light,
-                              t_img.reshape(-1)).reshape(H, W)
-            img[sees] = np.asarray(scene.light.colour, float)
-            vis_img = np.full((H, W), np.nan)
-            vis_img[ys, xs] = vis
-            if ao is not None:
-                layers["ao"] = np.full((H, W), np.nan)
-                layers["ao"][ys, xs] = ao
-
-        # 8. secondary rays: reflection, refraction, glossy, a generation at a time -----
+            img, vis_img, sees = _compose(scene, prim, pt, vis, ao, layers)
         if s.depth > 0:
-            pix = ys * W + xs
-            add, sec = whitted(tracer, pix, pts, nrm, tri_h, dir_img[ys, xs],
-                               (~sees[ys, xs]).astype(float), H * W)
-            img += add.reshape(H, W, 3)
-            layers.update({k: v.reshape(H, W) for k, v in sec.items()})
+            _secondary(tracer, prim, pt, sees, img, layers)
     finally:
         bar.close()
+    _summarise(stats, tally, prim)
+    backend.report(stats)       # the render mode's figures, the on-chip reduction's beats
+    rays = None
+    if s.record_rays:
+        rays = {k: np.concatenate(v) if v else np.zeros((0,)) for k, v in rec.items()}
+        rays["shadow_tmin"] = eps
+        rays["loaded"] = usable
+    return RenderResult(img, prim.tri, prim.t, vis_img, stats, dict(timer.times), rays,
+                        layers)
 
+
+# -- the stages, in the order _render runs them ----------------------------------------------
+def _spheres(scene: Scene, backend: Backend, s: RenderSettings, stats: dict):
+    """The usable triangles (the others counted) and their sphere hierarchy, with the
+    unit's conservative margin when that mode is on: ``(tris, usable, tree)``."""
+    tris = scene.triangles
+    ok, skipped = backend.usable(tris)
+    usable = np.flatnonzero(ok)
+    stats["skipped_triangles"] = skipped
+    stats["degenerate_triangles"] = int(scene.n_triangles - usable.size)
+    if usable.size == 0:
+        raise ValueError(f"scene {scene.name!r} has no usable triangle ({skipped})")
+    o_max = 2.0 * s.bound
+    margin = backend.sphere_margin(tris[usable], o_max)
+    tree = build_sphere_tree(tris[usable], s.tris_per_sphere, s.fanout, margin)
+    tree.leaf_tris = np.where(tree.leaf_tris >= 0, usable[tree.leaf_tris.clip(0)], -1)
+    stats.update(spheres=tree.n_leaves, sphere_nodes=tree.n_nodes, levels=tree.levels,
+                 sphere_margin_median=float(np.median(margin)))
+    return tris, usable, tree
+
+
+@dataclass
+class _Tiles:
+    """The camera's tiles as arrays, one row per primary bundle."""
+
+    org: np.ndarray
+    cen: np.ndarray
+    col: np.ndarray
+    row: np.ndarray
+    valid: np.ndarray       # (bundles, rows * cols): lattice points inside the image
+    y0: np.ndarray
+    x0: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return len(self.org)
+
+    @classmethod
+    def of(cls, scene: Scene, s: RenderSettings) -> _Tiles:
+        tiles = scene.camera.tiles(s.width, s.height, s.rows, s.cols)
+        return cls(np.array([t.origin for t in tiles]), np.array([t.centre for t in tiles]),
+                   np.array([0.5 * t.cols * t.step_col for t in tiles]),
+                   np.array([0.5 * t.rows * t.step_row for t in tiles]),
+                   np.array([t.valid.reshape(-1) for t in tiles]),
+                   np.array([t.y0 for t in tiles], np.int64),
+                   np.array([t.x0 for t in tiles], np.int64))
+
+
+def _compile(backend: Backend, tiles: _Tiles, s: RenderSettings, bar, desc: str) -> None:
+    """Compile (or load from numba's cache) the kernels with a pass of one bundle: its own
+    phase, not a rate."""
+    bar.set_description_str(f"{desc}: compiling kernels (once per machine)")
+    backend.warm_pass(tiles.org[:1], tiles.cen[:1], tiles.col[:1], tiles.row[:1], s.rows,
+                      s.cols)
+    bar.set_description_str(desc)
+    bar.reset(total=tiles.n)
+
+
+@dataclass
+class _Primary:
+    """The primary pass's per-pixel images: nearest triangle (-1 none), its distance (inf
+    none), the ray's direction, and the camera's origin."""
+
+    tri: np.ndarray
+    t: np.ndarray
+    dirs: np.ndarray
+    origin: np.ndarray
+
+
+def _primary(backend: Backend, tiles: _Tiles, s: RenderSettings, tally: Tally, timer, bar,
+             rec: dict) -> _Primary:
+    """The primary stage: all tiles, a pass of ``chunk`` bundles at a time, into the
+    per-pixel images."""
+    W, H = s.width, s.height
+    ii, jj = np.divmod(np.arange(s.rows * s.cols), s.cols)
+    out = _Primary(np.full((H, W), -1, np.int64), np.full((H, W), np.inf), np.zeros((H, W, 3)),
+                   np.zeros(3))
+
+    def primary_chunk(lo, hi, batch, best_t, best_tri):
+        v = tiles.valid[lo:hi]
+        y = (tiles.y0[lo:hi, None] + ii[None, :])[v]
+        x = (tiles.x0[lo:hi, None] + jj[None, :])[v]
+        out.tri[y, x] = best_tri[v]
+        out.t[y, x] = best_t[v]
+        out.dirs[y, x] = batch.directions[v]
+        out.origin = batch.origin[-1]
+        if s.record_rays:
+            rec["primary_o"].append(np.repeat(batch.origin, v.sum(axis=1), axis=0))
+            rec["primary_d"].append(batch.directions[v])
+            rec["primary_yx"].append(np.stack([y, x], 1))
+
+    nearest_pass(backend, tiles.org, tiles.cen, tiles.col, tiles.row, s.rows, s.cols,
+                 tally=tally, kind="primary", chunk=s.chunk, enable=tiles.valid, timer=timer,
+                 progress=bar.update, on_chunk=primary_chunk)
+    return out
+
+
+@dataclass
+class _Points:
+    """The primary hits: pixel rows and columns, triangle, point, normal facing the
+    camera."""
+
+    ys: np.ndarray
+    xs: np.ndarray
+    tri: np.ndarray
+    pts: np.ndarray
+    nrm: np.ndarray
+
+    @classmethod
+    def of(cls, prim: _Primary, normals_all: np.ndarray) -> _Points:
+        ys, xs = np.nonzero(prim.tri >= 0)
+        tri_h = prim.tri[ys, xs]
+        pts = prim.origin + prim.t[ys, xs, None] * prim.dirs[ys, xs]
+        nrm = normals_all[tri_h]
+        flip = np.einsum("ij,ij->i", nrm, prim.dirs[ys, xs]) > 0
+        nrm[flip] *= -1.0
+        return cls(ys, xs, tri_h, pts, nrm)
+
+
+def _shadows(tracer: Tracer, scene: Scene, s: RenderSettings, pt: _Points, stats: dict, timer,
+             rec: dict, eps: float) -> np.ndarray:
+    """The shadow stage: shadow bundles in passes of ``chunk``, early-out rounds within
+    each: the fraction of the light each point sees."""
+    plan = None
+    if s.shadows:
+        with timer("shading"):
+            plan = shadow_bundles(pt.pts, pt.nrm, scene.light, s.shadow_rows, s.shadow_cols,
+                                  eps)
+        stats["points_behind_light"] = plan.behind_light
+        stats["points_facing_away"] = plan.facing_away
+
+    def shadow_chunk(lo, hi, batch, blocked):
+        rec["shadow_o"].append(batch.origin)
+        rec["shadow_d"].append(batch.directions)
+        rec["shadow_tmax"].append(plan.tmax[lo:hi])
+        rec["shadow_own"].append(pt.tri[plan.point[lo:hi]])
+        rec["shadow_point"].append(plan.point[lo:hi])
+
+    vis, _ = tracer.shadows(pt.pts, pt.nrm, pt.tri, shadow_chunk if s.record_rays else None,
+                            plan)
+    return vis
+
+
+def _compose(scene: Scene, prim: _Primary, pt: _Points, vis, ao, layers: dict):
+    """The direct image (Phong terms of the hits, the light where a primary ray sees
+    it, the background elsewhere): ``(image, visibility image, sees-the-light mask)``;
+    the ambient-occlusion layer into ``layers``."""
+    H, W = prim.tri.shape
+    img = np.empty((H, W, 3))
+    img[:] = np.asarray(scene.background, float)
+    eye = np.asarray(scene.camera.position, float)
+    img[pt.ys, pt.xs] = phong(pt.pts, pt.nrm, scene.colours[pt.tri], eye, scene.light,
+                              scene.material_at(pt.tri), vis, ao)
+    sees = light_hits(eye, prim.dirs.reshape(-1, 3), scene.light,
+                      prim.t.reshape(-1)).reshape(H, W)
+    img[sees] = np.asarray(scene.light.colour, float)
+    vis_img = np.full((H, W), np.nan)
+    vis_img[pt.ys, pt.xs] = vis
+    if ao is not None:
+        layers["ao"] = np.full((H, W), np.nan)
+        layers["ao"][pt.ys, pt.xs] = ao
+    return img, vis_img, sees
+
+
+def _secondary(tracer: Tracer, prim: _Primary, pt: _Points, sees, img, layers: dict) -> None:
+    """Secondary rays: reflection, refraction and glossy rays, a generation at a time,
+    added to ``img``; their first bounce's layers into ``layers``."""
+    H, W = prim.tri.shape
+    pix = pt.ys * W + pt.xs
+    add, sec = whitted(tracer, pix, pt.pts, pt.nrm, pt.tri, prim.dirs[pt.ys, pt.xs],
+                       (~sees[pt.ys, pt.xs]).astype(float), H * W)
+    img += add.reshape(H, W, 3)
+    layers.update({k: v.reshape(H, W) for k, v in sec.items()})
+
+
+def _summarise(stats: dict, tally: Tally, prim: _Primary) -> None:
+    """The run's figures from the tally (rays, bundles, plane tests, pairs, hits, events,
+    the hierarchy's skips) into ``stats``."""
     unit = tally.unit_total()
     types = tally.ray_types()
     kinds = tally.kinds
@@ -419,11 +507,4 @@ def _render(scene: Scene, backend: Backend, settings: RenderSettings):
     stats["hierarchy"] = {"tested": hier["tested"].tolist(), "dropped": hier["dropped"].tolist(),
                           "triangles_dropped": hier["tris_dropped"].tolist(),
                           "leaves_to_unit": hier["leaves"]}
-    stats["pixels_hit"] = int(hit_px.sum())
-    backend.report(stats)       # the render mode's figures, the on-chip reduction's beats
-    rays = None
-    if s.record_rays:
-        rays = {k: np.concatenate(v) if v else np.zeros((0,)) for k, v in rec.items()}
-        rays["shadow_tmin"] = eps
-        rays["loaded"] = usable
-    return RenderResult(img, tri_img, t_img, vis_img, stats, dict(timer.times), rays, layers)
+    stats["pixels_hit"] = int((prim.tri >= 0).sum())
