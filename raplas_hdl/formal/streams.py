@@ -26,14 +26,24 @@ stream rule) and asserts:
   premise of taking it unchecked, besides all of the above;
 - for the job distributor, that beat ``n`` leaves on lane ``n mod K``; for the result
   merger, that it takes lane ``k``'s beats only between job-last beats ``k - 1`` and ``k``
-  (mod K).
+  (mod K);
+- for the result framing (:class:`~raplas_hdl.rtl.unit.framing.ResultFraming`), whose
+  input's marker bit is free (markers arrive at any time, their other bits free too; a
+  result's number is in the low bits of its ``t``): results in = non-empty beats out + the
+  hold register's valid (0 or 1), which is set exactly when a result came since the last
+  marker, and then holds that result's beat; a beat leaves with each input taken, except a
+  run's first result (it only fills the hold register); a non-empty beat carries its
+  result's fields, in order, once each, with ``last`` set exactly when the next input is a
+  marker; an ``empty`` beat (``last`` set, every other field 0) leaves exactly for a marker
+  with no result since the previous marker or reset.
 
 The stages and what each checks are :data:`STAGES`; :func:`check_stage` runs one
 (k-induction, ``mode prove``; a stage whose induction does not close at the depth given is
 ``unknown``, never passed; the two FIFOs are checked to a stated depth instead, since an
 induction over their memory's words needs an invariant the harness cannot state). Cover
-statements show the checks are not vacuous: each stage
-must reach a full FIFO / a lane change / a transfer while a reset is free.
+statements show the checks are not vacuous: each stage must reach a full FIFO / a lane
+change / an ``empty`` beat, a ``last`` beat and a beat held under ``!ready`` / a transfer
+while a reset is free.
 """
 
 from __future__ import annotations
@@ -112,6 +122,9 @@ STAGES = {s.name: s for s in (
           probes=(("turn_probe", "dut.turn"),)),
     Stage("result-merger", "rtl.unit.lanes.ResultMerger, 3 lanes", 8,
           probes=(("turn_probe", "dut.turn"),)),
+    Stage("result-framing", "rtl.unit.framing.ResultFraming, FP16, 2 rays, generic mode: "
+          "stage 8, one result held back for the run's last", 8,
+          probes=(("held_v_probe", "dut.held_v"), ("held_probe", "dut.held"))),
 )}
 
 
@@ -145,6 +158,8 @@ def stage_verilog(name: str) -> tuple[str, dict]:
                        banks=FIFO_SEQ if name == "credit-fifo-banked" else 1)
         return (verilog.convert(f, name="stage", emit_src=False),
                 {"width": FIFO_SEQ, "depth": 4, "credits": True})
+    if name == "result-framing":
+        return _framing_verilog()
     from ..rtl.unit.lanes import JobDistributor, ResultMerger
 
     cfg = _config(3)
@@ -155,6 +170,25 @@ def stage_verilog(name: str) -> tuple[str, dict]:
         width = comp.o.payload.shape().size
     info = {"lanes": 3, "width": width, "top": cfg.ray_id_bits + 1,
             "ray_lsb": _ray_lsb(comp) if name == "result-merger" else 0}
+    return verilog.convert(comp, name="stage", emit_src=False), info
+
+
+def _framing_verilog() -> tuple[str, dict]:
+    from amaranth.back import verilog
+
+    from ..rtl.unit.framing import ResultFraming
+
+    cfg = _config(1)
+    comp = ResultFraming(cfg)
+    i_layout, o_layout = comp.i.payload.shape(), comp.o.payload.shape()
+    # (offset in o, offset in i, width) of each field a result beat copies from its result;
+    # ray_id loses its marker bit on the way
+    copied = tuple((o_layout[n].offset, i_layout[n].offset, f.width)
+                   for n, f in o_layout if n not in ("last", "empty"))
+    info = {"iw": i_layout.size, "ow": o_layout.size, "copied": copied,
+            "marker": i_layout["ray_id"].offset + cfg.ray_id_bits,
+            "t_in": i_layout["t"].offset, "t_out": o_layout["t"].offset,
+            "last": o_layout["last"].offset, "empty": o_layout["empty"].offset}
     return verilog.convert(comp, name="stage", emit_src=False), info
 
 
@@ -350,11 +384,87 @@ endmodule
 """
 
 
+def _framing_check(info: dict) -> str:
+    iw, ow, mk = info["iw"], info["ow"], info["marker"]
+    ts, to, last, empty = info["t_in"], info["t_out"], info["last"], info["empty"]
+    seq_in, seq_out = f"[{ts + SEQ - 1}:{ts}]", f"[{to + SEQ - 1}:{to}]"
+    # the beat the last result taken makes, last and empty clear: what the hold register keeps
+    beat = "".join(f"  assign want[{o + w - 1}:{o}] = res_payload[{i + w - 1}:{i}];\n"
+                   for o, i, w in info["copied"])
+    ends = f"{ow}'h{(1 << last) | (1 << empty):x}"       # last and empty set
+    return f"""module stream_check(input clk, input rst, input i_valid, input o_ready,
+                    input [{iw - 1}:0] i_free);
+  reg init = 1;
+  // results taken, non-empty beats out; a result since the last marker (or reset)
+  reg [{SEQ - 1}:0] n_res = 0, n_out = 0;
+  wire [{SEQ - 1}:0] n_prev = n_res - 1;
+  reg pending = 0;
+  reg [{iw - 1}:0] res_payload = 0;          // the last result taken
+  wire held_v_probe;                         // the hold register's valid (connect -set)
+  wire [{ow - 1}:0] held_probe;              // and its beat
+  wire marker = i_free[{mk}];
+  // a result carries its number in t's low bits; a marker's payload is all free
+  wire [{iw - 1}:0] i_payload = {{i_free[{iw - 1}:{ts + SEQ}],
+      marker ? i_free{seq_in} : n_res, i_free[{ts - 1}:0]}};
+  wire i_ready, o_valid;
+  wire [{ow - 1}:0] o_payload, want;
+{beat}  assign want[{last}] = 0;
+  assign want[{empty}] = 0;
+  stage dut(.clk(clk), .rst(rst), .i__valid(i_valid), .i__payload(i_payload),
+            .i__ready(i_ready), .o__valid(o_valid), .o__payload(o_payload),
+            .o__ready(o_ready));
+  wire i_take = i_valid && i_ready, o_take = o_valid && o_ready;
+  wire o_last = o_payload[{last}], o_empty = o_payload[{empty}];
+  reg i_held = 0, off = 0;
+  reg [{iw - 1}:0] i_held_payload = 0;
+  reg [{ow - 1}:0] off_data = 0;
+  always @(posedge clk) begin
+    init <= 0;
+    if (rst) begin n_res <= 0; n_out <= 0; pending <= 0; end
+    else begin
+      if (i_take && !marker) begin n_res <= n_res + 1; res_payload <= i_payload; end
+      if (i_take) pending <= !marker;
+      if (o_take && !o_empty) n_out <= n_out + 1;
+    end
+    i_held <= !rst && i_valid && !i_ready;
+    i_held_payload <= i_payload;
+    off <= !rst && o_valid && !o_ready;
+    off_data <= o_payload;
+  end
+  always @* begin
+    if (init) assume(rst);
+    if (!init && i_held) assume(i_valid && i_payload == i_held_payload);   // the stream rule
+    if (!init && !rst) begin
+      assert(n_res == n_out + held_v_probe);   // results in = non-empty beats out + held
+      assert(held_v_probe == pending);         // held: the run's latest result
+      if (pending) assert(held_probe == want && res_payload{seq_in} == n_prev);
+      assert(i_ready == o_ready);
+      // a beat leaves with each take, but for a run's first result
+      assert(o_take == (i_take && (pending || marker)));
+      if (o_take) begin
+        assert(o_last == marker);              // last: the next one in is a marker
+        assert(o_empty == (marker && !pending));   // empty: a run without a result
+        if (o_empty) assert(o_payload == {ends});    // and every other field 0
+        if (!o_empty) assert(o_payload{seq_out} == n_out);   // in order, once each
+        if (!o_empty) assert((o_payload & ~{ends}) == want);   // its result's fields
+      end
+      if (off) assert(o_valid && o_payload == off_data);    // the stream rule
+      cover(o_take && o_empty);
+      cover(o_take && o_last && !o_empty && n_out == 2);    // the third result, last
+      cover(off && o_take && !o_empty);        // a beat held under !o.ready, then taken
+    end
+  end
+endmodule
+"""
+
+
 def _check_text(name: str, info: dict) -> str:
     if name in ("bram-fifo", "sync-fifo-buffered", "credit-fifo", "credit-fifo-banked"):
         return _fifo_check(info["width"], info["depth"], info.get("credits", False))
     if name == "job-distributor":
         return _distributor_check(info)
+    if name == "result-framing":
+        return _framing_check(info)
     return _merger_check(info)
 
 

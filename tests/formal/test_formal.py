@@ -18,9 +18,11 @@ What is checked here, and why each can fail:
   ``synth_xilinx -family xc4v`` proved equal to the RTL, and a netlist synthesised from
   mutated Verilog caught, with the RTL's side agreeing with the golden model;
 - stream stages (SymbiYosys): the block-RAM FIFO, Amaranth's SyncFIFOBuffered and the
-  credit FIFO, plain and in banks (bounded), the job distributor and the result merger
-  (k-induction) keep the stream rule and lose, double or reorder no beat, and a mutant of
-  each gives a counterexample;
+  credit FIFO, plain and in banks (bounded), the job distributor, the result merger and the
+  result framing (k-induction) keep the stream rule and lose, double or reorder no beat (the
+  framing: and sets ``last`` and ``empty`` where the markers say), and a mutant of each
+  gives a counterexample (three of the framing: no ``last``, no ``empty``, a hold register
+  that takes a result not taken);
 - the command line: exit codes 0, 1, 3 and 2.
 
 Each proof takes seconds (about 60 s in all on a quiet 2-core machine); the durations are
@@ -455,7 +457,8 @@ def test_virtex4_multiplier_mutant_gives_real_counterexample(work):
 
 # -- stream stages of the intersection unit (SymbiYosys) ------------------------------------
 @pytest.mark.parametrize("stage", ["bram-fifo", "sync-fifo-buffered", "credit-fifo",
-                                   "credit-fifo-banked", "job-distributor", "result-merger"])
+                                   "credit-fifo-banked", "job-distributor", "result-merger",
+                                   "result-framing"])
 def test_stream_stage_checked(stage, work):
     from raplas_hdl.formal.streams import STAGES, check_stage
 
@@ -478,6 +481,13 @@ def test_stream_stage_checked(stage, work):
     # the FIFO reports room an entry early: the writers' credits no longer find it
     ("credit-fifo", ("w_stream__ready = inner_level != 2'h3", "w_stream__ready = inner_level "
                                                               "!= 2'h2")),
+    # the framing sends a held result on a marker without last (bit 71; an empty beat's
+    # last, set by the same line further on, is left alone)
+    ("result-framing", ("o__payload[71] = 1'h1;", "o__payload[71] = 1'h0;", 1)),
+    # ... its hold register takes a result offered but not taken: beats doubled or lost
+    ("result-framing", ("assign \\$2  = i__valid & o__ready;", "assign \\$2  = i__valid;")),
+    # ... a marker with no result since the last sends a beat without empty (bit 72)
+    ("result-framing", ("o__payload[72] = 1'h1;", "o__payload[72] = 1'h0;")),
 ])
 def test_stream_stage_mutants_fail(stage, mutation, work):
     from raplas_hdl.formal.streams import check_stage
