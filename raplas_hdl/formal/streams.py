@@ -35,15 +35,25 @@ stream rule) and asserts:
   run's first result (it only fills the hold register); a non-empty beat carries its
   result's fields, in order, once each, with ``last`` set exactly when the next input is a
   marker; an ``empty`` beat (``last`` set, every other field 0) leaves exactly for a marker
-  with no result since the previous marker or reset.
+  with no result since the previous marker or reset;
+- for the pair selector (:class:`~raplas_hdl.rtl.unit.selector.PairSelector`, without the
+  reduction's early-out), whose two read ports the harness answers as the memories do (the
+  word addressed at the last ``en``) from contents that are free but fixed for the check
+  (the spheres' triangle counts and both banks' enable bits: the host writes them between
+  runs): sphere after sphere as taken, each ray of its masks (every ray with ``keep_all``;
+  none if it has no triangle), rows ascending then columns, leaves as a job (that ray, the
+  sphere, its bank and triangle count) if the ray is enabled, or else as ``skipped`` = its
+  triangle count for one cycle; a marker gives one marker job; one ray a cycle, and a ray
+  due waits at most one cycle with ``o.ready`` high.
 
 The stages and what each checks are :data:`STAGES`; :func:`check_stage` runs one
 (k-induction, ``mode prove``; a stage whose induction does not close at the depth given is
 ``unknown``, never passed; the two FIFOs are checked to a stated depth instead, since an
 induction over their memory's words needs an invariant the harness cannot state). Cover
 statements show the checks are not vacuous: each stage must reach a full FIFO / a lane
-change / an ``empty`` beat, a ``last`` beat and a beat held under ``!ready`` / a transfer
-while a reset is free.
+change / an ``empty`` beat, a ``last`` beat and a beat held under ``!ready`` / a skipped
+ray, a marker job, a job held under ``!ready``, every ray of a sphere / a transfer while a
+reset is free.
 """
 
 from __future__ import annotations
@@ -125,14 +135,17 @@ STAGES = {s.name: s for s in (
     Stage("result-framing", "rtl.unit.framing.ResultFraming, FP16, 2 rays, generic mode: "
           "stage 8, one result held back for the run's last", 8,
           probes=(("held_v_probe", "dut.held_v"), ("held_probe", "dut.held"))),
+    Stage("pair-selector", "rtl.unit.selector.PairSelector, 2 x 2 rays, 2 spheres, no "
+          "reduction: stages 4 and 5, one job per enabled ray", 8,
+          probes=(("e_v_probe", "dut.e_v"), ("it_probe", "dut.it"))),
 )}
 
 
-def _config(lanes: int):
-    # lazy: model.config loads numba, only to build the lane stages
+def _config(lanes: int, rows: int = 1):
+    # lazy: model.config loads numba, only to build the unit's stages
     from ..model.config import UnitConfig
 
-    return UnitConfig(fmt=FP16, rows=1, cols=2, tris_per_sphere=2, max_triangles=4,
+    return UnitConfig(fmt=FP16, rows=rows, cols=2, tris_per_sphere=2, max_triangles=4,
                       max_spheres=2, lanes=lanes)
 
 
@@ -160,6 +173,8 @@ def stage_verilog(name: str) -> tuple[str, dict]:
                 {"width": FIFO_SEQ, "depth": 4, "credits": True})
     if name == "result-framing":
         return _framing_verilog()
+    if name == "pair-selector":
+        return _selector_verilog()
     from ..rtl.unit.lanes import JobDistributor, ResultMerger
 
     cfg = _config(3)
@@ -189,6 +204,26 @@ def _framing_verilog() -> tuple[str, dict]:
             "marker": i_layout["ray_id"].offset + cfg.ray_id_bits,
             "t_in": i_layout["t"].offset, "t_out": o_layout["t"].offset,
             "last": o_layout["last"].offset, "empty": o_layout["empty"].offset}
+    return verilog.convert(comp, name="stage", emit_src=False), info
+
+
+def _selector_verilog() -> tuple[str, dict]:
+    from amaranth.back import verilog
+
+    from ..rtl.unit.selector import PairSelector
+    from ..rtl.unit.streams import tag_layout
+
+    cfg = _config(1, rows=2)
+    comp = PairSelector(cfg)
+    i_layout, o_layout, tag = comp.i.payload.shape(), comp.o.payload.shape(), tag_layout(cfg)
+    tag_at = i_layout["id"].offset
+    info = {"rows": cfg.rows, "cols": cfg.cols, "spheres": cfg.max_spheres,
+            "iw": i_layout.size, "ow": o_layout.size, "count": cfg.count_bits,
+            "sphere_bits": cfg.sphere_id_bits,
+            "i": {**{n: tag_at + tag[n].offset for n in ("sphere", "marker", "bank", "keep_all")},
+                  "row_mask": i_layout["row_mask"].offset,
+                  "col_mask": i_layout["col_mask"].offset},
+            "o": {n: (o_layout[n].offset, o_layout[n].width) for n, _ in o_layout}}
     return verilog.convert(comp, name="stage", emit_src=False), info
 
 
@@ -384,6 +419,29 @@ endmodule
 """
 
 
+def _stream_env(iw: int, ow: int) -> tuple[str, str]:
+    """The harness text of a stage with one input stream ``i`` and one output ``o``: the
+    registers (a beat offered on ``i`` and not taken; one offered on ``o`` and not taken),
+    and the text that ends the harness's clocked block and opens its checks, with the
+    stream rule assumed on ``i`` and asserted on ``o``."""
+    regs = f"""  reg i_held = 0, off = 0;
+  reg [{iw - 1}:0] i_held_payload = 0;
+  reg [{ow - 1}:0] off_data = 0;
+"""
+    checks = """    i_held <= !rst && i_valid && !i_ready;
+    i_held_payload <= i_payload;
+    off <= !rst && o_valid && !o_ready;
+    off_data <= o_payload;
+  end
+  always @* begin
+    if (init) assume(rst);
+    if (!init && i_held) assume(i_valid && i_payload == i_held_payload);   // the stream rule
+    if (!init && !rst) begin
+      if (off) assert(o_valid && o_payload == off_data);    // the stream rule
+"""
+    return regs, checks
+
+
 def _framing_check(info: dict) -> str:
     iw, ow, mk = info["iw"], info["ow"], info["marker"]
     ts, to, last, empty = info["t_in"], info["t_out"], info["last"], info["empty"]
@@ -392,6 +450,7 @@ def _framing_check(info: dict) -> str:
     beat = "".join(f"  assign want[{o + w - 1}:{o}] = res_payload[{i + w - 1}:{i}];\n"
                    for o, i, w in info["copied"])
     ends = f"{ow}'h{(1 << last) | (1 << empty):x}"       # last and empty set
+    regs, checks = _stream_env(iw, ow)
     return f"""module stream_check(input clk, input rst, input i_valid, input o_ready,
                     input [{iw - 1}:0] i_free);
   reg init = 1;
@@ -415,10 +474,7 @@ def _framing_check(info: dict) -> str:
             .o__ready(o_ready));
   wire i_take = i_valid && i_ready, o_take = o_valid && o_ready;
   wire o_last = o_payload[{last}], o_empty = o_payload[{empty}];
-  reg i_held = 0, off = 0;
-  reg [{iw - 1}:0] i_held_payload = 0;
-  reg [{ow - 1}:0] off_data = 0;
-  always @(posedge clk) begin
+{regs}  always @(posedge clk) begin
     init <= 0;
     if (rst) begin n_res <= 0; n_out <= 0; pending <= 0; end
     else begin
@@ -426,16 +482,7 @@ def _framing_check(info: dict) -> str:
       if (i_take) pending <= !marker;
       if (o_take && !o_empty) n_out <= n_out + 1;
     end
-    i_held <= !rst && i_valid && !i_ready;
-    i_held_payload <= i_payload;
-    off <= !rst && o_valid && !o_ready;
-    off_data <= o_payload;
-  end
-  always @* begin
-    if (init) assume(rst);
-    if (!init && i_held) assume(i_valid && i_payload == i_held_payload);   // the stream rule
-    if (!init && !rst) begin
-      assert(n_res == n_out + held_v_probe);   // results in = non-empty beats out + held
+{checks}      assert(n_res == n_out + held_v_probe);   // results in = non-empty beats out + held
       assert(held_v_probe == pending);         // held: the run's latest result
       if (pending) assert(held_probe == want && res_payload{seq_in} == n_prev);
       assert(i_ready == o_ready);
@@ -448,10 +495,174 @@ def _framing_check(info: dict) -> str:
         if (!o_empty) assert(o_payload{seq_out} == n_out);   // in order, once each
         if (!o_empty) assert((o_payload & ~{ends}) == want);   // its result's fields
       end
-      if (off) assert(o_valid && o_payload == off_data);    // the stream rule
       cover(o_take && o_empty);
       cover(o_take && o_last && !o_empty && n_out == 2);    // the third result, last
       cover(off && o_take && !o_empty);        // a beat held under !o.ready, then taken
+    end
+  end
+endmodule
+"""
+
+
+def _selector_check(info: dict) -> str:
+    rows, cols, cb, sb = info["rows"], info["cols"], info["count"], info["sphere_bits"]
+    n, iw, ow, at, o = rows * cols, info["iw"], info["ow"], info["i"], info["o"]
+    pb = n.bit_length()                          # positions 0 .. n
+    rw = rows + cols + sb + 2 + cb               # a sphere's record
+    all_rows, all_cols = f"{rows}'h{(1 << rows) - 1:x}", f"{cols}'h{(1 << cols) - 1:x}"
+    job = {name: f"o_payload[{off + w - 1}:{off}]" for name, (off, w) in o.items()}
+    # the iterator's register as selector.py lays it out, low bits first (probed)
+    it_at = {}
+    for name, w in (("busy", 1), ("rows", rows), ("colmask", cols), ("cols", cols),
+                    ("sid", sb), ("bank", 1), ("marker", 1)):
+        it_at[name] = (sum(v[1] for v in it_at.values()), w)
+    it_w = sum(w for _, w in it_at.values())
+    it_wires = "".join(f"  wire [{w - 1}:0] it_{name} = it_probe[{off + w - 1}:{off}];\n"
+                       for name, (off, w) in it_at.items())
+
+    def record(r):         # the fields of record register r, as wires r_rows, r_cols, ...
+        offs, out = 0, []
+        for name, w in (("rows", rows), ("cols", cols), ("sid", sb), ("bank", 1),
+                        ("marker", 1), ("ntris", cb)):
+            out.append(f"  wire [{w - 1}:0] {r}_{name} = {r}[{offs + w - 1}:{offs}];\n")
+            offs += w
+        out.append(f"  wire [{cb - 1}:0] {r}_count = counts >> ({r}_sid * {cb});\n")
+        return "".join(out)
+
+    def search(name, r, start):
+        """The next ray of record r at or after position start (rows ascending, then
+        columns): {name}_found, _q; _more: a ray of r's masks follows it; _rows, _cols: the
+        masks of the rows and columns from its own on."""
+        lines = [f"  reg {name}_found, {name}_more;\n  reg [{pb - 1}:0] {name}_q;\n"
+                 f"  reg [{rows - 1}:0] {name}_rows;\n  reg [{cols - 1}:0] {name}_cols;\n"
+                 f"  always @* begin\n    {name}_found = 0; {name}_more = 0; {name}_q = 0;\n"
+                 f"    {name}_rows = 0; {name}_cols = 0;\n"]
+        for k in reversed(range(n)):
+            i, j = divmod(k, cols)
+            lines.append(
+                f"    if ({start} <= {k} && {r}_rows[{i}] && {r}_cols[{j}]) begin "
+                f"{name}_more = {name}_found; {name}_found = 1; {name}_q = {k};\n"
+                f"      {name}_rows = {rows}'h{((1 << rows) - 1) & ~((1 << i) - 1):x}; "
+                f"{name}_cols = {cols}'h{((1 << cols) - 1) & ~((1 << j) - 1):x}; end\n")
+        return "".join(lines) + "  end\n"
+
+    def holds(r, at):      # the iterator holds record r from search at's ray on
+        return (f"it_busy && it_sid == {r}_sid && it_bank == {r}_bank && it_marker == "
+                f"{r}_marker && count_data == {r}_ntris\n"
+                f"          && ({r}_marker || ({at}_found && it_colmask == {r}_cols\n"
+                f"              && it_rows == ({r}_rows & {at}_rows) "
+                f"&& it_cols == ({r}_cols & {at}_cols)))")
+
+    def sane(r):           # a record in the queue: a marker, or a sphere with a ray
+        return (f"({r}_marker || ({r}_rows != 0 && {r}_cols != 0 && {r}_ntris != 0 "
+                f"&& {r}_ntris == {r}_count))")
+
+    records = record("q0") + record("q1")
+    regs, checks = _stream_env(iw, ow)
+    searches = (search("h", "q0", "p") + f"  wire [{pb - 1}:0] after = h_q + 1;\n"
+                + search("nx", "q0", "after") + search("q1s", "q1", "0"))
+    return f"""module stream_check(input clk, input rst, input i_valid,
+                    input [{iw - 1}:0] i_payload, input o_ready);
+  reg init = 1;
+  // the memories' words the selector reads: any, fixed for the check
+  (* anyconst *) reg [{cb * info["spheres"] - 1}:0] counts;    // triangles per sphere
+  (* anyconst *) reg [{2 * n - 1}:0] enables;    // the rays' enables, two banks
+  wire count_en, enable_en;
+  wire [{sb - 1}:0] count_addr;
+  wire [{(2 * n - 1).bit_length() - 1}:0] enable_addr;
+  reg [{cb - 1}:0] count_data;
+  reg enable_data;
+  always @(posedge clk) begin               // read ports: the word addressed at the last en
+    if (count_en) count_data <= counts >> (count_addr * {cb});
+    if (enable_en) enable_data <= enables >> enable_addr;
+  end
+  wire i_ready, o_valid;
+  wire [{ow - 1}:0] o_payload;
+  wire [{cb - 1}:0] skipped;
+  stage dut(.clk(clk), .rst(rst), .i__valid(i_valid), .i__payload(i_payload),
+            .i__ready(i_ready), .o__valid(o_valid), .o__payload(o_payload),
+            .o__ready(o_ready), .skipped(skipped),
+            .count__addr(count_addr), .count__en(count_en), .count__data(count_data),
+            .enable__addr(enable_addr), .enable__en(enable_en), .enable__data(enable_data));
+  wire e_v_probe;                            // the enable lookup's valid (connect -set)
+  wire [{it_w - 1}:0] it_probe;                  // the iterator's register
+{it_wires}  wire it_live = it_busy && (it_marker || (it_rows != 0 && it_cols != 0
+                                          && count_data != 0));
+  // a sphere taken: its record {{ntris, marker, bank, sphere, cols, rows}}
+  wire i_keep = i_payload[{at["keep_all"]}], i_marker = i_payload[{at["marker"]}];
+  wire i_bank = i_payload[{at["bank"]}];
+  wire [{sb - 1}:0] i_sphere = i_payload[{at["sphere"] + sb - 1}:{at["sphere"]}];
+  wire [{rows - 1}:0] i_rows = i_keep ? {all_rows}
+      : i_payload[{at["row_mask"] + rows - 1}:{at["row_mask"]}];
+  wire [{cols - 1}:0] i_cols = i_keep ? {all_cols}
+      : i_payload[{at["col_mask"] + cols - 1}:{at["col_mask"]}];
+  wire [{cb - 1}:0] i_ntris = counts >> (i_sphere * {cb});
+  wire [{rw - 1}:0] rec = {{i_ntris, i_marker, i_bank, i_sphere, i_cols, i_rows}};
+  wire i_take = i_valid && i_ready;
+  // the spheres whose jobs and skips are still to come, in order (q0 the head; p: its
+  // next position); a sphere without a ray (none in its masks, or no triangle) has none
+  reg [{rw - 1}:0] q0 = 0, q1 = 0, q2 = 0;
+  reg [1:0] qn = 0;
+  reg [{pb - 1}:0] p = 0;
+  wire push = i_take && (i_marker || (i_rows != 0 && i_cols != 0 && i_ntris != 0));
+{records}  // the head's next ray; the one after it; q1's first
+{searches}  wire h_enabled = enables >> (q0_bank * {n} + h_q);
+  wire job_enabled = enables >> ({job["bank"]} * {n} + {job["ray"]});
+  wire o_take = o_valid && o_ready, skip = skipped != 0;
+  wire served = o_take || skip;              // the head's next ray (or marker) done
+  wire pop = served && (q0_marker || !h_more);
+  wire [1:0] base = qn - pop;
+  reg [{rw - 1}:0] n0, n1, n2;
+  always @* begin
+    n0 = pop ? q1 : q0; n1 = pop ? q2 : q1; n2 = q2;
+    if (push && base == 0) n0 = rec;
+    if (push && base == 1) n1 = rec;
+    if (push && base == 2) n2 = rec;
+  end
+{regs}  reg [1:0] starve = 0;                      // cycles of o.ready a queued ray waited
+  always @(posedge clk) begin
+    init <= 0;
+    q0 <= n0; q1 <= n1; q2 <= n2;
+    if (rst) begin qn <= 0; p <= 0; starve <= 0; end
+    else begin
+      qn <= base + push;
+      if (served) p <= pop ? 0 : after;
+      if (served || qn == 0) starve <= 0;
+      else if (o_ready) starve <= starve + 1;
+    end
+{checks}      assert(!(o_take && skip));             // one ray a cycle
+      if (served) assert(qn != 0);           // nothing that was not sent
+      if (o_take) begin                      // the head's next job, once
+        assert({job["marker"]} == q0_marker && {job["sid"]} == q0_sid);
+        assert({job["bank"]} == q0_bank);
+        if (!q0_marker) assert(h_found && h_enabled && {job["ray"]} == h_q
+                               && {job["ntris"]} == q0_ntris);
+      end
+      // ... or its next ray skipped, disabled
+      if (skip) assert(!q0_marker && h_found && !h_enabled && skipped == q0_ntris);
+      assert(starve <= 1);                   // a ray waits at most 1 cycle of o.ready
+      // what the selector holds is what is still to come (for the induction)
+      assert(qn <= 2 && p <= {n} && (qn != 0 || p == 0));
+      if (qn >= 1) assert({sane("q0")} && (q0_marker || h_found));
+      if (qn >= 2) assert({sane("q1")});
+      if (e_v_probe) begin                   // the enable lookup holds the head's next
+        assert(qn >= 1 && {job["marker"]} == q0_marker && {job["sid"]} == q0_sid
+               && {job["bank"]} == q0_bank
+               && (q0_marker || ({job["ray"]} == h_q && {job["ntris"]} == q0_ntris)));
+        assert(enable_data == job_enabled);
+        if (!q0_marker && h_more) assert(qn == 1 && {holds("q0", "nx")});
+        else if (qn == 2) assert({holds("q1", "q1s")});
+        else assert(!it_live);
+      end else begin
+        assert(qn <= 1 && starve == 0);
+        if (qn == 1) assert({holds("q0", "h")});
+        else assert(!it_live);
+      end
+      cover(skip);
+      cover(o_take && q0_marker);
+      cover(off && o_take);                  // a job held under !o.ready, then taken
+      // the last of a sphere's rays, all of them in its masks
+      cover(pop && !q0_marker && q0_rows == {all_rows} && q0_cols == {all_cols});
     end
   end
 endmodule
@@ -465,6 +676,8 @@ def _check_text(name: str, info: dict) -> str:
         return _distributor_check(info)
     if name == "result-framing":
         return _framing_check(info)
+    if name == "pair-selector":
+        return _selector_check(info)
     return _merger_check(info)
 
 

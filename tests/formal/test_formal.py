@@ -22,7 +22,10 @@ What is checked here, and why each can fail:
   result framing (k-induction) keep the stream rule and lose, double or reorder no beat (the
   framing: and sets ``last`` and ``empty`` where the markers say), and a mutant of each
   gives a counterexample (three of the framing: no ``last``, no ``empty``, a hold register
-  that takes a result not taken);
+  that takes a result not taken); the pair selector (k-induction) gives each ray of its
+  spheres' masks in order, a job if enabled or else a skip, and four mutants of it fail
+  (a disabled ray's job sent, a job overwritten under back-pressure, rays lost at a row
+  change, the enable read from the wrong bank);
 - the command line: exit codes 0, 1, 3 and 2.
 
 Each proof takes seconds (about 60 s in all on a quiet 2-core machine); the durations are
@@ -458,7 +461,7 @@ def test_virtex4_multiplier_mutant_gives_real_counterexample(work):
 # -- stream stages of the intersection unit (SymbiYosys) ------------------------------------
 @pytest.mark.parametrize("stage", ["bram-fifo", "sync-fifo-buffered", "credit-fifo",
                                    "credit-fifo-banked", "job-distributor", "result-merger",
-                                   "result-framing"])
+                                   "result-framing", "pair-selector"])
 def test_stream_stage_checked(stage, work):
     from raplas_hdl.formal.streams import STAGES, check_stage
 
@@ -488,6 +491,16 @@ def test_stream_stage_checked(stage, work):
     ("result-framing", ("assign \\$2  = i__valid & o__ready;", "assign \\$2  = i__valid;")),
     # ... a marker with no result since the last sends a beat without empty (bit 72)
     ("result-framing", ("o__payload[72] = 1'h1;", "o__payload[72] = 1'h0;")),
+    # the selector sends a disabled ray's job (the enable lookup drops nothing)
+    ("pair-selector", ("assign o__valid = e_v & \\$33 ;", "assign o__valid = e_v;")),
+    # ... its iterator moves on while the lookup is stalled: a job overwritten, lost
+    ("pair-selector", ("assign enable__en = \\$30  | o__ready;", "assign enable__en = 1'h1;")),
+    # ... a row after the first starts from the columns left, not the mask: rays lost
+    ("pair-selector", ("assign \\$44  = \\$43  ? it[4:3] : cols_next;",
+                       "assign \\$44  = cols_next;")),
+    # ... the enable lookup reads bank 0 whatever the run's bank
+    ("pair-selector", ("assign \\$32  = it[8] ? \\$31  : { 2'h0, \\$24 [1:0] };",
+                       "assign \\$32  = { 2'h0, \\$24 [1:0] };")),
 ])
 def test_stream_stage_mutants_fail(stage, mutation, work):
     from raplas_hdl.formal.streams import check_stage
