@@ -44,7 +44,20 @@ stream rule) and asserts:
   none if it has no triangle), rows ascending then columns, leaves as a job (that ray, the
   sphere, its bank and triangle count) if the ray is enabled, or else as ``skipped`` = its
   triangle count for one cycle; a marker gives one marker job; one ray a cycle, and a ray
-  due waits at most one cycle with ``o.ready`` high.
+  due waits at most one cycle with ``o.ready`` high;
+- for the record fetch (:class:`~raplas_hdl.rtl.unit.fetch.RecordFetch` as a lane builds
+  it, the job-last bit above the marker), whose three read ports the harness answers from
+  free, fixed contents (the triangle lists, the Ray Memory's two banks, the Triangle
+  Memory), and whose ``o`` writes into a FIFO the harness keeps as a level (the reader takes
+  a word when there is one; each read comes back on ``freed``): no pair is written without
+  a free entry (``o.ready``, and ``overflow`` stays 0); the jobs taken, numbered by the
+  harness (every field of a job is an address or a count, none opaque), leave job after
+  job as their pairs, ``ntris`` of them (one for a marker, the jobs assumed to be markers
+  or to have 1 to ``tris_per_sphere`` triangles), each with the job's ray and marker bit,
+  job-last on the last, the ``k``-th triangle of the sphere's list, and the Ray Memory's
+  word at the ray in the job's bank and the Triangle Memory's at that triangle; credits
+  held + pairs in flight + words in the FIFO + reads on their way back = ``depth``; a job
+  taken while the FIFO behind is empty writes a pair within 4 cycles.
 
 The stages and what each checks are :data:`STAGES`; :func:`check_stage` runs one
 (k-induction, ``mode prove``; a stage whose induction does not close at the depth given is
@@ -52,17 +65,19 @@ The stages and what each checks are :data:`STAGES`; :func:`check_stage` runs one
 induction over their memory's words needs an invariant the harness cannot state). Cover
 statements show the checks are not vacuous: each stage must reach a full FIFO / a lane
 change / an ``empty`` beat, a ``last`` beat and a beat held under ``!ready`` / a skipped
-ray, a marker job, a job held under ``!ready``, every ray of a sphere / a transfer while a
-reset is free.
+ray, a marker job, a job held under ``!ready``, every ray of a sphere / a job's two pairs, a
+marker's pair, the write that spends the last credit, a pair on a credit given back / a
+transfer while a reset is free.
 """
 
 from __future__ import annotations
 
 import hashlib
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..fp import FP16
+from ..fp import FP16, FPFormat
 from .netlist import WORK_DIR
 from .sby import run_job
 
@@ -89,6 +104,7 @@ check.v
 
 SEQ = 4         # bits of the sequence numbers of the lanes' checks
 FIFO_SEQ = 3    # the FIFO's words: sequence numbers mod 8, more than the 4 words it holds
+FETCH_FORMAT = FPFormat(3, 2)   # the record fetch's words: 6-bit fields
 
 
 @dataclass(frozen=True)
@@ -110,6 +126,8 @@ class Stage:
         ``(wire, internal name)``: an internal register of the stage tied to a wire of the
         harness after flattening (``connect -set``), so the harness can state the
         invariant that links it to its own counters (which k-induction needs).
+    cover : int or None
+        Cycles of the cover run; ``depth + 4`` if None.
     """
 
     name: str
@@ -117,6 +135,7 @@ class Stage:
     depth: int
     mode: str = "prove"
     probes: tuple = ()
+    cover: int | None = None
 
 
 STAGES = {s.name: s for s in (
@@ -138,14 +157,18 @@ STAGES = {s.name: s for s in (
     Stage("pair-selector", "rtl.unit.selector.PairSelector, 2 x 2 rays, 2 spheres, no "
           "reduction: stages 4 and 5, one job per enabled ray", 8,
           probes=(("e_v_probe", "dut.e_v"), ("it_probe", "dut.it"))),
+    Stage("record-fetch", "rtl.unit.fetch.RecordFetch(depth=4, job_last=True), e3m2, 2 rays, "
+          "2 spheres of 2 triangles: stage 6 as a lane builds it, on credits", 8, cover=14,
+          probes=tuple((f"{r}_probe", f"dut.{r}")
+                       for r in ("busy", "job", "k", "credit", "g1", "g2", "g3"))),
 )}
 
 
-def _config(lanes: int, rows: int = 1):
+def _config(lanes: int, rows: int = 1, fmt=FP16):
     # lazy: model.config loads numba, only to build the unit's stages
     from ..model.config import UnitConfig
 
-    return UnitConfig(fmt=FP16, rows=rows, cols=2, tris_per_sphere=2, max_triangles=4,
+    return UnitConfig(fmt=fmt, rows=rows, cols=2, tris_per_sphere=2, max_triangles=4,
                       max_spheres=2, lanes=lanes)
 
 
@@ -175,6 +198,8 @@ def stage_verilog(name: str) -> tuple[str, dict]:
         return _framing_verilog()
     if name == "pair-selector":
         return _selector_verilog()
+    if name == "record-fetch":
+        return _fetch_verilog()
     from ..rtl.unit.lanes import JobDistributor, ResultMerger
 
     cfg = _config(3)
@@ -225,6 +250,42 @@ def _selector_verilog() -> tuple[str, dict]:
                   "col_mask": i_layout["col_mask"].offset},
             "o": {n: (o_layout[n].offset, o_layout[n].width) for n, _ in o_layout}}
     return verilog.convert(comp, name="stage", emit_src=False), info
+
+
+def _fetch_verilog() -> tuple[str, dict]:
+    from amaranth.back import verilog
+
+    from ..model.records import RAY, TRIANGLE
+    from ..rtl.records import struct_layout
+    from ..rtl.unit.fetch import RecordFetch
+
+    # the fetch copies the records' words whole: a narrow format makes them cheaper to check
+    cfg = _config(1, fmt=FETCH_FORMAT)
+    comp = RecordFetch(cfg, depth=4, job_last=True)
+    job, pair = comp.i.payload.shape(), comp.o.payload.shape()
+    ray, tri = struct_layout(RAY, cfg), struct_layout(TRIANGLE, cfg)
+    info = {"depth": 4, "tps": cfg.tris_per_sphere, "rays": cfg.n_rays,
+            "spheres": cfg.max_spheres, "tris": cfg.max_triangles,
+            "iw": job.size, "ow": pair.size, "rw": ray.size, "tw": tri.size,
+            "tb": cfg.tri_id_bits, "rb": cfg.ray_id_bits,
+            "job": {n: (f.offset, f.width) for n, f in job},
+            "ray_id": pair["ray_id"].offset, "tri_id": pair["tri_id"].offset,
+            # (offset in the pair, offset in the memory word, width) of each record field
+            "ray": tuple((pair[n].offset, f.offset, f.width) for n, f in ray),
+            "tri": tuple((pair[n].offset, f.offset, f.width) for n, f in tri),
+            "abits": {n: getattr(comp, n).addr.shape().width for n in ("tlist", "ray", "tri")}}
+    text = verilog.convert(comp, name="stage", emit_src=False)
+    info["regs"] = _reg_widths(text, ("k", "credit", "g1", "g2", "g3"))
+    return text, info
+
+
+def _reg_widths(text: str, names) -> dict:
+    """The widths of registers ``names`` as declared in the emitted Verilog."""
+    out = {}
+    for name in names:
+        found = re.search(rf"^  reg (?:\[(\d+):0\] )?{name} = ", text, re.M)
+        out[name] = int(found.group(1)) + 1 if found and found.group(1) else 1
+    return out
 
 
 def _ray_lsb(merger) -> int:
@@ -669,6 +730,152 @@ endmodule
 """
 
 
+def _word(vec: str, index: str, width: int, count: int) -> str:
+    """Word ``index`` of the ``count`` words of ``width`` bits in ``vec``, as a chain of
+    multiplexers (cheaper for the solver than a shift by ``index * width``)."""
+    out = f"{vec}[{count * width - 1}:{(count - 1) * width}]"
+    for j in reversed(range(count - 1)):
+        out = f"({index} == {j}) ? {vec}[{(j + 1) * width - 1}:{j * width}] : {out}"
+    return f"({out})"
+
+
+def _fetch_check(info: dict) -> str:
+    d, tps, nr, tb, rb = info["depth"], info["tps"], info["rays"], info["tb"], info["rb"]
+    iw, ow, rw, tw, ab, regs_w = (info["iw"], info["ow"], info["rw"], info["tw"],
+                                  info["abits"], info["regs"])
+    kb, cw, nb = regs_w["k"], regs_w["credit"], 3       # nb: job numbers mod 8
+    cb = info["job"]["ntris"][1]
+
+    def job(name, n):      # job number n, as wires {name}_ray, _sid, ...
+        out = [f"  wire [{iw - 1}:0] {name} = slots >> ({n} * {iw});\n"]
+        for f, (off, w) in info["job"].items():
+            out.append(f"  wire [{w - 1}:0] {name}_{f} = {name}[{off + w - 1}:{off}];\n")
+        return "".join(out)
+
+    # the pairs in flight, oldest first: the chain of positions from the next pair out
+    stages = ("o_valid", "g3_probe[0]", "g2_probe[0]", "g1_probe[0]")
+    chain = [f"  wire [{nb - 1}:0] p0_n = n_done;\n  wire [{kb - 1}:0] p0_k = kout;\n"]
+    for i, v in enumerate(stages):
+        chain.append(job(f"p{i}_j", f"p{i}_n") + f"""\
+  wire p{i}_last = p{i}_j_marker || p{i}_k == p{i}_j_ntris - 1;
+  wire [{nb - 1}:0] p{i + 1}_n = ({v} && p{i}_last) ? p{i}_n + 1 : p{i}_n;
+  wire [{kb - 1}:0] p{i + 1}_k = {v} ? (p{i}_last ? 0 : p{i}_k + 1) : p{i}_k;
+""")
+    want = [f"  assign want[{info['ray_id'] + rb + 1}:{info['ray_id']}] = "
+            f"{{p0_last, p0_j_marker, p0_j_ray}};\n",
+            f"  assign want[{info['tri_id'] + tb - 1}:{info['tri_id']}] = h_tri;\n"]
+    want += [f"  assign want[{o + w - 1}:{o}] = h_rayw[{m + w - 1}:{m}];\n"
+             for o, m, w in info["ray"]]
+    want += [f"  assign want[{o + w - 1}:{o}] = h_triw[{m + w - 1}:{m}];\n"
+             for o, m, w in info["tri"]]
+    regs, checks = _stream_env(iw, ow)
+    nt, mk = info["job"]["ntris"][0], info["job"]["marker"][0]
+    i_ntris = f"i_payload[{nt + cb - 1}:{nt}]"
+    sane = "".join(   # every job queued is as assumed when taken
+        f"      if ({nb}'d{j} - n_done < queued) assert(slots[{j * iw + mk}] || "
+        f"(slots[{j * iw + nt + cb - 1}:{j * iw + nt}] >= 1 && "
+        f"slots[{j * iw + nt + cb - 1}:{j * iw + nt}] <= {tps}));\n" for j in range(8))
+    probes = "".join(f"  wire [{regs_w[r] - 1}:0] {r}_probe;\n" for r in ("k", "credit", "g1",
+                                                                           "g2", "g3"))
+    return f"""module stream_check(input clk, input rst, input i_valid,
+                    input [{iw - 1}:0] i_payload, input r_take);
+  reg init = 1;
+  // the memories the fetch reads: any contents, fixed for the check
+  (* anyconst *) reg [{info["spheres"] * tps * tb - 1}:0] tlist;   // sphere s's k-th: s*{tps}+k
+  (* anyconst *) reg [{2 * nr * rw - 1}:0] rays;     // Ray Memory, two banks
+  (* anyconst *) reg [{info["tris"] * tw - 1}:0] tris;     // Triangle Memory
+  wire tlist_en, ray_en, tri_en;
+  wire [{ab["tlist"] - 1}:0] tlist_addr;
+  wire [{ab["ray"] - 1}:0] ray_addr;
+  wire [{ab["tri"] - 1}:0] tri_addr;
+  reg [{tb - 1}:0] tlist_data;
+  reg [{rw - 1}:0] ray_data;
+  reg [{tw - 1}:0] tri_data;
+  always @(posedge clk) begin               // read ports: the word addressed at the last en
+    if (tlist_en) tlist_data <= tlist >> (tlist_addr * {tb});
+    if (ray_en) ray_data <= {_word("rays", "ray_addr", rw, 2 * nr)};
+    if (tri_en) tri_data <= {_word("tris", "tri_addr", tw, info["tris"])};
+  end
+  // the pair FIFO behind o, as its writer's credits see it: lvl words; the reader takes one
+  // when there is one (r_take), and each read gives the fetch an entry back (freed)
+  reg [2:0] lvl = 0;
+  reg fr = 0;                                // a read last cycle: the credit on its way
+  wire o_ready = lvl != {d};
+  wire i_ready, o_valid, overflow;
+  wire [{ow - 1}:0] o_payload, want;
+  stage dut(.clk(clk), .rst(rst), .i__valid(i_valid), .i__payload(i_payload),
+            .i__ready(i_ready), .o__valid(o_valid), .o__payload(o_payload),
+            .o__ready(o_ready), .freed(r_take), .overflow(overflow),
+            .tlist__addr(tlist_addr), .tlist__en(tlist_en), .tlist__data(tlist_data),
+            .ray__addr(ray_addr), .ray__en(ray_en), .ray__data(ray_data),
+            .tri__addr(tri_addr), .tri__en(tri_en), .tri__data(tri_data));
+  // the fetch's registers (connect -set): the job it expands, its next pair, its credits,
+  // and the pipeline (bit 0 of g1 .. g3: valid; g4's is o.valid)
+  wire busy_probe;
+  wire [{iw - 1}:0] job_probe;
+{probes}  // jobs taken (job n kept at n mod 8); jobs whose pairs all left; pairs of job n_done out
+  reg [{nb - 1}:0] n_in = 0, n_done = 0;
+  reg [{kb - 1}:0] kout = 0;
+  reg [{8 * iw - 1}:0] slots = 0;
+  wire [{nb - 1}:0] queued = n_in - n_done;
+{"".join(chain)}  // the next pair out, pair kout of job n_done: its ray, its kout-th triangle,
+  // their words
+  wire [{tb - 1}:0] h_tri = tlist >> ((p0_j_sid * {tps} + p0_k) * {tb});
+  wire [{rw - 1}:0] h_rayw = {_word("rays", f"p0_j_bank * {nr} + p0_j_ray", rw, 2 * nr)};
+  wire [{tw - 1}:0] h_triw = {_word("tris", "h_tri", tw, info["tris"])};
+{"".join(want)}  // where the fetch is: the next pair it starts
+  wire [{nb - 1}:0] ip_n = busy_probe ? n_in - 1 : n_in;
+  wire [{kb - 1}:0] ip_k = busy_probe ? k_probe : 0;
+{job("cur", "ip_n")}  wire [{cw - 1}:0] in_flight = {" + ".join(stages)};
+  reg [2:0] m_out = 0;                       // pairs written (mod 8)
+  reg [2:0] starve = 0;                      // cycles a job waited, FIFO behind empty
+{regs}  always @(posedge clk) begin
+    init <= 0;
+    fr <= !rst && r_take;
+    if (rst) begin n_in <= 0; n_done <= 0; kout <= 0; lvl <= 0; m_out <= 0; starve <= 0; end
+    else begin
+      if (i_valid && i_ready) begin
+        slots[n_in * {iw} +: {iw}] <= i_payload;
+        n_in <= n_in + 1;
+      end
+      n_done <= p1_n;
+      kout <= p1_k;
+      lvl <= lvl + o_valid - r_take;
+      m_out <= m_out + o_valid;
+      starve <= (queued != 0 && lvl == 0 && !o_valid) ? starve + 1 : 0;
+    end
+{checks}      // a job is a marker, or has 1 .. {tps} triangles (the selector sends none without;
+      // the host's counts are at most tris_per_sphere)
+      if (i_valid && !i_payload[{mk}]) assume({i_ntris} >= 1 && {i_ntris} <= {tps});
+      assume(!r_take || lvl != 0);           // the reader takes a word that is there
+      if (o_valid) begin
+        assert(o_ready);                     // never written without a free entry
+        assert(queued != 0);                 // nothing that was not taken
+        assert(o_payload == want);           // the next pair, in order, its words fetched
+      end
+      assert(!overflow);
+      assert(starve <= 4);                   // a job's first pair within 4 cycles of room
+      // the credits: every entry is free for the fetch, claimed by a pair in flight, full,
+      // or on its way back
+      assert(credit_probe + in_flight + lvl + fr == {d} && lvl <= {d});
+      // the job the fetch holds is the last taken, at its next pair; the pairs in flight are
+      // those from the next out to it
+      assert(queued <= 5);
+{sane}      if (busy_probe) assert(queued != 0 && job_probe == cur
+                             && (cur_marker ? ip_k == 0 : ip_k < cur_ntris));
+      if (queued != 0) assert(p0_j_marker ? kout == 0 : kout < p0_j_ntris);
+      else assert(kout == 0);
+      assert(p4_n == ip_n && p4_k == ip_k);
+      cover(o_valid && p0_last && !p0_j_marker && kout == 1);   // a job's two pairs
+      cover(o_valid && p0_j_marker);         // a marker's pair
+      cover(o_valid && lvl == {d - 1});          // the write that spends the last credit
+      cover(o_valid && m_out == {d});            // a pair on a credit given back
+    end
+  end
+endmodule
+"""
+
+
 def _check_text(name: str, info: dict) -> str:
     if name in ("bram-fifo", "sync-fifo-buffered", "credit-fifo", "credit-fifo-banked"):
         return _fifo_check(info["width"], info["depth"], info.get("credits", False))
@@ -678,6 +885,8 @@ def _check_text(name: str, info: dict) -> str:
         return _framing_check(info)
     if name == "pair-selector":
         return _selector_check(info)
+    if name == "record-fetch":
+        return _fetch_check(info)
     return _merger_check(info)
 
 
@@ -731,7 +940,8 @@ def check_stage(name: str, *, timeout: float = 300, cwd: Path | str = ".",
     (work / "stage.v").write_text(text)
     (work / "check.v").write_text(check)
     steps, result, reason = [], "proved" if stage.mode == "prove" else "bounded", ""
-    for mode, depth in ((stage.mode, stage.depth), ("cover", stage.depth + 4)):
+    cover = stage.depth + 4 if stage.cover is None else stage.cover
+    for mode, depth in ((stage.mode, stage.depth), ("cover", cover)):
         res, secs, detail = _run(work, mode, depth, timeout, stage.probes)
         steps.append({"proves": f"sby {mode}: {detail}", "result": res,
                       "seconds": round(secs, 3)})

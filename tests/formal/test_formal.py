@@ -461,7 +461,7 @@ def test_virtex4_multiplier_mutant_gives_real_counterexample(work):
 # -- stream stages of the intersection unit (SymbiYosys) ------------------------------------
 @pytest.mark.parametrize("stage", ["bram-fifo", "sync-fifo-buffered", "credit-fifo",
                                    "credit-fifo-banked", "job-distributor", "result-merger",
-                                   "result-framing", "pair-selector"])
+                                   "result-framing", "pair-selector", "record-fetch"])
 def test_stream_stage_checked(stage, work):
     from raplas_hdl.formal.streams import STAGES, check_stage
 
@@ -501,6 +501,15 @@ def test_stream_stage_checked(stage, work):
     # ... the enable lookup reads bank 0 whatever the run's bank
     ("pair-selector", ("assign \\$32  = it[8] ? \\$31  : { 2'h0, \\$24 [1:0] };",
                        "assign \\$32  = { 2'h0, \\$24 [1:0] };")),
+    # the record fetch starts with 5 credits for a FIFO of 4: a write into a full FIFO
+    ("record-fetch", ("3'h4", "3'h5")),
+    # ... it takes the next job after any pair, not only the last: a job's pairs lost
+    ("record-fetch", ("assign \\$10  = issue & last;", "assign \\$10  = issue;")),
+    # ... it reads the Ray Memory's bank 0 whatever the job's bank
+    ("record-fetch", ("assign \\$14  = g2[2] ? \\$13  : { 2'h0, g2[1] };",
+                      "assign \\$14  = { 2'h0, g2[1] };")),
+    # ... it sets the job-last bit on a marker's pair only: the lanes' merger never moves on
+    ("record-fetch", ("\\$20 [4] = last;", "\\$20 [4] = job[5];")),
 ])
 def test_stream_stage_mutants_fail(stage, mutation, work):
     from raplas_hdl.formal.streams import check_stage
