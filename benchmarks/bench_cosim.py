@@ -6,7 +6,7 @@ The unit is FPAdd at FP24/rtz (default depth). Each mode runs random operands at
 (start-up included), its CPU time, and for the cocotb modes the wall time inside the test
 (steady state, no start-up). The plain harness is the same Verilog (DUT + batch harness)
 built by Verilator with the same flags (``-O3``, ``-CFLAGS -O2``, no tracing) and
-``raplas_hdl/sim/verilator_main.cpp`` instead of cocotb: the limit.
+``raplas_hdl/sim/build/verilator_main.cpp`` instead of cocotb: the limit.
 
 Targets (issue 2): batch >= 20x per-cycle, and batch >= half the plain harness on Verilator.
 
@@ -36,10 +36,11 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from raplas_hdl.fp import FPFormat  # noqa: E402
-from raplas_hdl.sim.harness import (batch_plusargs, harness_verilog, read_results,  # noqa: E402
-                         run_batch, run_percycle, write_vectors)
-from raplas_hdl.sim.runner import build_plain_verilator, require_simulator, simulator_env  # noqa: E402
-from raplas_hdl.sim.tb_fp import fp_expected, fp_spec, fp_verilog  # noqa: E402
+from raplas_hdl.sim.build.harness import (batch_plusargs, harness_verilog,  # noqa: E402
+                                          read_results, run_batch, run_percycle, write_vectors)
+from raplas_hdl.sim.build.runner import (build_plain_verilator,  # noqa: E402
+                                         require_simulator, simulator_env)
+from raplas_hdl.sim.cosim.fp import fp_expected, fp_spec, fp_verilog  # noqa: E402
 
 OP = "fp-add"
 FMT = FPFormat(7, 16, "rtz")

@@ -29,7 +29,7 @@ the largest relative difference of ``t``.
 
 With ``--rtl icarus|verilator`` the shadow passes of the first scene at ``--rtl-size`` also
 go through the reduced unit's Verilog in a live simulation
-(:class:`raplas_hdl.sim.unit_harness.UnitSession`): its answers must equal the model's, and
+(:class:`raplas_hdl.sim.drive.unit_harness.UnitSession`): its answers must equal the model's, and
 its ``pairs_issued`` gives the early-out's real saving beside the zero-latency bound.
 
 Usage::
@@ -189,7 +189,7 @@ def measure_rtl(scene: str, size, shadow, rows: int, cols: int, sim: str) -> dic
     zero-latency bound."""
     import resource
 
-    from raplas_hdl.sim.unit_harness import UnitSession
+    from raplas_hdl.sim.drive.unit_harness import UnitSession
 
     def children():
         ru = resource.getrusage(resource.RUSAGE_CHILDREN)

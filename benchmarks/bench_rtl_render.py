@@ -39,7 +39,7 @@ from raplas_hdl.fp import FP24
 from raplas_hdl.host.backends import make_backend
 from raplas_hdl.host.render import RenderSettings, render
 from raplas_hdl.host.scenes import get_scene
-from raplas_hdl.sim.unit_harness import replay
+from raplas_hdl.sim.drive.unit_harness import replay
 
 BASELINE_PRIMARY_S = 239.0   # issue 12: bunny 32x32, Verilator, per-cycle driver, primary pass
 

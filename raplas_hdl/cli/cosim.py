@@ -129,7 +129,7 @@ def read_vectors(path, unit: str, fmt=None):
         raise ValueError(f"unit must be one of {', '.join(FP_UNITS)}, not {unit!r}")
     nops = 3 if unit == "fp-add" else 2
     names = ["A", "B"] + (["SUB"] if unit == "fp-add" else []) + ["EXPECTED", "FLAGS"]
-    from ..sim.vectors import check_header, hex_fields, match_header, text_lines
+    from ..sim.cosim.vectors import check_header, hex_fields, match_header, text_lines
 
     rows = []
     width = None
@@ -320,7 +320,7 @@ def _print_rate(info, total) -> None:
 def _run_fp(args) -> int:
     import numpy as np
 
-    from raplas_hdl.sim.tb_fp import fp_cosim, fp_expected
+    from raplas_hdl.sim.cosim.fp import fp_cosim, fp_expected
 
     fmt = args.fmt
     if args.cases is not None:

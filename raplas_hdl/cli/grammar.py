@@ -645,7 +645,7 @@ def fst_libs_missing() -> str | None:
 @contextlib.contextmanager
 def waves(args):
     """Around a command's simulations: with ``--waves``, ask the simulation runner
-    (:mod:`raplas_hdl.sim.runner`) for FST waveforms in ``args.waves_dir`` and print the
+    (:mod:`raplas_hdl.sim.build.runner`) for FST waveforms in ``args.waves_dir`` and print the
     path of every file written."""
     if not getattr(args, "waves", False):
         yield
@@ -676,8 +676,8 @@ def waves(args):
 
 def require_simulator(name: str) -> None:
     """UsageError (naming what to install) unless simulator ``name`` is installed."""
-    from ..sim.runner import SimulatorNotFound
-    from ..sim.runner import require_simulator as req
+    from ..sim.build.runner import SimulatorNotFound
+    from ..sim.build.runner import require_simulator as req
 
     try:
         req(name)

@@ -3,7 +3,7 @@
 The driver speaks to an abstract 32-bit bus: any object with ``read(addr) -> int`` and
 ``write(addr, value)``, ``addr`` being a *word* address of the register map
 (:data:`raplas_hdl.model.board_map.REGISTER_MAP`). Behind it may be the co-simulation's
-Wishbone master (``raplas_hdl/sim/tb_board.py``), a UART or PCIe bridge to a board, or a
+Wishbone master (``raplas_hdl/sim/tb/board.py``), a UART or PCIe bridge to a board, or a
 test double.
 A bus that cannot complete an access (Wishbone ``err``) raises an exception from
 ``read``/``write``; the driver lets it through.

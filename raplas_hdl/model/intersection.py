@@ -166,7 +166,7 @@ def run_bundle(config: UnitConfig, scene: SceneMemory, bundle: BundleMemory,
 
 def run_runs(config: UnitConfig, scene: SceneMemory, runs) -> list:
     """Run the unit over ``runs`` in order: the model's side of the interface the RTL driver
-    has (:func:`raplas_hdl.sim.unit_driver.run_runs`, without the simulator).
+    has (:func:`raplas_hdl.sim.drive.unit_driver.run_runs`, without the simulator).
 
     Parameters
     ----------

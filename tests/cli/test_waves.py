@@ -6,7 +6,7 @@ One small cosim per simulator (a simulator build each: about 30 s under Verilato
 import pytest
 
 from raplas_hdl.cli import main
-from raplas_hdl.sim.runner import available_simulators
+from raplas_hdl.sim.build.runner import available_simulators
 
 FST_MAGIC = bytes([0])   # an FST file starts with a header block of type 0 (VCD with '$')
 

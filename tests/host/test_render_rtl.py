@@ -5,7 +5,7 @@ bundles (one unit configuration, so one live simulation for the whole render; th
 configuration, so the same cached simulator build, as the 2x2 bundles of
 ``host/test_render_secondary_rtl.py``), with
 early-out rounds, through the intersection unit's Verilog (the job-stream harness of
-:mod:`raplas_hdl.sim.unit_harness`: the scene loaded once, then one round of runs per pass
+:mod:`raplas_hdl.sim.drive.unit_harness`: the scene loaded once, then one round of runs per pass
 and early-out batch) and through the golden model. Image, nearest triangle per pixel,
 visibility and the unit's counters must agree. Verilator renders 32x32 pixels; Icarus,
 some 30x slower on this unit, renders 8x4. A missing simulator is an error, not a skip.

@@ -15,7 +15,7 @@ from raplas_hdl.model.memory_image import (REGIONS, BundleMemory, Run, SceneMemo
                                            write_address)
 from raplas_hdl.model.plane_sphere import tester_flags as plane_flags
 from raplas_hdl.model.ray_triangle import intersect
-from raplas_hdl.sim.unit_driver import random_bundle, random_scene
+from raplas_hdl.sim.drive.unit_driver import random_bundle, random_scene
 
 
 def ref_run(config, scene, bundle, ids, keep_all=False):

@@ -101,7 +101,7 @@ def test_filelist_compiles_with_icarus(fp_add, tmp_path):
 
 
 def _lint(core_dir, vlnv, cwd):
-    from raplas_hdl.sim.runner import simulator_env
+    from raplas_hdl.sim.build.runner import simulator_env
 
     res = subprocess.run([sys.executable, "-m", "fusesoc.main", "--cores-root", str(core_dir),
                           "run", "--target", "lint", vlnv], cwd=cwd,

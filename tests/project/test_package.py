@@ -74,8 +74,8 @@ def test_wheel_file_list(wheel):
     # every module and data file of the package, and nothing else
     assert shipped == source, (f"missing {sorted(source - shipped)[:20]}, "
                                f"extra {sorted(shipped - source)[:20]}")
-    for need in ("raplas_hdl/sim/verilator_main.cpp", "raplas_hdl/sim/tb_fp.py",
-                 "raplas_hdl/sim/unit_harness.py", "raplas_hdl/data/scenes/showcase.toml",
+    for need in ("raplas_hdl/sim/build/verilator_main.cpp", "raplas_hdl/sim/tb/stream.py",
+                 "raplas_hdl/sim/drive/unit_harness.py", "raplas_hdl/data/scenes/showcase.toml",
                  "raplas_hdl/data/meshes/stanford-bunny.obj",
                  "raplas_hdl/data/meshes/README.md", "raplas_hdl/cli/fusesoc.py"):
         assert need in shipped, need
@@ -103,7 +103,7 @@ def test_unpacked_wheel_runs_outside_the_checkout(wheel, tmp_path):
     env = {**os.environ, "PYTHONPATH": str(site)}
     py = [sys.executable, "-m", "raplas_hdl"]
     where = _run([sys.executable, "-c",
-                  "import raplas_hdl, raplas_hdl.sim.runner as r; "
+                  "import raplas_hdl, raplas_hdl.sim.build.runner as r; "
                   "from raplas_hdl.host.scenes import get_scene; "
                   "s = get_scene('showcase'); "
                   "print(raplas_hdl.__file__); print(r.BUILD_ROOT); print(len(s.triangles))"],

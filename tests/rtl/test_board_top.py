@@ -50,7 +50,7 @@ def scene_runs():
 
 @pytest.mark.parametrize("simulator", ["icarus", "verilator"])
 def test_board_cosim_matches_model(simulator, scene_runs):
-    from raplas_hdl.sim.board_sim import run_board
+    from raplas_hdl.sim.drive.board_sim import run_board
 
     scene, runs = scene_runs
     t0 = time.monotonic()
@@ -75,7 +75,7 @@ SMALL = ["--format", "FP16", "--rows", "2", "--cols", "2", "--tris-per-sphere", 
 def small_ports():
     from raplas_hdl.fp import FP16
     from raplas_hdl.rtl.constraints import board_ports
-    from raplas_hdl.sim.board_sim import board_verilog   # emitted once for every xdist worker
+    from raplas_hdl.sim.drive.board_sim import board_verilog   # emitted once for every xdist worker
 
     cfg = UnitConfig(fmt=FP16, rows=2, cols=2, tris_per_sphere=2, max_triangles=16,
                      max_spheres=8, fifo_depth=3)

@@ -180,7 +180,7 @@ def test_unit_cosim_long(simulator, reduce, fmt, options):
 
 
 def _reducer_check(simulator, n_runs, seed, cfg=CERT, **kw):
-    from raplas_hdl.sim.reducer_harness import cosim_reducer
+    from raplas_hdl.sim.drive.reducer_harness import cosim_reducer
 
     runs = reducer_runs(cfg, n_runs, seed)
     got, want, _ = cosim_reducer(simulator, cfg, runs, seed=seed,

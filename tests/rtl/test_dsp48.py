@@ -2,7 +2,7 @@
 
 One top holds :class:`DSP48Mul` (``DSP48`` primitives, simulated with the ``DSP48`` module of
 Yosys's ``share/xilinx/cells_sim.v``) and :class:`PipelinedMul` (inferred ``a * b``); the
-cocotb TB (:mod:`raplas_hdl.sim.tb_dsp48`) drives random operands (edge values first) with random
+cocotb TB (:mod:`raplas_hdl.sim.tb.dsp48`) drives random operands (edge values first) with random
 clock-enable stalls, and every cycle's outputs are compared with each other and with a
 Python model of the pipeline. The synthesis test checks that the DSP48 version leaves no
 flip-flop of the multiply in the fabric.
@@ -18,7 +18,7 @@ from amaranth.lib.wiring import In, Out
 from raplas_hdl.rtl.dsp48 import (DSP48Mul, PipelinedMul, dsp48_count, dsp48_sim_model,
                                   make_multiplier, multiplier_latency)
 from raplas_hdl.synth.yosys import synthesize
-from raplas_hdl.sim.runner import run_cocotb
+from raplas_hdl.sim.build.runner import run_cocotb
 
 
 class _Pair(wiring.Component):
@@ -66,7 +66,7 @@ def test_dsp48_multiplier_bit_exact_under_icarus(width, tmp_path):
     a, b, en = _vectors(width, 400, seed=width)
     np.savez(tmp_path / "in.npz", a=a, b=b, en=en)
     out = tmp_path / "out.npz"
-    run_cocotb("icarus", text, "dsp48_pair", "raplas_hdl.sim.tb_dsp48", f"dsp48_pair-w{width}",
+    run_cocotb("icarus", text, "dsp48_pair", "raplas_hdl.sim.tb.dsp48", f"dsp48_pair-w{width}",
                env={"RAPLAS_TB_IN": tmp_path / "in.npz", "RAPLAS_TB_OUT": out})
     res = np.load(out)
     p_dsp = [int(x) for x in res["p_dsp"]]

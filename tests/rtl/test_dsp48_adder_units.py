@@ -29,7 +29,7 @@ from raplas_hdl.fp import FP24
 from raplas_hdl.rtl.fp_add import fp_add_latency
 from raplas_hdl.rtl.plane_sphere import PlaneSphereArray, PlaneSphereTester
 from raplas_hdl.rtl.ray_triangle import RayTriangleUnit
-from raplas_hdl.sim.runner import require_simulator
+from raplas_hdl.sim.build.runner import require_simulator
 
 V4 = "virtex4"
 
@@ -223,7 +223,7 @@ def test_intersection_unit_cycles_equal_model_with_bram_fifo():
     from raplas_hdl.model.config import UnitConfig
     from raplas_hdl.model.throughput import profile_runs, simulate
     from raplas_hdl.rtl.intersection import IntersectionUnit
-    from raplas_hdl.sim.unit_harness import UnitSession
+    from raplas_hdl.sim.drive.unit_harness import UnitSession
 
     require_simulator("icarus")
     cfg = UnitConfig(fmt=FP24, rows=2, cols=2, testers=2, tris_per_sphere=4,

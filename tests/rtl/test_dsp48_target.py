@@ -8,7 +8,7 @@ from FPMul takes the same option. Checked here:
 * the stated latencies (FP24: multiplier 4 instead of 3, tester 13, ray-triangle 30) and the
   errors for a bad target, in Python;
 * FP24 FPMul in ``rtz`` and ``rne``, generic and virtex4 side by side in one batch-harness
-  DUT (:func:`raplas_hdl.sim.tb_fp.fp_bundle`), under Icarus and Verilator with Yosys's
+  DUT (:func:`raplas_hdl.sim.cosim.fp.fp_bundle`), under Icarus and Verilator with Yosys's
   ``DSP48`` model:
   every result bit and flag against :mod:`raplas_hdl.fp.model`, with random gaps and
   clock-enable stalls. The bundle delays each unit to the longest *stated* latency, so
@@ -32,10 +32,10 @@ from raplas_hdl.rtl.dsp48 import dsp48_sim_model
 from raplas_hdl.rtl.fp_mul import FPMul, fp_mul_latency
 from raplas_hdl.rtl.plane_sphere import PlaneSphereArray, PlaneSphereTester
 from raplas_hdl.rtl.ray_triangle import RayTriangleUnit
-from raplas_hdl.sim.harness import run_batch
-from raplas_hdl.sim.runner import require_simulator, run_cocotb
-from raplas_hdl.sim.tb_fp import check_bundle, fp_bundle
-from raplas_hdl.sim.tb_ray_triangle import read_payloads, write_payloads
+from raplas_hdl.sim.build.harness import run_batch
+from raplas_hdl.sim.build.runner import require_simulator, run_cocotb
+from raplas_hdl.sim.cosim.fp import check_bundle, fp_bundle, fp_expected
+from raplas_hdl.sim.tb.ray_triangle import read_payloads, write_payloads
 from tests.support.fp_vectors import fp24_vectors
 from tests.support.ray_triangle import compare, expected, pack_inputs, unpack_outputs
 
@@ -162,8 +162,6 @@ def test_fp32_fpmul_virtex4_four_dsp48_under_icarus():
 
 def test_bundle_check_catches_a_wrong_virtex4_result():
     """The comparison can fail for a virtex4 unit, and says which target."""
-    from raplas_hdl.sim.tb_fp import fp_expected
-
     units = {"mul_rtz": ("fp-mul", FP24), "mul_rtz_virtex4": ("fp-mul", FP24)}
     a = np.arange(1000, 1064, dtype=np.uint32) << 8
     b = np.full(64, FP24.one, dtype=np.uint32)
@@ -198,7 +196,7 @@ def test_ray_triangle_virtex4_under_icarus(tmp_path):
     tri_ids = rng.integers(0, 1 << 16, count)
     write_payloads(tmp_path / "in.txt", pack_inputs(fmt, vec, ray_ids, tri_ids))
     out, lat_file = tmp_path / "out.txt", tmp_path / "latency.txt"
-    run_cocotb("icarus", text, "ray_triangle", "raplas_hdl.sim.tb_ray_triangle",
+    run_cocotb("icarus", text, "ray_triangle", "raplas_hdl.sim.tb.ray_triangle",
                f"ray_triangle-{fmt.name}-paper-virtex4",
                env={"RAPLAS_RT_IN": tmp_path / "in.txt", "RAPLAS_RT_OUT": out,
                     "RAPLAS_RT_IDLE": 0.25, "RAPLAS_RT_STALL": 0.35, "RAPLAS_RT_SEED": seed,
@@ -229,7 +227,7 @@ def test_plane_sphere_array_virtex4_under_icarus(tmp_path):
     cases = make_cases(rows, cols, fmt, n_spheres=60, seed=77)
     stim, result = tmp_path / "in.npz", tmp_path / "out.npz"
     write_stimulus(stim, cases, fmt)
-    run_cocotb("icarus", text + dsp48_sim_model(), "plane_sphere", "raplas_hdl.sim.tb_plane_sphere",
+    run_cocotb("icarus", text + dsp48_sim_model(), "plane_sphere", "raplas_hdl.sim.tb.plane_sphere",
                f"plane_sphere-{rows}x{cols}-t2-{fmt.name}-virtex4",
                env={"RAPLAS_PS_IN": stim, "RAPLAS_PS_OUT": result})
     got = [unpack_beat(int(v, 16), rows, cols) for v in np.load(result)["results"]]

@@ -5,7 +5,7 @@ One DUT holds, for every rounding, the virtex4 adder and the generic adder (dela
 virtex4 latency), fed the same operands; the batch harness runs it under Icarus and
 Verilator with Yosys's ``DSP48`` model (``share/xilinx/cells_sim.v``), random gaps in
 ``i_valid`` and clock-enable stalls, and every result bit and flag of every unit is
-compared with :mod:`raplas_hdl.fp.model` (:func:`raplas_hdl.sim.tb_fp.check_bundle`).
+compared with :mod:`raplas_hdl.fp.model` (:func:`raplas_hdl.sim.cosim.fp.check_bundle`).
 All units valid on every output beat shows that the stated latency (7) is the true one.
 
 * ``make test``: E4M3 every operand pair, add and subtract, under Verilator (all three
@@ -28,9 +28,9 @@ from raplas_hdl.rtl.dsp48 import dsp48_sim_model
 from raplas_hdl.rtl.fp_add import FPAdd, fp_add_latency
 from raplas_hdl.rtl.fp_add_dsp48 import LATENCY
 from raplas_hdl.rtl.pipeline import delay
-from raplas_hdl.sim.harness import HarnessSpec, run_batch
-from raplas_hdl.sim.runner import require_simulator
-from raplas_hdl.sim.tb_fp import check_bundle
+from raplas_hdl.sim.build.harness import HarnessSpec, run_batch
+from raplas_hdl.sim.build.runner import require_simulator
+from raplas_hdl.sim.cosim.fp import check_bundle
 from tests.support.fp_vectors import fp24_vectors, special_values
 
 VERILATOR_ARGS = ("--output-split", "0", "-CFLAGS", "-O0")

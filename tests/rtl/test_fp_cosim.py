@@ -1,17 +1,17 @@
 """FPAdd and FPMul as Verilog under cocotb, Icarus and Verilator, against the golden model.
 
 Every output bit and flag is compared. One simulator build per (format, simulator) holds
-all roundings of both units (:func:`raplas_hdl.sim.tb_fp.fp_bundle`) and is reused by the batch and
-per-cycle tests (and across pytest-xdist workers). A missing simulator fails these tests
+all roundings of both units (:func:`raplas_hdl.sim.cosim.fp.fp_bundle`) and is reused by the
+batch and per-cycle tests (and across pytest-xdist workers). A missing simulator fails these tests
 with a message saying what to install; it is never a skip.
 """
 
 import numpy as np
 import pytest
 
-from raplas_hdl.sim.harness import run_batch, run_percycle
-from raplas_hdl.sim.runner import require_simulator
-from raplas_hdl.sim.tb_fp import check_bundle, fp_bundle
+from raplas_hdl.sim.build.harness import run_batch, run_percycle
+from raplas_hdl.sim.build.runner import require_simulator
+from raplas_hdl.sim.cosim.fp import check_bundle, fp_bundle, fp_expected
 from tests.support.fp_vectors import fp24_vectors
 
 SIMS = ("icarus", "verilator")
@@ -86,7 +86,6 @@ def test_harness_detects_a_wrong_result():
     a = np.arange(64, dtype=np.uint32)
     b = np.full(64, 0x38, dtype=np.uint32)
     sub = np.zeros(64, dtype=np.uint32)
-    from raplas_hdl.sim.tb_fp import fp_expected
     out = {"valids": np.full(64, (1 << len(units)) - 1)}
     for suffix, (op, fmt) in units.items():
         out[f"o_{suffix}"], out[f"f_{suffix}"] = fp_expected(op, fmt, a, b, sub)

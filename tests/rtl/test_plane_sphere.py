@@ -268,14 +268,14 @@ def _verilog(rows, cols, testers, fmt):
 
 
 def check_cocotb(name, config, simulator, tmp_path):
-    from raplas_hdl.sim.runner import run_cocotb
+    from raplas_hdl.sim.build.runner import run_cocotb
 
     rows, cols, testers, fmt = config
     dut, text = _verilog(rows, cols, testers, fmt)
     cases = make_cases(rows, cols, fmt, n_spheres=60, seed=100 + zlib.crc32(name.encode()) % 1000)
     stim, result = tmp_path / "in.npz", tmp_path / "out.npz"
     write_stimulus(stim, cases, fmt)
-    run_cocotb(simulator, text, "plane_sphere", "raplas_hdl.sim.tb_plane_sphere",
+    run_cocotb(simulator, text, "plane_sphere", "raplas_hdl.sim.tb.plane_sphere",
                f"plane_sphere-{rows}x{cols}-t{dut.testers}-{fmt.name}",
                env={"RAPLAS_PS_IN": stim, "RAPLAS_PS_OUT": result}, 
                build_args=VERILATOR_ARGS if simulator == "verilator" else (),

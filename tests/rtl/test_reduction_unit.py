@@ -1,5 +1,5 @@
 """The intersection unit built with the on-chip reduction (``UnitConfig(reduce=True)``) in a
-live simulation (:class:`raplas_hdl.sim.unit_harness.UnitSession`) against the model's
+live simulation (:class:`raplas_hdl.sim.drive.unit_harness.UnitSession`) against the model's
 reduced ``run_runs``: every answer bit of every run equal; the counters equal except that
 the any-hit early-out lets the unit issue fewer pairs (``pairs_issued``, and the ``hits``
 and event counters of those pairs, at most the model's, which has no early-out).
@@ -24,7 +24,7 @@ from raplas_hdl.model.config import UnitConfig
 from raplas_hdl.model.memory_image import Run, as_run
 from raplas_hdl.model.reduction import inf_pattern
 from raplas_hdl.rtl.intersection import IntersectionUnit
-from raplas_hdl.sim.unit_harness import UnitSession
+from raplas_hdl.sim.drive.unit_harness import UnitSession
 
 CFG = UnitConfig(fmt=FP24, rows=2, cols=4, testers=3, tris_per_sphere=4, max_triangles=128,
                  max_spheres=64, fifo_depth=8, reduce=True)

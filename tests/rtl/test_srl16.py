@@ -28,7 +28,7 @@ from raplas_hdl.fp import FP24
 from raplas_hdl.rtl.dsp48 import dsp48_sim_model
 from raplas_hdl.rtl.pipeline import SRL_STAGES, Delay, delay, srl_split
 from raplas_hdl.rtl.ray_triangle import RayTriangleUnit
-from raplas_hdl.sim.runner import require_simulator, run_cocotb
+from raplas_hdl.sim.build.runner import require_simulator, run_cocotb
 
 V4 = "virtex4"
 
@@ -132,7 +132,7 @@ def check_lines(simulator, tmp_path, n=1500, seed=3):
     en[:60] = 1                                      # a run at full rate first
     np.savez(tmp_path / "in.npz", i=data, en=en)
     ports = [p for c, s in LINES for p in (f"o_srl_{c}_{s}", f"o_ff_{c}_{s}")]
-    run_cocotb(simulator, text + dsp48_sim_model(), "srl_lines", "raplas_hdl.sim.tb_srl16",
+    run_cocotb(simulator, text + dsp48_sim_model(), "srl_lines", "raplas_hdl.sim.tb.srl16",
                "srl_lines", env={"RAPLAS_TB_IN": tmp_path / "in.npz",
                                  "RAPLAS_TB_OUT": tmp_path / "out.npz",
                                  "RAPLAS_TB_PORTS": ",".join(ports)})

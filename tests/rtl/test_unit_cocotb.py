@@ -15,7 +15,7 @@ import pytest
 
 from raplas_hdl.fp import FP24
 from raplas_hdl.model.config import UnitConfig
-from raplas_hdl.sim.unit_driver import run_runs
+from raplas_hdl.sim.drive.unit_driver import run_runs
 from tests.support.unit_scenes import (assert_keep_all, assert_operation_events,
                                        check_against_model, scene_and_runs)
 
@@ -30,7 +30,8 @@ def scene_runs():
 
 @pytest.mark.parametrize("overlap", [False, True], ids=["sequential", "overlap"])
 # Verilator builds the unit in about 35 s because only the top's ports are public
-# (see raplas_hdl/sim/runner.py, mark_ports_public); with every signal public it took over 40 min.
+# (see raplas_hdl/sim/build/runner.py, mark_ports_public); with every signal public it took
+# over 40 min.
 @pytest.mark.parametrize("simulator", ["icarus", "verilator"])
 def test_unit_cocotb_matches_model(simulator, overlap, scene_runs):
     scene, runs = scene_runs

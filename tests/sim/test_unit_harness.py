@@ -16,7 +16,7 @@ import pytest
 from raplas_hdl.fp import FP24
 from raplas_hdl.model.config import UnitConfig
 from raplas_hdl.model.records import RESULT
-from raplas_hdl.sim.unit_harness import (
+from raplas_hdl.sim.drive.unit_harness import (
     HarnessError,
     UnitSession,
     encode_ops,

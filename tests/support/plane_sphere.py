@@ -1,7 +1,7 @@
 """Stimulus and results of the plane-sphere array's tests (``rtl/test_plane_sphere.py``,
 ``rtl/test_dsp48_target.py``): bundles, sphere patterns near their planes, the model's masks,
 the PS_RESULT beats and their comparison, and the stimulus file of
-``raplas_hdl/sim/tb_plane_sphere.py``."""
+``raplas_hdl/sim/tb/plane_sphere.py``."""
 
 from __future__ import annotations
 
@@ -116,7 +116,7 @@ def check_beats(got, want):
 
 
 def write_stimulus(path, cases, fmt, idle=0.3, stall=0.3, seed=7):
-    """The stimulus file of ``raplas_hdl/sim/tb_plane_sphere.py``: planes and spheres as hex
+    """The stimulus file of ``raplas_hdl/sim/tb/plane_sphere.py``: planes and spheres as hex
     words, and the testbench's random idle and stall rates."""
     np.savez(path,
              planes=np.array([[f"{w:x}" for w in c["planes"]] for c in cases]),

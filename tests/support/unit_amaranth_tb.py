@@ -14,12 +14,13 @@ import numpy as np
 from amaranth.sim import Simulator
 
 from raplas_hdl.model.records import CMD, COUNTERS, output_record
-from raplas_hdl.sim.unit_driver import encode_runs
+from raplas_hdl.sim.drive.unit_driver import encode_runs
 
 
 def simulate_runs(unit, scene, runs, *, seed=0, ready_density=0.7, overlap=False,
                   max_cycles=200_000, vcd=None):
-    """Results and counters per run, as :func:`raplas_hdl.sim.unit_driver.run_runs` gives them."""
+    """Results and counters per run, as :func:`raplas_hdl.sim.drive.unit_driver.run_runs`
+    gives them."""
     cfg = unit.config
     stim = encode_runs(cfg, scene, runs, overlap=overlap)
     n_runs = len(runs)

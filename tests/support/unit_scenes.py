@@ -5,7 +5,7 @@ import numpy as np
 from raplas_hdl.fp import model as fpm
 from raplas_hdl.model.intersection import run_bundle
 from raplas_hdl.model.memory_image import BundleMemory, Run, as_run
-from raplas_hdl.sim.unit_driver import random_bundle, random_scene
+from raplas_hdl.sim.drive.unit_driver import random_bundle, random_scene
 
 
 def aimed_bundle(config, scene, seed, disable=0.0, spread=0.12):

@@ -21,13 +21,13 @@ class RtlBackend(UnitBackend):
     The host side (memories, hierarchy test, pair order) is the model backend's
     (:class:`~raplas_hdl.host.backends.unit.UnitBackend`); the render mode folds the runs'
     streams (:meth:`stream`) or, with ``reduce``, the unit's answers. The runs go
-    through live simulations of the unit (:class:`raplas_hdl.sim.unit_harness.UnitSession`):
+    through live simulations of the unit (:class:`raplas_hdl.sim.drive.unit_harness.UnitSession`):
     one per unit configuration a render needs (the primary and the shadow bundle sizes),
     started on first use with the scene loaded once, then fed one round of runs per
     :meth:`stream` call; the simulator builds are cached on disk across renders. A new
     scene (:meth:`load`) or :meth:`close` ends the sessions. With waveforms asked for
     (``WAVES=1``, ``render --waves``) the runs go through the per-cycle cocotb driver
-    (:func:`raplas_hdl.sim.unit_driver.run_runs`, one simulation per round) instead.
+    (:func:`raplas_hdl.sim.drive.unit_driver.run_runs`, one simulation per round) instead.
 
     Raises
     ------
@@ -37,13 +37,13 @@ class RtlBackend(UnitBackend):
 
     name = "rtl"
     runs_compiled = False
-    DRIVER = "raplas_hdl.sim.unit_harness"
+    DRIVER = "raplas_hdl.sim.drive.unit_harness"
 
     def __init__(self, fmt: FPFormat = FP24, mode: str = "conservative", testers=None,
                  margin_scale: int = 1, sim: str = "icarus", reduce: bool = False):
         super().__init__(fmt, mode, testers, margin_scale, reduce)
         try:    # lazy: the simulator side loads only for an rtl render
-            from raplas_hdl.sim.runner import SimulatorNotFound, require_simulator
+            from raplas_hdl.sim.build.runner import SimulatorNotFound, require_simulator
         except ImportError as exc:
             raise BackendUnavailable(
                 f"the rtl backend needs the raplas_hdl.sim package: {exc}") from exc
@@ -99,7 +99,7 @@ class RtlBackend(UnitBackend):
     def run_runs(self, config, runs):
         if os.environ.get("WAVES", "") not in ("", "0"):
             # waveforms (render --waves): the per-cycle cocotb driver, which records them
-            from raplas_hdl.sim.unit_driver import run_runs    # lazy: cocotb
+            from raplas_hdl.sim.drive.unit_driver import run_runs    # lazy: cocotb
 
             return run_runs(self.sim, config, self.scene_memory, runs)
         s = self.session(config)

@@ -3,7 +3,7 @@
 ``raplas-hdl cosim`` drives every unit at full clock rate with no Python per cycle:
 
 ``ray-triangle``
-    The batch harness of :mod:`raplas_hdl.sim.harness` around the unit's streams (``i`` a
+    The batch harness of :mod:`raplas_hdl.sim.build.harness` around the unit's streams (``i`` a
     packed :data:`~raplas_hdl.model.records.PAIR`, ``o`` a
     :data:`~raplas_hdl.model.records.RT_RESULT`), random gaps in ``i.valid`` (held until
     taken) and random back-pressure on ``o.ready``.
@@ -14,14 +14,14 @@
     nothing is in flight, writes the planes (one per clock) and goes on. The tester's clock
     enable is the output's ready (a held pipeline holds its result).
 ``intersection-unit``
-    A live session of :mod:`raplas_hdl.sim.unit_harness` (scene by backdoor, runs through
+    A live session of :mod:`raplas_hdl.sim.drive.unit_harness` (scene by backdoor, runs through
     the op stream, results decoded in bulk); a case is one run (a bundle against a list of
     spheres) and every field of every result beat and every counter is compared. With
-    ``--waves`` the per-cycle cocotb driver (:func:`raplas_hdl.sim.unit_driver.run_runs`)
+    ``--waves`` the per-cycle cocotb driver (:func:`raplas_hdl.sim.drive.unit_driver.run_runs`)
     runs instead, as ``render --waves`` does.
 
 Each unit is a :class:`UnitCosim`: its random cases (seeded), the model's expected results,
-its vectors file (:mod:`raplas_hdl.sim.vectors`; docs/cosim.md), the simulation and the
+its vectors file (:mod:`raplas_hdl.sim.cosim.vectors`; docs/cosim.md), the simulation and the
 comparison of every output field. With ``target="virtex4"`` the units' multipliers are
 DSP48 primitives and Yosys's DSP48 model (:func:`raplas_hdl.rtl.dsp48.dsp48_sim_model`) is
 appended to the simulated text.
@@ -29,19 +29,18 @@ appended to the simulated text.
 
 from __future__ import annotations
 
-from .base import (RT_ID_BITS, SPHERE_ID_BITS, VERILATOR_ARGS, UnitCosim, compare, unit_verilog,
-                   words64)
+from .base import RT_ID_BITS, SPHERE_ID_BITS, UnitCosim, compare, unit_verilog
 from .intersection import IntersectionCosim
 from .plane_sphere import ArrayCosim, TesterCosim, plane_wrapper_verilog
 from .ray_triangle import RayTriangleCosim
 
 __all__ = ["COSIM_UNITS", "ArrayCosim", "IntersectionCosim", "RT_ID_BITS", "RayTriangleCosim",
-           "SPHERE_ID_BITS", "TesterCosim", "UnitCosim", "VERILATOR_ARGS", "compare",
-           "plane_wrapper_verilog", "unit_cosim", "unit_verilog", "words64"]
+           "SPHERE_ID_BITS", "TesterCosim", "UnitCosim", "compare", "plane_wrapper_verilog",
+           "unit_cosim", "unit_verilog"]
 
 _CLASSES = {c.name: c for c in (TesterCosim, ArrayCosim, RayTriangleCosim,
                                 IntersectionCosim)}
-#: The units this module co-simulates (the FP units go through :mod:`raplas_hdl.sim.tb_fp`).
+#: The units this module co-simulates (the FP units: the functions of :mod:`.fp`).
 COSIM_UNITS = tuple(_CLASSES)
 
 

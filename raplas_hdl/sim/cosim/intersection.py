@@ -8,9 +8,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..runner import waves_requested
-from ..vectors import LineKind
+from ..build.runner import waves_requested
 from .base import UnitCosim
+from .vectors import LineKind
 
 
 class IntersectionCosim(UnitCosim):
@@ -51,7 +51,7 @@ class IntersectionCosim(UnitCosim):
         # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
         from raplas_hdl.fp import model as fpm
 
-        from ..unit_driver import random_bundle, random_scene
+        from ..drive.unit_driver import random_bundle, random_scene
 
         cfg = self.config
         rng = np.random.default_rng([seed, 41])
@@ -251,7 +251,7 @@ class IntersectionCosim(UnitCosim):
         t0 = time.monotonic()
         if waves_requested():       # the per-cycle cocotb driver records waveforms
             # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
-            from ..unit_driver import run_runs
+            from ..drive.unit_driver import run_runs
 
             got = run_runs(simulator, self.config, cases["scene"], cases["runs"], seed=seed,
                            ready_density=1.0 - stall_density, multiplier=self.target,
@@ -261,7 +261,7 @@ class IntersectionCosim(UnitCosim):
             run_s = time.monotonic() - t0
         else:
             # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
-            from ..unit_harness import UnitSession
+            from ..drive.unit_harness import UnitSession
 
             with UnitSession(simulator, self.config, cases["scene"], seed=seed,
                              ready_density=1.0 - stall_density,

@@ -5,10 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..harness import HarnessSpec
-from ..vectors import LineKind
-from .base import (SPHERE_ID_BITS, UnitCosim, as_u64, cosim_key, run_cosim_batch, unit_verilog,
-                   words32, words64)
+from ..build.harness import HarnessSpec, run_unit_batch, words32, words64
+from .base import SPHERE_ID_BITS, UnitCosim, as_u64, cosim_key, unit_verilog
+from .vectors import LineKind
 
 
 def plane_wrapper_verilog(kind: str, planes: int, width: int, in_bits: int,
@@ -219,9 +218,9 @@ class TesterCosim(_PlaneCosim):
         pl = cases["planes"][cases["group"], 0]
         words = {"planes": pack_fields([pl[:, 0], pl[:, 1], pl[:, 2], pl[:, 3]], w),
                  "sphere": pack_fields([cases[k] for k in ("cx", "cy", "cz", "r")], w)}
-        out, info = run_cosim_batch(simulator, spec, text,
-                           cosim_key("plane_sphere_tester", self.fmt.name, self.targets), words,
-                           valid_density, stall_density, seed, timeout_s)
+        out, info = run_unit_batch(simulator, spec, text,
+                          cosim_key("plane_sphere_tester", self.fmt.name, self.targets), words,
+                          valid_density, stall_density, seed, timeout_s=timeout_s)
         info["latency"] = latency
         return {"flag": out["result"]}, info
 
@@ -329,10 +328,10 @@ class ArrayCosim(_PlaneCosim):
         words = sph.pack_words({"id": cases["id"], "c": c, "r": cases["r"]})
         cols = {"planes": pack_fields([pl[:, j // 4, j % 4] for j in range(4 * p)], w),
                 "sphere": words32(words, sph.size)}
-        out, info = run_cosim_batch(simulator, spec, text,
-                           cosim_key("plane_sphere", self.fmt.name, f"{self.rows}x{self.cols}",
-                                f"t{self.options.get('testers', p)}", self.targets),
-                           cols, valid_density, stall_density, seed, timeout_s)
+        out, info = run_unit_batch(simulator, spec, text,
+                          cosim_key("plane_sphere", self.fmt.name, f"{self.rows}x{self.cols}",
+                               f"t{self.options.get('testers', p)}", self.targets),
+                          cols, valid_density, stall_density, seed, timeout_s=timeout_s)
         rec = res.unpack_words(words64(out["result"], res.size))
         info["latency"] = latency
         return {k: rec[k] for k in self.outputs}, info

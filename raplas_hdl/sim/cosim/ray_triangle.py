@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..harness import HarnessSpec
-from ..vectors import LineKind, columns_of
-from .base import (RT_ID_BITS, UnitCosim, as_u64, cosim_key, run_cosim_batch, unit_verilog,
-                   words32, words64)
+from ..build.harness import HarnessSpec, run_unit_batch, words32, words64
+from .base import RT_ID_BITS, UnitCosim, as_u64, cosim_key, unit_verilog
+from .vectors import LineKind, columns_of
 
 
 class RayTriangleCosim(UnitCosim):
@@ -99,10 +98,10 @@ class RayTriangleCosim(UnitCosim):
                            outputs=[("o__payload", out_bits)], i_valid="i__valid",
                            o_valid="o__valid", i_ready="i__ready", o_ready="o__ready")
         words = self.pair.pack_words(self._split(cases, self.pair))
-        out, info = run_cosim_batch(simulator, spec, text,
-                           cosim_key("ray_triangle", self.fmt.name, self.mode, self.targets),
-                           {"i__payload": words32(words, self.pair.size)}, valid_density,
-                           stall_density, seed, timeout_s)
+        out, info = run_unit_batch(simulator, spec, text,
+                          cosim_key("ray_triangle", self.fmt.name, self.mode, self.targets),
+                          {"i__payload": words32(words, self.pair.size)}, valid_density,
+                          stall_density, seed, timeout_s=timeout_s)
         words = words64(out["o__payload"], out_bits)
         rec = self.res.unpack_words(words)
         got = {}

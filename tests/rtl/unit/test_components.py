@@ -26,7 +26,7 @@ from raplas_hdl.rtl.unit.framing import EVENTS_LAYOUT, EventCounters, ResultFram
 from raplas_hdl.rtl.unit.memories import MEMORIES, WriteDecoder, memory_geometry
 from raplas_hdl.rtl.unit.selector import PairSelector
 from raplas_hdl.rtl.unit.streams import job_layout, mask_layout, sphere_layout, tag_layout
-from raplas_hdl.sim.unit_driver import random_bundle, random_scene
+from raplas_hdl.sim.drive.unit_driver import random_bundle, random_scene
 from tests.support.unit_scenes import model_runs, scene_and_runs
 
 CFG = UnitConfig(fmt=FPFormat(5, 6), rows=2, cols=3, testers=2, tris_per_sphere=3,

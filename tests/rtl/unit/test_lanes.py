@@ -23,7 +23,7 @@ from raplas_hdl.model.intersection import run_runs
 from raplas_hdl.model.config import UnitConfig
 from raplas_hdl.model.throughput import Timing, pairs_per_cycle, profile_runs, simulate
 from raplas_hdl.rtl.intersection import IntersectionUnit
-from raplas_hdl.sim.unit_harness import UnitSession
+from raplas_hdl.sim.drive.unit_harness import UnitSession
 from tests.support.unit_scenes import check_against_model, scene_and_runs
 
 SMALL = UnitConfig(fmt=FP24, rows=2, cols=2, testers=4, tris_per_sphere=4,
@@ -55,7 +55,7 @@ def check_cycles(cfg, scene, runs, results, overlap=False):
     runs go one at a time; with ``overlap``, the round's, with the harness's host writes
     (each run's words after the previous command and after the last beat of the bank's
     previous run)."""
-    from raplas_hdl.sim.unit_driver import encode_runs
+    from raplas_hdl.sim.drive.unit_driver import encode_runs
 
     prof = profile_runs(cfg, scene, runs)
     if not overlap:
@@ -112,7 +112,7 @@ def test_feeder_credits_bound_cycles_equal_model():
     credit fewer, or a credit one cycle slower, gives other cycles), and the ``cycles``
     counter equals the cycle model's, run by run."""
     from raplas_hdl.model.memory_image import Run
-    from raplas_hdl.sim.unit_driver import random_bundle, random_scene
+    from raplas_hdl.sim.drive.unit_driver import random_bundle, random_scene
 
     scene = random_scene(SMALL, 120, seed=4, size=1.2, extent=4.0, empty_spheres=2)
     away = random_bundle(SMALL, seed=5, target=np.array([0.0, 60.0, 0.0]), spread=0.01)

@@ -12,7 +12,7 @@ import pytest
 
 from raplas_hdl.fp import FP24
 from raplas_hdl.model.config import UnitConfig
-from raplas_hdl.sim.reducer_harness import cosim_reducer
+from raplas_hdl.sim.drive.reducer_harness import cosim_reducer
 from tests.support.reduction import reducer_runs
 
 CFG = UnitConfig(FP24, rows=2, cols=4, max_triangles=16, reduce=True)

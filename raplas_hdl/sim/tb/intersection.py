@@ -1,8 +1,9 @@
 """cocotb testbench of the intersection unit (Verilog module ``intersection_unit``).
 
-Started by :func:`raplas_hdl.sim.unit_driver.run_runs`, which passes, in environment variables,
-``UNIT_STIM`` (an ``.npz`` from :func:`raplas_hdl.sim.unit_driver.encode_runs`: scene writes
-and, per run, its memory writes and its command), ``UNIT_META`` (JSON: the unit's
+Started by :func:`raplas_hdl.sim.drive.unit_driver.run_runs`, which passes, in environment
+variables, ``UNIT_STIM`` (an ``.npz`` from
+:func:`raplas_hdl.sim.drive.unit_driver.encode_runs`: scene writes and, per run, its memory
+writes and its command), ``UNIT_META`` (JSON: the unit's
 parameters, seed, ready density) and ``UNIT_OUT`` (where the results go). The ports' payloads
 are packed and unpacked with the records of :mod:`raplas_hdl.model.records` (``CMD``,
 ``RESULT``, ``COUNTERS``) bound to the unit's parameters.

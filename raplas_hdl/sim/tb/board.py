@@ -1,9 +1,9 @@
 """cocotb testbench of the board-level top (Verilog module ``board_top``).
 
-Started by :func:`raplas_hdl.sim.board_sim.run_board`, which passes, in environment variables,
-``BOARD_STIM`` (an ``.npz``: the scene's and the runs' memories, see
-:func:`raplas_hdl.sim.board_sim.encode_stimulus`), ``BOARD_META`` (JSON: the unit's parameters,
-seed, bus gap density) and ``BOARD_OUT`` (where the results go).
+Started by :func:`raplas_hdl.sim.drive.board_sim.run_board`, which passes, in environment
+variables, ``BOARD_STIM`` (an ``.npz``: the scene's and the runs' memories, see
+:func:`raplas_hdl.sim.drive.board_sim.encode_stimulus`), ``BOARD_META`` (JSON: the unit's
+parameters, seed, bus gap density) and ``BOARD_OUT`` (where the results go).
 
 The host side is the real driver, :class:`raplas_hdl.host.board_driver.BoardDriver`, run
 unchanged in a cocotb *bridge* thread: its bus object turns every ``read``/``write`` into a
@@ -32,7 +32,7 @@ from cocotb.triggers import FallingEdge, RisingEdge
 
 from raplas_hdl.host.board_driver import BoardDriver
 from raplas_hdl.model.board_map import BOARD_ID, REGISTERS, STATUS_BITS, cmd_start_word
-from raplas_hdl.sim.board_sim import decode_stimulus
+from raplas_hdl.sim.drive.board_sim import decode_stimulus
 
 
 class BusError(RuntimeError):

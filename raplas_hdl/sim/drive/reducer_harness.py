@@ -1,5 +1,5 @@
 """Co-simulation of the reducer alone (:class:`raplas_hdl.rtl.unit.reducer.Reducer`) in the
-batch harness (:mod:`raplas_hdl.sim.harness`), Icarus or Verilator, against
+batch harness (:mod:`raplas_hdl.sim.build.harness`), Icarus or Verilator, against
 :func:`raplas_hdl.model.reduction.reduce_run`.
 
 The harness has one input stream; :class:`ReducerTop` makes it the reducer's three inputs:
@@ -16,15 +16,13 @@ from amaranth.hdl import Module
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from ..model.config import UnitConfig
-from ..model.memory_image import REGIONS, bundle_writes
-from ..model.records import answer_record, result_record
-from ..model.reduction import reduce_run
-from ..rtl.emit import emit_verilog
-from ..rtl.unit.reducer import Reducer, answer_layout
-from .cosim import VERILATOR_ARGS, words64
-from .harness import HarnessSpec, run_batch
-from .unit_driver import ICARUS_ARGS, verilator_pch_fix
+from raplas_hdl.model.config import UnitConfig
+from raplas_hdl.model.memory_image import REGIONS, bundle_writes
+from raplas_hdl.model.records import answer_record, result_record
+from raplas_hdl.model.reduction import reduce_run
+from raplas_hdl.rtl.emit import emit_verilog
+from raplas_hdl.rtl.unit.reducer import Reducer, answer_layout
+from raplas_hdl.sim.build.harness import HarnessSpec, run_unit_batch, words64
 
 __all__ = ["ReducerTop", "stimulus", "expected", "cosim_reducer"]
 
@@ -108,14 +106,7 @@ def cosim_reducer(simulator: str, cfg: UnitConfig, runs, *, seed: int = 1,
     n32 = (width + 31) // 32
     col = np.array([[(x >> (32 * k)) & 0xFFFFFFFF for k in range(n32)] for x in ints],
                    np.uint32)
-    out, info = _batch_n(simulator, spec, text, build_key, {"i__payload": col},
-                         valid_density, stall_density, seed, want.size)
+    out, info = run_unit_batch(simulator, spec, text, build_key, {"i__payload": col},
+                               valid_density, stall_density, seed, n_out=want.size)
     got = ans.unpack_words(words64(out["o__payload"], ans.size))
     return got, want, info
-
-
-def _batch_n(simulator, spec, text, key, columns, valid_density, stall_density, seed, n_out):
-    with verilator_pch_fix(simulator):
-        return run_batch(simulator, spec, text, key, columns, valid_density, stall_density,
-                         seed, n_out=n_out,
-                         build_args=VERILATOR_ARGS if simulator == "verilator" else ICARUS_ARGS)

