@@ -14,18 +14,23 @@ A ``MULT18X18D`` is packed when all of these hold, and left as it is otherwise:
 * every used ``P`` output bit has one load, the ``DI`` of a ``TRELLIS_FF``, and its net is
   not a port of the module; at least one ``P`` bit is used;
 * these flip-flops are plain registers on one clock: ``CLKMUX`` ``CLK`` on the same net,
-  the same clock enable (``CEMUX`` ``CE`` on the same net, or all enabled always), no
-  set or reset (``LSR`` the constant 0), reset value 0 (``REGSET`` ``RESET``, which is also
-  what the block's registers hold after configuration) and the same ``GSR`` setting.
+  the same clock enable (``CEMUX`` ``CE`` on the same net, or all ``INV`` on the same net,
+  or all enabled always), no set or reset (``LSR`` the constant 0), reset value 0
+  (``REGSET`` ``RESET``, which is also what the block's registers hold after configuration)
+  and the same ``GSR`` setting.
 
 Packing then gives the block ``REG_INPUTA_CLK = REG_INPUTB_CLK = REG_OUTPUT_CLK = "CLK0"``
 with ``CE0``/``RST0``, connects ``CLK0`` to the clock, ``CE0`` to the enable and ``RST0``
 to 0, and wires each ``A``/``B`` bit to its flip-flop's ``DI`` (the block's input register
-takes the flip-flop's place) and each ``P`` bit to its flip-flop's ``Q`` net. A flip-flop left
-without a load is removed, so an input register shared by several multipliers (Yosys merges
-equal registers) becomes one register per block. Every cycle's values are those of the
-netlist before packing: the same registers, moved (``tests/pnr/test_dsp_registers.py``
-simulates a packed multiplier against the golden model, with a block model of its own).
+takes the flip-flop's place) and each ``P`` bit to its flip-flop's ``Q`` net. The block's
+``CE0`` has no inversion: an enable the flip-flops took inverted (``CEMUX`` ``INV``, as Yosys
+maps ``en = ~x``, the reducer's) comes through a ``LUT4`` inverter, one per net, shared by
+the blocks; netlists without such registers pack as before. A flip-flop left without a load
+is removed, so an input register shared by several multipliers (Yosys merges equal
+registers) becomes one register per block. Every cycle's values are those of the netlist
+before packing: the same registers, moved (``tests/pnr/test_dsp_registers.py`` simulates a
+packed multiplier, behind a plain and an inverted enable, against the golden model, with a
+block model of its own).
 """
 
 from __future__ import annotations
@@ -55,12 +60,14 @@ def _ff_class(cell: dict):
     lsr = con.get("LSR", ["0"])[0]
     if lsr != "0" and par.get("LSRMUX", "LSR") != "0":
         return None
-    cemux = par.get("CEMUX", "CE")
+    cemux = str(par.get("CEMUX", "CE")).strip()       # Yosys writes "1 " for always on
     ce = con.get("CE", ["1"])[0]
-    if cemux == "1" or ce == "1":
+    if cemux == "1" or (ce == "1" and cemux == "CE"):
         ce = "1"
-    elif cemux != "CE" or ce in ("0", "x", "z"):
+    elif cemux not in ("CE", "INV") or not _is_bit(ce):
         return None
+    elif cemux == "INV":
+        ce = ("INV", ce)
     clk = con.get("CLK", [None])[0]
     if not _is_bit(clk):
         return None
@@ -83,6 +90,30 @@ def _pack_module(mod: dict) -> dict:
     io = _io_bits(mod.get("ports", {}))
     stats = {"mult18": 0, "registered": 0, "ff_removed": 0}
     removed: set[str] = set()
+    inverted: dict = {}          # enable net -> the net of its LUT4 inverter
+    named = [b for n in mod.get("netnames", {}).values() for b in n.get("bits", ())
+             if _is_bit(b)]
+    next_bit = [max([*driver, *loads, *io, *named, 0]) + 1]      # a net no one uses yet
+
+    def enable_net(ce):
+        """The net for ``CE0``: ``ce`` itself, or its inverse through a LUT4."""
+        if not isinstance(ce, tuple):
+            return ce
+        net = ce[1]
+        if net not in inverted:
+            z = inverted[net] = next_bit[0]
+            next_bit[0] += 1
+            name = f"$dsp_ce_inv_{net}"
+            cells[name] = {"hide_name": 1, "type": "LUT4",
+                           "parameters": {"INIT": "0101010101010101"},      # Z = ~A
+                           "port_directions": {"A": "input", "B": "input", "C": "input",
+                                               "D": "input", "Z": "output"},
+                           "connections": {"A": [net], "B": ["0"], "C": ["0"], "D": ["0"],
+                                           "Z": [z]}}
+            loads[net].append((name, "A", 0))
+            driver[z] = (name, "Z")
+        return inverted[net]
+
     for name, c in list(cells.items()):
         if c["type"] != "MULT18X18D":
             continue
@@ -95,6 +126,7 @@ def _pack_module(mod: dict) -> dict:
         if plan is None:
             continue
         ins, outs, (clk, ce, gsr) = plan
+        ce = enable_net(ce)
         for port, ff in ins:                 # the block's input register replaces the FF
             di = cells[ff]["connections"]["DI"][0]
             old = con[port][0]

@@ -28,7 +28,7 @@ TB = """module tb;
   wire [{w1}:0] o_rtl, o_net; wire [2:0] f_rtl, f_net; wire v_rtl, v_net;
   {top} rtl(.clk(clk), .rst(rst), .a(a), .b(b), .i_valid(i_valid), .en(en), .o(o_rtl),
             .flags(f_rtl), .o_valid(v_rtl));
-  net_top net(.clk(clk), .rst(rst), .a(a), .b(b), .i_valid(i_valid), .en(en), .o(o_net),
+  net_top net(.clk(clk), .rst(rst), .a(a), .b(b), .i_valid(i_valid), {net_en}, .o(o_net),
               .flags(f_net), .o_valid(v_net));
   reg [63:0] vec [0:{n1}];
   integer i, fd;
@@ -69,15 +69,34 @@ def _vectors(fmt, n, seed):
     return a, b, valid, en
 
 
-@pytest.mark.parametrize("fmt_name", ["e7m16-rtz", "e7m16-rne"])
-def test_packed_multiplier_equals_rtl_and_model(fmt_name, tmp_path):
+#: The multiplier behind an inverted enable (port ``en_n``, the testbench drives ``~en``):
+#: Yosys maps its registers with ``CEMUX`` ``INV``, which the pass feeds to the block
+#: through a LUT4 inverter.
+INVERTED_TOP = """module inv_top(input clk, input rst, input [{w1}:0] a, input [{w1}:0] b,
+               input i_valid, input en_n, output [{w1}:0] o, output [2:0] flags,
+               output o_valid);
+  {top} u(.clk(clk), .rst(rst), .a(a), .b(b), .i_valid(i_valid), .en(~en_n), .o(o),
+          .flags(flags), .o_valid(o_valid));
+endmodule
+"""
+
+
+@pytest.mark.parametrize("fmt_name,enable", [("e7m16-rtz", "plain"), ("e7m16-rne", "plain"),
+                                             ("e7m16-rtz", "inverted")])
+def test_packed_multiplier_equals_rtl_and_model(fmt_name, enable, tmp_path):
     if shutil.which("iverilog") is None:
         pytest.fail("Icarus Verilog (iverilog) is needed: apt-get install iverilog")
     fmt = parse_format(fmt_name)
     text, top, latency = unit_verilog("fp-mul", fmt, {})
-    syn = synthesize_ecp5(text, top, base=tmp_path, use_cache=False)
+    synth_text, synth_top = text, top
+    if enable == "inverted":
+        synth_text += INVERTED_TOP.format(w1=fmt.width - 1, top=top)
+        synth_top = "inv_top"
+    syn = synthesize_ecp5(synth_text, synth_top, base=tmp_path, use_cache=False)
     assert syn.counts["mult18"] == 1 and syn.counts["mult18_registered"] == 1
-    net = simulation_netlist(syn.work / "net.json", top, "net_top")
+    yosys_net = (syn.work / "net-yosys.json").read_text()
+    assert ('"CEMUX": "INV"' in yosys_net) == (enable == "inverted")
+    net = simulation_netlist(syn.work / "net.json", synth_top, "net_top")
     assert 'REG_INPUTA_CLK("CLK0")' in net and 'REG_OUTPUT_CLK("CLK0")' in net
 
     n = 3000
@@ -86,7 +105,9 @@ def test_packed_multiplier_equals_rtl_and_model(fmt_name, tmp_path):
              << (2 * fmt.width)) | (a << fmt.width) | b)
     (tmp_path / "vec.hex").write_text("".join(f"{w:016x}\n" for w in words))
     (tmp_path / "all.v").write_text(text + net + mult18x18d_sim_model()
-                                    + TB.format(w1=fmt.width - 1, n=n, n1=n - 1, top=top))
+                                    + TB.format(w1=fmt.width - 1, n=n, n1=n - 1, top=top,
+                                                net_en=(".en_n(~en)" if enable == "inverted"
+                                                        else ".en(en)")))
     subprocess.run(["iverilog", "-g2005", "-o", "sim.vvp", "all.v"], cwd=tmp_path, check=True,
                    capture_output=True)
     subprocess.run(["vvp", "-n", "sim.vvp"], cwd=tmp_path, check=True, capture_output=True)
@@ -173,6 +194,47 @@ def test_pack_leaves_what_it_cannot_move(change):
     before = copy.deepcopy(net)
     stats = pack_dsp_registers(net)
     assert stats["registered"] == 0 and stats["ff_removed"] == 0
+    assert net == before
+
+
+def test_an_inverted_enable_reaches_the_block_through_one_inverter():
+    net = _netlist()
+    cells = net["modules"]["top"]["cells"]
+    for c in cells.values():
+        if c["type"] == "TRELLIS_FF":
+            c["parameters"]["CEMUX"] = "INV"
+    twin = copy.deepcopy(cells["mul"])
+    twin["connections"].update({f"P{i}": [40 + i] for i in range(4)})
+    cells["mul2"] = twin
+    cells.update({f"fq{i}": _ff(40 + i, 50 + i, CEMUX="INV") for i in range(4)})
+    stats = pack_dsp_registers(net)
+    assert stats["registered"] == 2
+    luts = [c for c in cells.values() if c["type"] == "LUT4"]
+    assert len(luts) == 1                                 # one inverter per enable net
+    inv = luts[0]
+    assert inv["connections"]["A"] == [90]
+    init = inv["parameters"]["INIT"]                      # Z = INIT[{D,C,B,A}], B=C=D=0
+    assert init[-1] == "1" and init[-2] == "0"
+    z = inv["connections"]["Z"][0]
+    assert z not in (90, 91) and cells["mul"]["connections"]["CE0"] == [z]
+    assert cells["mul2"]["connections"]["CE0"] == [z]
+
+
+def test_always_enabled_registers_as_yosys_writes_them_are_packed():
+    net = _netlist()
+    for c in net["modules"]["top"]["cells"].values():
+        if c["type"] == "TRELLIS_FF":
+            c["parameters"]["CEMUX"] = "1 "              # padded, as in synth_ecp5's JSON
+            del c["connections"]["CE"]
+    assert pack_dsp_registers(net)["registered"] == 1
+    assert net["modules"]["top"]["cells"]["mul"]["connections"]["CE0"] == ["1"]
+
+
+def test_plain_and_inverted_enables_do_not_mix():
+    net = _netlist()
+    net["modules"]["top"]["cells"]["fp1"]["parameters"]["CEMUX"] = "INV"
+    before = copy.deepcopy(net)
+    assert pack_dsp_registers(net)["registered"] == 0
     assert net == before
 
 

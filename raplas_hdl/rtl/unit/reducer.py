@@ -10,7 +10,8 @@ Stages (a pipeline that moves as a whole, ``en``, while no run's answers are bei
    when it accepts a command); read the ray's ``tmax`` (a RAM of ``2 * rows * cols``
    patterns, written by snooping the host's writes to RAY field 7).
 2. **qualify**, in two stages (``a2``: the products, from ``tmax`` registered as it leaves
-   the RAM, into registers; ``b``: their comparisons). The beat is a *candidate* when
+   the RAM and the bank's ``tmin`` registered beside it, into registers; ``b``: their
+   comparisons). The beat is a *candidate* when
    ``hit``, ``t'`` finite, ``det`` finite and not zero, ``tmin * |det| <= t' * sign(det)
    <= tmax * |det|`` and ``tri_id + 1 != exclude`` (``tmin``, ``exclude`` and the any-hit
    bit per bank, snooped from the WINDOW region). The products are exact:
@@ -243,7 +244,7 @@ class Reducer(wiring.Component):
 
         # -- 1. take
         a_v = Signal()
-        a = Signal(beat_l)
+        a = Signal(beat_l, reset_less=True)
         r = self.i.payload
         m.d.comb += [self.i.ready.eq(en & runs.r_stream.valid),
                      runs.r_stream.ready.eq(self.i.valid & self.i.ready & r.last)]
@@ -267,10 +268,11 @@ class Reducer(wiring.Component):
 
         def stage(src_v, src, name, extra=None):
             """The next pipeline register of a beat: its valid bit, and a record of the
-            beat's fields and ``extra`` ones, where those ``src`` has are copied."""
+            beat's fields and ``extra`` ones, where those ``src`` has are copied (without a
+            reset: only the valid bit needs one)."""
             layout = data.StructLayout({**beat_l.members, **(extra or {})})
             v = Signal(name=f"{name}_v")
-            r = Signal(layout, name=name)
+            r = Signal(layout, name=name, reset_less=True)
             have = src.shape().members
             with m.If(en):
                 m.d.sync += [v.eq(src_v)] + [r[k].eq(src[k]) for k in layout.members
@@ -280,20 +282,24 @@ class Reducer(wiring.Component):
         raw_l = raw_layout(fmt)
 
         def raw_reg(x, y, sign, name):
-            """A product's first half (:func:`product_raw`) on a register; its key."""
-            r = Signal(raw_l, name=f"{name}_r")
+            """A product's first half (:func:`product_raw`) on a register; its key. The
+            register and the operands' stage registers have no reset, so that place and
+            route can move them into the multiplier block
+            (:mod:`raplas_hdl.pnr.dsp_registers`)."""
+            r = Signal(raw_l, name=f"{name}_r", reset_less=True)
             with m.If(en):
                 m.d.sync += r.eq(product_raw(m, x, y, sign, fmt, name))
             return key_of(m, r, fmt, name)
 
         one = Const(((1 << (E - 1)) - 1) << M, W)
-        a2_v, a2 = stage(a_v, a, "a2", {"tmax": W})
+        # the bank's tmin is selected as the beat enters a2, so no multiplexer stands before
+        # k_lo's multiply (a bank's window is written only before its run is accepted)
+        a2_v, a2 = stage(a_v, a, "a2", {"tmax": W, "tmin": W})
         with m.If(en):
-            m.d.sync += a2.tmax.eq(tr.data)
+            m.d.sync += [a2.tmax.eq(tr.data), a2.tmin.eq(tmin[a.bank])]
         s_num = sign_of(a2.t) ^ sign_of(a2.det)
-        tmin_a2 = tmin[a2.bank]
         k_num = raw_reg(a2.t, one, s_num, "k_num")
-        k_lo = raw_reg(tmin_a2, a2.det, sign_of(tmin_a2), "k_lo")
+        k_lo = raw_reg(a2.tmin, a2.det, sign_of(a2.tmin), "k_lo")
         k_hi = raw_reg(a2.tmax, a2.det, sign_of(a2.tmax), "k_hi")
         b_v, b = stage(a2_v, a2, "b", {"tmax_inf": 1})
         with m.If(en):
