@@ -19,10 +19,11 @@ UNIT_LIMITS = {
     # the command line does not load the RTL (a test compares them)
     "stages": {"fp-add": (1, 9, "rtz 6, rne 7, chop 5"),
                "fp-mul": (1, 5, "rtz 4, rne 5, chop 4")},
+    # the reducer alone: a unit of `raplas-hdl cosim` only
     "rows": {u: (1, g.MAX_LATTICE, 4) for u in ("plane-sphere", "intersection-unit",
-                                                 "board-top")},
+                                                 "board-top", "reducer")},
     "cols": {u: (1, g.MAX_LATTICE, 4) for u in ("plane-sphere", "intersection-unit",
-                                                 "board-top")},
+                                                 "board-top", "reducer")},
     "testers": {u: (1, 2 * g.MAX_LATTICE, None) for u in ("plane-sphere",
                                                            "intersection-unit", "board-top")},
     "tris_per_sphere": {u: (1, 4096, 8) for u in ("intersection-unit", "board-top")},

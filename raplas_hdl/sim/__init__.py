@@ -25,8 +25,9 @@ below it: ``cosim`` | ``tb``, then ``drive``, then ``build``; a contract in pypr
     Other DUTs: :mod:`~raplas_hdl.sim.drive.board_sim` (the board top, the host's driver on
     its bus) and :mod:`~raplas_hdl.sim.drive.reducer_harness` (the reducer alone).
 ``cosim``
-    The units against the golden model (``raplas-hdl cosim``): a
-    :class:`~raplas_hdl.sim.cosim.base.UnitCosim` per unit, the vectors file format
-    (:mod:`~raplas_hdl.sim.cosim.vectors`); the FP units' Verilog, model results, run and
-    bundle DUT in :mod:`~raplas_hdl.sim.cosim.fp`.
+    Every unit against the golden model behind one interface,
+    :class:`~raplas_hdl.sim.cosim.base.UnitCosim` (:func:`~raplas_hdl.sim.cosim.unit_cosim`,
+    which ``raplas-hdl cosim`` takes for every unit), a module per unit (``fp``,
+    ``plane_sphere``, ``ray_triangle``, ``intersection``, ``reducer``, ``board``), and the
+    vectors file format (:mod:`~raplas_hdl.sim.cosim.vectors`).
 """

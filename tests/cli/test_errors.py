@@ -239,6 +239,23 @@ CASES = [
     ("waves-dir-without-waves", "cosim fp-add --sim icarus --waves-dir {t}/w",
      ["--waves-dir needs --waves"]),
     ("cosim-unit-choice", "cosim fp-div", ["unit must be one of fp-add, fp-mul"]),
+    ("cosim-reducer-vectors", "cosim reducer --sim icarus --vectors {t}/good.vec",
+     ["--vectors does not apply to reducer", "use --random"]),
+    ("cosim-reducer-write-vectors",
+     "cosim reducer --sim icarus --random 5 --write-vectors {t}/r.vec",
+     ["--write-vectors does not apply to reducer"]),
+    ("cosim-reducer-option-of-other-unit", "cosim reducer --sim icarus --mode conservative",
+     ["--mode does not apply to unit reducer"]),
+    ("cosim-reducer-format", "cosim reducer --sim icarus --format e10m16",
+     ["the on-chip reduction needs man_bits <= 24"]),
+    ("cosim-reducer-runs-upper-limit", "cosim reducer --sim icarus --random 100001",
+     ["--random of reducer is at most 100,000 runs"]),
+    ("cosim-board-top-stall-density", "cosim board-top --sim icarus --stall-density 0.5",
+     ["--stall-density does not apply to board-top"]),
+    ("cosim-board-top-certified", "cosim board-top --sim icarus --mode certified",
+     ["the board top's register map has modes paper, conservative"]),
+    ("cosim-board-top-percycle", "cosim board-top --sim icarus --driver percycle",
+     ["--driver percycle applies to fp-add and fp-mul only", "host's driver"]),
     # -- stress
     ("stress-old-formats-spelling", "stress ray-triangle --formats FP16",
      ["--formats", "--format FMT"]),
@@ -429,8 +446,8 @@ def test_load_mesh_errors_name_the_file(t, name, needle):
 
 
 def test_read_vectors_api(t):
-    from raplas_hdl.cli.cosim import read_vectors
     from raplas_hdl.fp import FP24
+    from raplas_hdl.sim.cosim.fp import read_vectors
 
     a, b, sub, exp, flags = read_vectors(t / "good.vec", "fp-mul", FP24)
     assert a.tolist() == [0x3F0000] and sub is None and flags is None

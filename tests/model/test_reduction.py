@@ -11,11 +11,14 @@ from raplas_hdl.fp import FP24, FPFormat
 from raplas_hdl.fp import model as fpm
 from raplas_hdl.host.reduction_passes import host_choice, pass_runs, recorded_runs
 from raplas_hdl.host.render import RenderSettings
+from raplas_hdl.model.config import UnitConfig
 from raplas_hdl.model.intersection import RESULT_DTYPE, run_runs
 from raplas_hdl.model.memory_image import bundle_writes
 from raplas_hdl.model.reduction import (ANSWER_DTYPE, check_reduce_format, early_out_saving,
                                         inf_pattern, reduce_run)
-from tests.support.reduction import CFG, random_beats, window_bundle
+from raplas_hdl.sim.drive.reducer_harness import random_beats, window_bundle
+
+CFG = UnitConfig(FP24, rows=2, cols=4, max_triangles=64, reduce=True)
 
 
 def _exact(bits, fmt=FP24):
@@ -50,7 +53,7 @@ def reference(cfg, beats, bundle):
 @pytest.mark.parametrize("seed", range(3))
 def test_reduction_is_exact(seed, any_hit):
     rng = np.random.default_rng(seed)
-    beats = random_beats(rng, 600)
+    beats = random_beats(rng, 600, CFG)
     tmax = fpm.encode(rng.uniform(0.5, 6.0, CFG.n_rays), FP24)
     tmax[0] = inf_pattern(FP24)
     bundle = window_bundle(CFG, tmin=int(fpm.encode(np.array([0.25 * seed]), FP24)[0]),

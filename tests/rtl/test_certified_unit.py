@@ -30,6 +30,7 @@ from raplas_hdl.model.config import UnitConfig
 from raplas_hdl.model.records import OUTCOME_HIT, OUTCOME_UNCERTAIN
 from raplas_hdl.model.reduction import candidates, first_answers, reduce_run
 from raplas_hdl.sim.cosim import unit_cosim
+from raplas_hdl.sim.drive.reducer_harness import cosim_reducer, random_runs, window_bundle
 
 #: a format with many uncertain pairs on the cosim's random scenes (about 2.5 % of pairs)
 COARSE = FPFormat(6, 8)
@@ -98,11 +99,9 @@ RESULT_FIELDS = ("ray_id", "tri_id", "hit", "t", "u", "v", "det", "flags", "last
 
 
 def reducer_runs(cfg, n_runs, seed):
-    from tests.support.reduction import reducer_runs as paper_runs
-
     rng = np.random.default_rng([seed, 15])
     return [(_random_outcomes(rng, beats), bundle)
-            for beats, bundle in paper_runs(cfg, n_runs, seed, beats_per_run=4 * cfg.n_rays)]
+            for beats, bundle in random_runs(cfg, n_runs, seed, beats_per_run=4 * cfg.n_rays)]
 
 
 def test_reduce_model_against_reference():
@@ -131,8 +130,6 @@ def test_reduce_model_against_reference():
 def test_reduce_model_any_hit_uncertain_does_not_block():
     """In an any-hit run an uncertain pair neither answers nor blocks its ray."""
     cfg = CERT
-    from tests.support.reduction import window_bundle
-
     beats = np.zeros(3, result_dtype(cfg))
     one = int(np.asarray(__import__("raplas_hdl.fp.model", fromlist=["encode"]).encode(
         np.array([1.0]), FP24))[0])
@@ -180,8 +177,6 @@ def test_unit_cosim_long(simulator, reduce, fmt, options):
 
 
 def _reducer_check(simulator, n_runs, seed, cfg=CERT, **kw):
-    from raplas_hdl.sim.drive.reducer_harness import cosim_reducer
-
     runs = reducer_runs(cfg, n_runs, seed)
     got, want, _ = cosim_reducer(simulator, cfg, runs, seed=seed,
                                  build_key="reducer_certified", **kw)

@@ -468,6 +468,14 @@ def _sources(spec: HarnessSpec, dut_verilog: str) -> str:
     return dut_verilog.rstrip() + "\n\n" + harness_verilog(spec)
 
 
+def _run_info(n: int, cycles: int, res: dict) -> dict:
+    """The ``info`` of a run: ``res`` is what :func:`~.runner.run_cocotb` returned."""
+    return {"n": n, "cycles": cycles, "run_s": res["run_s"], "build_s": res["build_s"],
+            "run_cpu_s": res["run_cpu_s"], "test_real_s": res["test_real_s"],
+            "vectors_per_s": n / res["run_s"] if res["run_s"] > 0 else float("inf"),
+            "build_dir": str(res["build_dir"])}
+
+
 def run_batch(simulator: str, spec: HarnessSpec, dut_verilog: str, build_key: str,
               columns: dict, valid_density: float = 1.0, stall_density: float = 0.0,
               seed: int = 1, n_out: int | None = None, timeout_s: float | None = None,
@@ -525,11 +533,7 @@ def run_batch(simulator: str, spec: HarnessSpec, dut_verilog: str, build_key: st
     want = n if n_out is None else n_out
     if got != want:
         raise AssertionError(f"batch run produced {got} output beats, expected {want}")
-    info = {"n": n, "cycles": cycles, "run_s": res["run_s"], "build_s": res["build_s"],
-            "run_cpu_s": res["run_cpu_s"], "test_real_s": res["test_real_s"],
-            "vectors_per_s": n / res["run_s"] if res["run_s"] > 0 else float("inf"),
-            "build_dir": str(res["build_dir"])}
-    return outputs, info
+    return outputs, _run_info(n, cycles, res)
 
 
 def run_percycle(simulator: str, spec: HarnessSpec, dut_verilog: str, build_key: str,
@@ -564,11 +568,7 @@ def run_percycle(simulator: str, spec: HarnessSpec, dut_verilog: str, build_key:
     for p in spec.outputs:
         if p.width <= 32:
             outputs[p.name] = outputs[p.name].astype(np.uint32)
-    info = {"n": n, "cycles": cycles, "run_s": res["run_s"], "build_s": res["build_s"],
-            "run_cpu_s": res["run_cpu_s"], "test_real_s": res["test_real_s"],
-            "vectors_per_s": n / res["run_s"] if res["run_s"] > 0 else float("inf"),
-            "build_dir": str(res["build_dir"])}
-    return outputs, info
+    return outputs, _run_info(n, cycles, res)
 
 
 def run_unit_batch(simulator: str, spec: HarnessSpec, dut_verilog: str, build_key: str,

@@ -1,6 +1,6 @@
 """What every unit's co-simulation shares: :class:`UnitCosim`, the comparison of
-every output field, the units' Verilog (cached on disk by the RTL sources) and the batch
-harness run."""
+every output field (:func:`compare`; a run's result beats, :func:`beat_lines`) and the units'
+Verilog (cached on disk by the RTL sources)."""
 
 from __future__ import annotations
 
@@ -78,25 +78,47 @@ class UnitCosim:
     fmt : FPFormat
     options : dict
         The unit's options as ``raplas-hdl verilog`` takes them (None: the default).
+    driver : str
+        One of :attr:`drivers`: ``"batch"`` (the harness at full clock rate) or, for the
+        units that have one, ``"percycle"`` (the cocotb driver).
 
     Attributes
     ----------
     kinds : tuple of LineKind
         The line kinds of its vectors file.
     outputs : tuple of str
-        The output fields compared with the model.
+        The output fields shown, field by field, for a case that differs.
+    compared : tuple of str
+        The fields compared with the model (default :attr:`outputs`; a field the expected
+        results leave at None is not compared).
     header_params : dict
         Build parameters a vectors file's header must agree with.
+    harness : str
+        How the run is named in ``raplas-hdl cosim``'s first line.
+    case_name : str
+        What a case is, plural (``"cases"``, or ``"runs"`` for the units fed runs).
+
+    Raises
+    ------
+    ValueError
+        A driver the unit does not have.
     """
 
     name = ""
     kinds: tuple = ()
     outputs: tuple = ()
-    percycle_only = False
+    drivers = ("batch",)
+    harness = "batch harness"
+    case_name = "cases"
 
-    def __init__(self, fmt, options: dict):
+    def __init__(self, fmt, options: dict, driver: str = "batch"):
+        if driver not in self.drivers:
+            raise ValueError(f"{self.name} runs under the driver {' or '.join(self.drivers)}, "
+                             f"not {driver!r}")
         self.fmt = fmt
+        self.driver = driver
         self.options = {k: v for k, v in options.items() if v is not None}
+        self.compared = self.outputs
         self.target = self.options.get("target", "generic")
         self.adder = self.options.get("adder", "generic")
         # build-cache tag of the DSP48 choices (the adder only when not generic)
@@ -104,6 +126,12 @@ class UnitCosim:
         self.header_params = {}
 
     # the interface
+    def check(self) -> None:
+        """Check the build parameters by building the unit (no elaboration); ValueError
+        names the parameter."""
+        _, comp, _ = build_unit(self.name, self.fmt, **self.options)
+        comp._MustUse__silence = True             # built only to check the parameters
+
     def random(self, n: int, seed: int) -> dict:
         raise NotImplementedError
 
@@ -129,6 +157,16 @@ class UnitCosim:
         return " ".join(f"{n}={int(cases[n][i]):x}" for n in names if n in cases)
 
     # shared
+    def label(self) -> str:
+        """The unit's options as ``raplas-hdl cosim``'s first line gives them."""
+        return " ".join(f"{k}={v}" for k, v in self.options.items())
+
+    def report(self, cases, expected, got, limit: int) -> tuple[int, list[str]]:
+        """``(cases that differ, the lines that show the first limit of them)``."""
+        bad = compare(expected, got, [k for k in self.compared if expected.get(k) is not None])
+        return len(bad), [line for i in bad[:limit]
+                          for line in self.show(cases, expected, got, int(i))]
+
     def read(self, path) -> tuple[dict, dict]:
         """``(cases, expected)`` of a vectors file, checked whole."""
         items = read_lines(path, self.name, self.kinds, self.fmt, self.header_params)
@@ -146,6 +184,32 @@ class UnitCosim:
             mark = "   <- differs" if e != g else ""
             lines.append(f"    {k:12s} expected {e:x}, got {g:x}{mark}")
         return lines
+
+
+def beat_lines(expected, got) -> list[str]:
+    """The lines that show how a run's result beats (structured arrays) differ: the counts,
+    then the first differing beat field by field (empty when they are equal)."""
+    lines = []
+    if len(expected) != len(got):
+        lines.append(f"    beats        expected {len(expected)}, got {len(got)}   <- differs")
+    m = min(len(expected), len(got))
+    diff = [j for j in range(m) if expected[j].tobytes() != got[j].tobytes()]
+    if diff:
+        j = diff[0]
+        lines.append(f"    {len(diff)} beats differ; the first, beat {j}:")
+        for name in expected.dtype.names:
+            e, g = int(expected[name][j]), int(got[name][j])
+            mark = "   <- differs" if e != g else ""
+            lines.append(f"      {name:12s} expected {e:x}, got {g:x}{mark}")
+    return lines
+
+
+def report_runs(unit: UnitCosim, cases, diffs, limit: int) -> tuple[int, list[str]]:
+    """:meth:`UnitCosim.report` of a unit fed runs: ``diffs`` holds, per run, the lines that
+    show its differences (empty or None when it agrees)."""
+    bad = [k for k, lines in enumerate(diffs) if lines]
+    return len(bad), [line for i in bad[:limit]
+                      for line in (f"  {unit.describe(cases, i)}", *diffs[i])]
 
 
 def cosim_key(*parts) -> str:

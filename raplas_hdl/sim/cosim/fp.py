@@ -1,6 +1,7 @@
-"""The FP units (``fp-add``, ``fp-mul``) in the batch harness or the per-cycle driver,
-against the golden model: their Verilog and harness spec, the model's results, the run and
-its comparison (:func:`fp_cosim`), and one DUT holding every rounding of both units
+"""``fp-add`` and ``fp-mul`` against the golden model, in the batch harness or under the
+per-cycle cocotb driver (:class:`FPCosim`): their Verilog and harness spec, the model's
+results, their vectors files (:func:`read_vectors`, :func:`write_vectors`: ``A B [SUB]
+EXPECTED [FLAGS]``, docs/cosim.md); and one DUT holding every rounding of both units
 (:func:`fp_bundle`, :func:`check_bundle`) for the tests."""
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ from raplas_hdl.fp import FPFormat
 from raplas_hdl.rtl.emit import emit_verilog
 
 from ..build.harness import HarnessSpec, run_batch, run_percycle
+from .base import UnitCosim
+from .vectors import MAX_LINES, check_header, hex_fields, match_header, text_lines
 
 FP_OPS = ("fp-add", "fp-mul")
 
@@ -74,98 +77,162 @@ def fp_expected(op: str, fmt, a, b, sub=None) -> tuple[np.ndarray, np.ndarray]:
     return np.where(s, sbits, bits).astype(np.uint32), np.where(s, sflags, flags).astype(np.uint8)
 
 
-def fp_cosim(op: str, fmt, a, b, sub=None, *, simulator: str, stages: int | None = None,
-             mode: str = "batch", valid_density: float = 0.7, stall_density: float = 0.2,
-             seed: int = 1, expected=None, timeout_s: float | None = None,
-             multiplier: str = "generic") -> dict:
-    """Run operand arrays through the FP unit's Verilog and compare with the model.
+def read_vectors(path, unit: str, fmt=None):
+    """``(a, b, sub or None, expected, flags or None)`` from a vectors file.
 
-    Parameters
-    ----------
-    op : str
-        ``"fp-add"`` or ``"fp-mul"``.
-    fmt : FPFormat
-        Format and rounding.
-    a, b : array of uint32
-        Operand bit patterns.
-    sub : array of 0/1, optional
-        Per-operation subtract select (``fp-add``; default all 0).
-    simulator : str
-        ``"icarus"`` or ``"verilator"``.
-    stages : int, optional
-        Pipeline depth (default: the unit's).
-    mode : str
-        ``"batch"`` (harness streams files at full clock rate) or ``"percycle"``
-        (:class:`StreamTB` drives every cycle from Python).
-    valid_density, stall_density : float
-        Probability that ``i_valid`` is high, and that ``en`` is low, in a cycle.
-    expected : (bits, flags), optional
-        Expected results (default: :func:`fp_expected`); flags may be None (not checked).
-    multiplier : str
-        ``fp-mul``: ``"generic"`` or ``"virtex4"`` (DSP48 primitives, simulated with
-        Yosys's model, :func:`raplas_hdl.rtl.dsp48.dsp48_sim_model`).
+    Checks everything before returning: the field count of ``unit`` (and the same on every
+    line), hex numbers, ``SUB`` 0 or 1, ``FLAGS`` 0 to 7, and with ``fmt`` that ``A``, ``B``
+    and ``EXPECTED`` fit its width; a header naming another unit or format is refused.
 
-    Returns
-    -------
-    dict
-        ``n``, ``mismatches`` (count), ``bad`` (indices), ``got`` and ``got_flags``,
-        ``expected`` and ``expected_flags``, ``vectors_per_s``, ``cycles``, ``run_s``,
-        ``build_s``, ``latency``.
+    Raises
+    ------
+    ValueError
+        One line naming the file, the line and the problem.
     """
-    a = np.asarray(a, dtype=np.uint32)
-    b = np.asarray(b, dtype=np.uint32)
-    if a.shape != b.shape or a.ndim != 1:
-        raise ValueError(f"a and b must be 1-D arrays of one length, not {a.shape}, {b.shape}")
-    spec = fp_spec(op, fmt)
-    cols = {"a": a, "b": b}
-    if op == "fp-add":
-        cols["sub"] = (np.zeros(a.shape, np.uint32) if sub is None
-                       else np.asarray(sub).astype(np.uint32))
-    verilog, latency = fp_verilog(op, fmt, stages, multiplier)
-    key = f"{spec.dut}-{fmt.name}-s{stages if stages is not None else 'd'}"
-    if multiplier != "generic":
-        # lazy: rtl.dsp48 loads Amaranth; importing raplas_hdl.sim.cosim needs none
-        from raplas_hdl.rtl.dsp48 import dsp48_sim_model
+    if unit not in FP_OPS:
+        raise ValueError(f"unit must be one of {', '.join(FP_OPS)}, not {unit!r}")
+    nops = 3 if unit == "fp-add" else 2
+    names = ["A", "B"] + (["SUB"] if unit == "fp-add" else []) + ["EXPECTED", "FLAGS"]
+    rows = []
+    width = None
+    for lineno, line in enumerate(text_lines(path), 1):
+        m = match_header(line.strip())
+        if m:
+            check_header(path, lineno, m, unit, fmt)
+            continue
+        fields = line.split("#", 1)[0].split()
+        if not fields:
+            continue
+        if len(fields) not in (nops + 1, nops + 2):
+            raise ValueError(f"{path}:{lineno}: expected {nops + 1} or {nops + 2} hex fields "
+                             f"for {unit} ({' '.join(names[:-1])} [FLAGS]), got {len(fields)}")
+        if width is None:
+            width = len(fields)
+        elif len(fields) != width:
+            raise ValueError(f"{path}:{lineno}: {len(fields)} fields where line 1 has "
+                             f"{width} (FLAGS on all lines or on none)")
+        values = hex_fields(path, lineno, fields, names)
+        for name, v in zip(names, values):
+            if name == "SUB" and v > 1:
+                raise ValueError(f"{path}:{lineno}: SUB must be 0 or 1, not {v:#x}")
+            if name == "FLAGS" and v > 7:
+                raise ValueError(f"{path}:{lineno}: FLAGS must be 0 to 7 (1 overflow, "
+                                 f"2 underflow, 4 invalid), not {v:#x}")
+            if fmt is not None and name in ("A", "B", "EXPECTED") and v > fmt.mask:
+                raise ValueError(f"{path}:{lineno}: {name} {v:#x} is wider than the "
+                                 f"{fmt.width} bits of {fmt.name}")
+            if v >= 1 << 32:
+                raise ValueError(f"{path}:{lineno}: {name} {v:#x} is wider than 32 bits")
+        rows.append(values)
+        if len(rows) > MAX_LINES:
+            raise ValueError(f"{path}: more than {MAX_LINES:,} cases")
+    if not rows:
+        raise ValueError(f"{path}: no cases")
+    arr = np.array(rows, dtype=np.uint64)
+    a, b = arr[:, 0].astype(np.uint32), arr[:, 1].astype(np.uint32)
+    sub = arr[:, 2].astype(np.uint32) if unit == "fp-add" else None
+    exp = arr[:, nops].astype(np.uint32)
+    flags = arr[:, nops + 1].astype(np.uint8) if arr.shape[1] == nops + 2 else None
+    return a, b, sub, exp, flags
 
-        verilog += "\n" + dsp48_sim_model()
-        key += f"-{multiplier}"
-    if mode == "batch":
-        out, info = run_batch(simulator, spec, verilog, key, cols, valid_density,
-                              stall_density, seed, timeout_s=timeout_s)
-    elif mode == "percycle":
-        out, info = run_percycle(simulator, spec, verilog, key, cols, 1.0 - valid_density,
-                                 stall_density, seed, timeout_s=timeout_s)
-    else:
-        raise ValueError(f"mode must be 'batch' or 'percycle', not {mode!r}")
-    if expected is None:
-        exp_bits, exp_flags = fp_expected(op, fmt, a, b, cols.get("sub"))
-    else:
-        exp_bits, exp_flags = expected
-    exp_bits = np.asarray(exp_bits, dtype=np.uint32)
-    got = out["o"].astype(np.uint32)
-    got_flags = out["flags"].astype(np.uint8)
-    bad = got != exp_bits
-    if exp_flags is not None:
-        exp_flags = np.asarray(exp_flags, dtype=np.uint8)
-        bad |= got_flags != exp_flags
-    idx = np.flatnonzero(bad)
-    return {"n": int(a.size), "mismatches": int(idx.size), "bad": idx, "got": got,
-            "got_flags": got_flags, "expected": exp_bits, "expected_flags": exp_flags,
-            "vectors_per_s": info["vectors_per_s"], "cycles": info["cycles"],
-            "run_s": info["run_s"], "build_s": info["build_s"], "latency": latency}
+
+def write_vectors(path, unit: str, a, b, sub, expected, flags=None, fmt=None) -> None:
+    """Write cases in the vectors-file format (docs/cosim.md); the header names the unit
+    and, when given, the format."""
+    cols = [a, b] + ([sub] if unit == "fp-add" else []) + [expected]
+    if flags is not None:
+        cols.append(flags)
+    spec = "%x"
+    tag = f"{unit} {fmt.name}" if fmt is not None else unit
+    np.savetxt(path, np.stack([np.asarray(c, dtype=np.uint64) for c in cols], axis=1),
+               fmt=" ".join([spec] * len(cols)),
+               header=f"{tag}: A B {'SUB ' if unit == 'fp-add' else ''}EXPECTED FLAGS (hex)")
 
 
-def format_mismatches(res: dict, a, b, sub=None, limit: int = 5) -> str:
-    """The first ``limit`` mismatches of :func:`fp_cosim`, one per line, in hex."""
-    lines = []
-    for i in res["bad"][:limit]:
-        s = f" sub={int(sub[i])}" if sub is not None else ""
-        ef = res["expected_flags"]
-        lines.append(f"#{i}: a={int(a[i]):08x} b={int(b[i]):08x}{s} expected "
-                     f"{int(res['expected'][i]):08x}"
-                     + (f"/flags {int(ef[i])}" if ef is not None else "")
-                     + f" got {int(res['got'][i]):08x}/flags {int(res['got_flags'][i])}")
-    return "\n".join(lines)
+class FPCosim(UnitCosim):
+    """``fp-add`` and ``fp-mul``: a case is one operation (``a``, ``b``, and ``sub`` for the
+    adder); compared: the result ``o`` and the event flags (when the expected results have
+    them). Driver ``"batch"``: the batch harness; ``"percycle"``: the cocotb driver
+    (:class:`raplas_hdl.sim.tb.stream.StreamTB`), stalls on ``en`` in both."""
+
+    outputs = ("o", "flags")
+    drivers = ("batch", "percycle")
+
+    def __init__(self, fmt, options, driver="batch"):
+        super().__init__(fmt, options, driver)
+        self.harness = driver
+        self.sub = self.name == "fp-add"
+
+    def label(self):
+        return f"target={self.target}" if self.target != "generic" else ""
+
+    def random(self, n, seed):
+        rng = np.random.default_rng(seed)
+        a = rng.integers(0, self.fmt.mask + 1, n, dtype=np.uint32)
+        b = rng.integers(0, self.fmt.mask + 1, n, dtype=np.uint32)
+        sub = rng.integers(0, 2, n).astype(np.uint32) if self.sub else None
+        return {"a": a, "b": b, "sub": sub}
+
+    def expected(self, cases):
+        o, flags = fp_expected(self.name, self.fmt, cases["a"], cases["b"], cases["sub"])
+        return {"o": o, "flags": flags}
+
+    def n_cases(self, cases):
+        return len(cases["a"])
+
+    def read(self, path):
+        a, b, sub, o, flags = read_vectors(path, self.name, self.fmt)
+        return {"a": a, "b": b, "sub": sub}, {"o": o, "flags": flags}
+
+    def write(self, path, cases, expected):
+        write_vectors(path, self.name, cases["a"], cases["b"], cases["sub"], expected["o"],
+                      expected["flags"], fmt=self.fmt)
+
+    def show(self, cases, expected, got, i):
+        nd = (self.fmt.width + 3) // 4
+        sub = cases["sub"]
+        e, g = int(expected["o"][i]), int(got["o"][i])
+        lines = [f"  case {i}: a={int(cases['a'][i]):0{nd}x} b={int(cases['b'][i]):0{nd}x}"
+                 + (f" sub={int(sub[i])}" if sub is not None else ""),
+                 f"    {'o':12s} expected {e:0{nd}x}, got {g:0{nd}x}"
+                 + ("   <- differs" if e != g else "")]
+        if expected["flags"] is not None:
+            e, g = int(expected["flags"][i]), int(got["flags"][i])
+            lines.append(f"    {'flags':12s} expected {e}, got {g}"
+                         + ("   <- differs" if e != g else ""))
+        return lines
+
+    def simulate(self, cases, simulator, *, valid_density, stall_density, seed,
+                 timeout_s=None):
+        spec = fp_spec(self.name, self.fmt)
+        cols = {"a": np.asarray(cases["a"], np.uint32), "b": np.asarray(cases["b"], np.uint32)}
+        if self.sub:
+            cols["sub"] = np.asarray(cases["sub"]).astype(np.uint32)
+        stages = self.options.get("stages")
+        verilog, latency = fp_verilog(self.name, self.fmt, stages, self.target)
+        key = f"{spec.dut}-{self.fmt.name}-s{stages if stages is not None else 'd'}"
+        if self.target != "generic":
+            # lazy: rtl.dsp48 loads Amaranth; importing raplas_hdl.sim.cosim needs none
+            from raplas_hdl.rtl.dsp48 import dsp48_sim_model
+
+            verilog += "\n" + dsp48_sim_model()
+            key += f"-{self.target}"
+        if self.driver == "batch":
+            out, info = run_batch(simulator, spec, verilog, key, cols, valid_density,
+                                  stall_density, seed, timeout_s=timeout_s)
+        else:
+            out, info = run_percycle(simulator, spec, verilog, key, cols, 1.0 - valid_density,
+                                     stall_density, seed, timeout_s=timeout_s)
+        info["latency"] = latency
+        return {"o": out["o"].astype(np.uint32), "flags": out["flags"].astype(np.uint8)}, info
+
+
+class FPAddCosim(FPCosim):
+    name = "fp-add"
+
+
+class FPMulCosim(FPCosim):
+    name = "fp-mul"
 
 
 def fp_bundle(exp_bits: int, man_bits: int, roundings=("rtz", "rne", "chop"),

@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..build.runner import waves_requested
-from .base import UnitCosim
+from .base import UnitCosim, beat_lines, report_runs
 from .vectors import LineKind
 
 
@@ -28,9 +28,10 @@ class IntersectionCosim(UnitCosim):
 
     name = "intersection-unit"
     outputs = ("stream", "counters")
+    case_name = "runs"
 
-    def __init__(self, fmt, options):
-        super().__init__(fmt, options)
+    def __init__(self, fmt, options, driver="batch"):
+        super().__init__(fmt, options, driver)
         # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
         from raplas_hdl.model.config import UnitConfig
 
@@ -46,6 +47,9 @@ class IntersectionCosim(UnitCosim):
                               **({"lanes": self.config.lanes} if self.config.lanes != 1
                                  else {}),
                               **({"reduce": True} if self.config.reduce else {})}
+
+    def check(self):
+        pass        # the constructor built the UnitConfig (ValueError names the parameter)
 
     def random(self, n, seed):
         # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
@@ -285,18 +289,7 @@ class IntersectionCosim(UnitCosim):
         out = []
         any_hit = expected.get("any_hit") or [False] * len(expected["runs"])
         for k, ((es, ec), (gs, gc)) in enumerate(zip(expected["runs"], got["runs"])):
-            lines = []
-            if len(es) != len(gs):
-                lines.append(f"    beats        expected {len(es)}, got {len(gs)}   <- differs")
-            m = min(len(es), len(gs))
-            diff = [j for j in range(m) if es[j].tobytes() != gs[j].tobytes()]
-            if diff:
-                j = diff[0]
-                lines.append(f"    {len(diff)} beats differ; the first, beat {j}:")
-                for name in es.dtype.names:
-                    e, g = int(es[name][j]), int(gs[name][j])
-                    mark = "   <- differs" if e != g else ""
-                    lines.append(f"      {name:12s} expected {e:x}, got {g:x}{mark}")
+            lines = beat_lines(es, gs)
             for name in COUNTERS.names:
                 if name not in ec:                                   # the model has no cycles
                     continue
@@ -309,6 +302,9 @@ class IntersectionCosim(UnitCosim):
                     lines.append(f"    counter {name}: expected {e}, got {g}   <- differs")
             out.append(lines or None)
         return out
+
+    def report(self, cases, expected, got, limit):
+        return report_runs(self, cases, self.mismatches(expected, got), limit)
 
     def describe(self, cases, i):
         b, ids, keep = cases["runs"][i]

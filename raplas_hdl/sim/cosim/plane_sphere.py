@@ -173,8 +173,8 @@ class TesterCosim(_PlaneCosim):
     name = "plane-sphere-tester"
     outputs = ("flag",)
 
-    def __init__(self, fmt, options):
-        super().__init__(fmt, options)
+    def __init__(self, fmt, options, driver="batch"):
+        super().__init__(fmt, options, driver)
         w = fmt.width
         self.kinds = (self._plane_kind(),
                       LineKind("S", (("cx", w), ("cy", w), ("cz", w), ("r", w), ("flag", 1))))
@@ -247,8 +247,8 @@ class ArrayCosim(_PlaneCosim):
     name = "plane-sphere"
     outputs = ("id", "row_mask", "col_mask")
 
-    def __init__(self, fmt, options):
-        super().__init__(fmt, options)
+    def __init__(self, fmt, options, driver="batch"):
+        super().__init__(fmt, options, driver)
         self.rows = self.options.get("rows", 4)
         self.cols = self.options.get("cols", 4)
         self.header_params = {"rows": self.rows, "cols": self.cols}

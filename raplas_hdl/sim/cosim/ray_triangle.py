@@ -16,8 +16,8 @@ class RayTriangleCosim(UnitCosim):
 
     name = "ray-triangle"
 
-    def __init__(self, fmt, options):
-        super().__init__(fmt, options)
+    def __init__(self, fmt, options, driver="batch"):
+        super().__init__(fmt, options, driver)
         # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
         from raplas_hdl.model.records import PAIR, RT_RESULT
 

@@ -30,7 +30,7 @@ __all__ = ["MAX_LINES", "UNIT_NAMES", "LineKind", "check_header", "columns_of", 
 MAX_LINES = 10_000_000
 #: The units whose name a header may give (longest first, for the pattern).
 UNIT_NAMES = ("fp-add", "fp-mul", "plane-sphere-tester", "plane-sphere", "ray-triangle",
-              "intersection-unit")
+              "intersection-unit", "board-top")
 _HEADER = re.compile(r"#\s*(" + "|".join(sorted(UNIT_NAMES, key=len, reverse=True))
                      + r")(?![\w-])(?:\s+([^\s:=]+))?((?:\s+[a-z_]+=[^\s:]+)*)\s*:")
 

@@ -38,33 +38,43 @@ _SCENE_FIELDS = ("v0", "e1", "e2", "n", "centres", "radii", "tri_lists", "tri_co
 _BUNDLE_FIELDS = ("plane_n", "plane_p", "ray_o", "ray_d", "enable")
 
 
-def _digest(config: UnitConfig) -> str:
-    h = hashlib.sha256(unit_verilog_digest(config).encode())
+def _digest(config: UnitConfig, multiplier: str, adder: str) -> str:
+    h = hashlib.sha256(unit_verilog_digest(config, multiplier, adder).encode())
     h.update((Path(raplas_hdl.__file__).parent / "model" / "board_map.py").read_bytes())
     return h.hexdigest()[:16]
 
 
-def board_verilog(config: UnitConfig) -> str:
-    """The board top's Verilog for ``config`` (module ``board_top``), cached.
+def board_verilog(config: UnitConfig, multiplier: str = "generic",
+                  adder: str = "generic") -> str:
+    """The board top's Verilog for ``config`` (module ``board_top``), cached; ``multiplier``
+    and ``adder`` ``"virtex4"`` build the unit's DSP48 targets (Yosys's DSP48 simulation
+    model appended).
 
     Cached in memory and on disk, keyed by the parameters and the RTL sources; a file lock
     makes concurrent callers (pytest-xdist workers) wait for one emission.
     """
-    if config in _VERILOG_CACHE:
-        return _VERILOG_CACHE[config]
-    path = BUILD_ROOT / "verilog" / f"{TOPLEVEL}-{_digest(config)}.v"
+    key = (config, multiplier, adder)
+    if key in _VERILOG_CACHE:
+        return _VERILOG_CACHE[key]
+    path = BUILD_ROOT / "verilog" / f"{TOPLEVEL}-{_digest(config, multiplier, adder)}.v"
     with file_lock(path.with_suffix(".lock")):
         if path.exists():
             text = path.read_text()
         else:
-            # lazy: board_top loads Amaranth, needed only when the cached Verilog is missing
+            # lazy (here and below): the RTL loads Amaranth, needed only when the cached
+            # Verilog is missing
             from raplas_hdl.rtl.board_top import BoardTop
 
-            text, _ = emit_verilog(BoardTop(config), TOPLEVEL, config.params())
+            text, _ = emit_verilog(BoardTop(config, multiplier=multiplier, adder=adder),
+                                   TOPLEVEL, config.params())
+            if "virtex4" in (multiplier, adder):
+                from raplas_hdl.rtl.dsp48 import dsp48_sim_model
+
+                text += "\n" + dsp48_sim_model()
             tmp = path.with_suffix(f".{os.getpid()}.tmp")
             tmp.write_text(text)
             os.replace(tmp, path)
-    _VERILOG_CACHE[config] = text
+    _VERILOG_CACHE[key] = text
     return text
 
 
@@ -99,7 +109,8 @@ def decode_stimulus(meta: dict, stim: dict):
 
 def run_board(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
               seed: int = 1, gap_density: float = 0.3, prefetch: bool = True,
-              build_key: str | None = None):
+              build_key: str | None = None, multiplier: str = "generic",
+              adder: str = "generic"):
     """Run ``runs`` through the board top.
 
     Parameters
@@ -113,6 +124,8 @@ def run_board(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
         The bus master's random idle cycles (see :mod:`raplas_hdl.sim.tb.board`).
     prefetch : bool
         The driver writes the next bundle while a run goes (the double buffer).
+    multiplier, adder : {"generic", "virtex4"}
+        The unit's DSP48 targets (:func:`board_verilog`).
 
     Returns
     -------
@@ -131,7 +144,7 @@ def run_board(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
     if not runs:
         raise ValueError("runs is empty")
     scene.check(config)
-    text = board_verilog(config)
+    text = board_verilog(config, multiplier, adder)
     with tempfile.TemporaryDirectory(prefix="raplas-board-") as tmp:
         stim_path, out_path, meta_path = (Path(tmp) / n for n in
                                           ("stim.npz", "out.npz", "meta.json"))

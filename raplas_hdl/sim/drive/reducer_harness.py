@@ -6,7 +6,8 @@ The harness has one input stream; :class:`ReducerTop` makes it the reducer's thr
 each input word is a ``kind`` and a payload, ``kind`` 0 a ``RESULT`` beat (to ``i``), 1 a
 host write (``addr``, ``data``: the window of a bank), 2 a run's bank (to ``run_bank``).
 :func:`stimulus` orders them as the intersection unit would: per run, the bank's window
-writes, the bank, then the beats; runs alternate banks.
+writes, the bank, then the beats; runs alternate banks. :func:`random_runs` makes
+adversarial runs for it (and for the reduction's model tests).
 """
 
 from __future__ import annotations
@@ -16,15 +17,18 @@ from amaranth.hdl import Module
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from raplas_hdl.fp import model as fpm
 from raplas_hdl.model.config import UnitConfig
-from raplas_hdl.model.memory_image import REGIONS, bundle_writes
+from raplas_hdl.model.intersection import RESULT_DTYPE
+from raplas_hdl.model.memory_image import REGIONS, BundleMemory, bundle_writes
 from raplas_hdl.model.records import answer_record, result_record
-from raplas_hdl.model.reduction import reduce_run
+from raplas_hdl.model.reduction import inf_pattern, reduce_run
 from raplas_hdl.rtl.emit import emit_verilog
 from raplas_hdl.rtl.unit.reducer import Reducer, answer_layout
 from raplas_hdl.sim.build.harness import HarnessSpec, run_unit_batch, words64
 
-__all__ = ["ReducerTop", "stimulus", "expected", "cosim_reducer"]
+__all__ = ["ReducerTop", "stimulus", "expected", "cosim_reducer", "random_runs",
+           "random_beats", "window_bundle"]
 
 KIND_BEAT, KIND_WRITE, KIND_RUN = range(3)
 
@@ -110,3 +114,69 @@ def cosim_reducer(simulator: str, cfg: UnitConfig, runs, *, seed: int = 1,
                                valid_density, stall_density, seed, n_out=want.size)
     got = ans.unpack_words(words64(out["o__payload"], ans.size))
     return got, want, info
+
+
+# -- random runs ------------------------------------------------------------------------------
+def window_bundle(cfg: UnitConfig, **window) -> BundleMemory:
+    """A bundle of zero planes and rays with the window ``window`` (tmin, tmax, exclude,
+    any_hit)."""
+    z3 = np.zeros((cfg.n_rays, 3), np.uint32)
+    return BundleMemory(np.zeros((cfg.n_planes, 3), np.uint32),
+                        np.zeros(cfg.n_planes, np.uint32), z3, z3.copy(), **window)
+
+
+def random_beats(rng, n: int, cfg: UnitConfig) -> np.ndarray:
+    """Result beats with random and deliberately tied ratios t'/det (3/6 = 1/2, scaled by
+    powers of two), signs, zeros, infinities and NaNs, tri IDs with repeats."""
+    fmt = cfg.fmt
+    b = np.zeros(n, RESULT_DTYPE)
+    b["ray_id"] = rng.integers(0, cfg.n_rays, n)
+    b["tri_id"] = rng.integers(0, 12, n)
+    b["hit"] = rng.random(n) < 0.8
+    t = rng.uniform(-0.5, 4.0, n)
+    det = rng.choice([-1.0, 1.0], n) * rng.uniform(0.01, 2.0, n)
+    # ties: t'/det = a/b for small a, b, times a power of two
+    k = rng.random(n) < 0.4
+    num, den = rng.integers(1, 6, n), rng.integers(1, 4, n)
+    mult = rng.integers(1, 4, n) * 2.0 ** rng.integers(-3, 3, n)
+    sgn = rng.choice([-1.0, 1.0], n)
+    t = np.where(k, sgn * num * mult, t)
+    det = np.where(k, sgn * den * mult, det)
+    bits_t = fpm.encode(t, fmt)
+    bits_d = fpm.encode(det, fmt)
+    special = rng.random(n)
+    inf = inf_pattern(fmt)
+    bits_t = np.where(special < 0.02, inf, bits_t)
+    bits_d = np.where((special > 0.02) & (special < 0.04), 0, bits_d)
+    bits_t = np.where((special > 0.04) & (special < 0.05), inf | 1, bits_t)
+    bits_t = np.where((special > 0.05) & (special < 0.06), 0, bits_t)
+    b["t"], b["det"] = bits_t, bits_d
+    b["u"], b["v"] = rng.integers(0, fmt.mask, n), rng.integers(0, fmt.mask, n)
+    b["flags"] = rng.integers(0, 8, n)
+    b["last"][-1] = 1
+    return b
+
+
+def random_runs(cfg: UnitConfig, n_runs: int, seed: int, beats_per_run: int = 40) -> list:
+    """``n_runs`` (beats, bundle) runs for the reducer: random beats (:func:`random_beats`),
+    a run that issued no pair and one without a hit every seven, random windows, nearest-hit
+    and any-hit runs alternating."""
+    fmt = cfg.fmt
+    rng = np.random.default_rng(seed)
+    runs = []
+    for k in range(n_runs):
+        kind = k % 7
+        if kind == 5:                       # a run that issued no pair
+            beats = np.zeros(1, RESULT_DTYPE)
+            beats["last"] = beats["empty"] = 1
+        else:
+            beats = random_beats(rng, int(rng.integers(1, beats_per_run)), cfg)
+            if kind == 6:                   # pairs, but no hit
+                beats["hit"] = 0
+        tmax = fpm.encode(rng.uniform(0.5, 6.0, cfg.n_rays), fmt)
+        tmax[rng.random(cfg.n_rays) < 0.3] = inf_pattern(fmt)
+        tmin = int(fpm.encode(np.array([rng.choice([0.0, -1.0, 0.3])]), fmt)[0])
+        bundle = window_bundle(cfg, tmin=tmin, tmax=tmax, exclude=int(rng.integers(-1, 12)),
+                               any_hit=bool(k % 2))
+        runs.append((beats, bundle))
+    return runs

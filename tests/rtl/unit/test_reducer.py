@@ -12,8 +12,7 @@ import pytest
 
 from raplas_hdl.fp import FP24
 from raplas_hdl.model.config import UnitConfig
-from raplas_hdl.sim.drive.reducer_harness import cosim_reducer
-from tests.support.reduction import reducer_runs
+from raplas_hdl.sim.drive.reducer_harness import cosim_reducer, random_runs
 
 CFG = UnitConfig(FP24, rows=2, cols=4, max_triangles=16, reduce=True)
 #: 35 rays: the tree of priority encoders (5 padded groups of 8)
@@ -21,7 +20,7 @@ WIDE = UnitConfig(FP24, rows=5, cols=7, max_triangles=16, reduce=True)
 
 
 def check(simulator, n_runs, seed, cfg=CFG, **kw):
-    runs = reducer_runs(cfg, n_runs, seed, beats_per_run=4 * cfg.n_rays)
+    runs = random_runs(cfg, n_runs, seed, beats_per_run=4 * cfg.n_rays)
     got, want, info = cosim_reducer(simulator, cfg, runs, seed=seed, **kw)
     assert got.size == want.size
     for name in want.dtype.names:
