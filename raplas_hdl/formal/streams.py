@@ -57,24 +57,41 @@ stream rule) and asserts:
   job-last on the last, the ``k``-th triangle of the sphere's list, and the Ray Memory's
   word at the ray in the job's bank and the Triangle Memory's at that triangle; credits
   held + pairs in flight + words in the FIFO + reads on their way back = ``depth``; a job
-  taken while the FIFO behind is empty writes a pair within 4 cycles.
+  taken while the FIFO behind is empty writes a pair within 4 cycles;
+- for the sphere feeder (:class:`~raplas_hdl.rtl.unit.feeder.SphereFeeder`, with its
+  sphere FIFO), whose read ports the harness answers from free, fixed contents (the run
+  lists, the Sphere Memory, the Plane Memory's two banks), and behind whose ``o`` it keeps
+  the array as a count (items taken from ``o``, less those ``retired``, which it assumes
+  only when there is one), with ``plane_written`` free, and runs assumed inside the
+  memories (``first + count <= max_spheres``): the runs taken leave run after run, each as
+  its ``count`` spheres (position ``first + pos``, or the run list's entry there in the
+  run's bank when ``indirect``) with the Sphere Memory's word and the run's tag bits, then
+  its marker; every item leaves while the array holds all the planes of its run's bank;
+  planes are written only while no item is on its way to or through the array, in order,
+  the Plane Memory's words of the last run's bank; credits held + items in the pipeline +
+  in the sphere FIFO + reads on their way back = the FIFO's depth. Checked to a stated
+  depth (``bmc``): an induction over the sphere FIFO's words needs the invariant the FIFOs'
+  checks cannot state either.
 
 The stages and what each checks are :data:`STAGES`; :func:`check_stage` runs one
 (k-induction, ``mode prove``; a stage whose induction does not close at the depth given is
-``unknown``, never passed; the two FIFOs are checked to a stated depth instead, since an
-induction over their memory's words needs an invariant the harness cannot state). Cover
+``unknown``, never passed; the FIFOs and the sphere feeder are checked to a stated depth
+instead, since an induction over a FIFO's memory words needs an invariant the harness cannot
+state). Cover
 statements show the checks are not vacuous: each stage must reach a full FIFO / a lane
 change / an ``empty`` beat, a ``last`` beat and a beat held under ``!ready`` / a skipped
 ray, a marker job, a job held under ``!ready``, every ray of a sphere / a job's two pairs, a
 marker's pair, the write that spends the last credit, a pair on a credit given back / a
-transfer while a reset is free.
+sphere from a run list, the marker of a run of two spheres, an item held under ``!ready``,
+a second plane load after an item went through the array / a transfer while a reset is
+free.
 """
 
 from __future__ import annotations
 
 import hashlib
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ..fp import FP16, FPFormat
@@ -161,6 +178,11 @@ STAGES = {s.name: s for s in (
           "2 spheres of 2 triangles: stage 6 as a lane builds it, on credits", 8, cover=14,
           probes=tuple((f"{r}_probe", f"dut.{r}")
                        for r in ("busy", "job", "k", "credit", "g1", "g2", "g3"))),
+    Stage("sphere-feeder", "rtl.unit.feeder.SphereFeeder, e3m2, 2 spheres, 2 planes: stages 1 "
+          "and 2, plane loads and spheres on credits into its sphere FIFO", 18, "bmc", cover=18,
+          probes=(*((f"{r}_probe", f"dut.{r}") for r in ("credit", "freed", "f1", "fs", "f2",
+                                                          "f3")),
+                  ("fifo_level_probe", "dut.fifo.inner_level"))),
 )}
 
 
@@ -200,6 +222,8 @@ def stage_verilog(name: str) -> tuple[str, dict]:
         return _selector_verilog()
     if name == "record-fetch":
         return _fetch_verilog()
+    if name == "sphere-feeder":
+        return _feeder_verilog()
     from ..rtl.unit.lanes import JobDistributor, ResultMerger
 
     cfg = _config(3)
@@ -276,6 +300,33 @@ def _fetch_verilog() -> tuple[str, dict]:
             "abits": {n: getattr(comp, n).addr.shape().width for n in ("tlist", "ray", "tri")}}
     text = verilog.convert(comp, name="stage", emit_src=False)
     info["regs"] = _reg_widths(text, ("k", "credit", "g1", "g2", "g3"))
+    return text, info
+
+
+def _feeder_verilog() -> tuple[str, dict]:
+    from amaranth.back import verilog
+
+    from ..model.records import PLANE
+    from ..rtl.records import struct_layout
+    from ..rtl.unit.feeder import SPHERE_FIFO_DEPTH, SphereFeeder
+    from ..rtl.unit.streams import tag_layout
+
+    # one ray: two planes to load, so that a second load comes within the cycles checked
+    cfg = replace(_config(1, fmt=FETCH_FORMAT), cols=1)
+    comp = SphereFeeder(cfg, capacity=4)
+    cmd, sph, tag = comp.cmd.payload.shape(), comp.o.payload.shape(), tag_layout(cfg)
+    info = {"depth": SPHERE_FIFO_DEPTH, "spheres": cfg.max_spheres, "planes": cfg.n_planes,
+            "sb": cfg.sphere_id_bits, "iw": cmd.size, "ow": sph.size,
+            "sw": comp.sphere.data.shape().width, "pw": struct_layout(PLANE, cfg).size,
+            "cmd": {n: (f.offset, f.width) for n, f in cmd},
+            "tag": {n: sph["id"].offset + f.offset for n, f in tag},
+            # the sphere's words as the feeder copies them from the Sphere Memory's word
+            "c": (sph["c"].offset, sph["c"].width), "r": (sph["r"].offset, sph["r"].width),
+            "abits": {n: getattr(comp, n).addr.shape().width
+                      for n in ("rlist", "sphere", "plane")},
+            "pw_addr": comp.pw_addr.shape().width}
+    text = verilog.convert(comp, name="stage", emit_src=False)
+    info["regs"] = _reg_widths(text, ("credit", "f1", "fs", "f2", "f3"))
     return text, info
 
 
@@ -739,6 +790,21 @@ def _word(vec: str, index: str, width: int, count: int) -> str:
     return f"({out})"
 
 
+def _memories(stage: str, mems) -> str:
+    """The harness text of the read ports of ``stage``, answered as the memories do (the
+    word addressed at the last ``en``) from contents that are free but fixed for the check:
+    ``mems`` holds ``(port, contents, word bits, words, address bits, what)``."""
+    decl = "".join(f"  (* anyconst *) reg [{w * n - 1}:0] {mem};    // {what}\n"
+                   for _, mem, w, n, _, what in mems)
+    wires = "".join(f"  wire {port}_en;\n  wire [{ab - 1}:0] {port}_addr;\n"
+                    f"  reg [{w - 1}:0] {port}_data;\n" for port, _, w, _, ab, _ in mems)
+    reads = "".join(f"    if ({port}_en) {port}_data <= {_word(mem, f'{port}_addr', w, n)};\n"
+                    for port, mem, w, n, _, _ in mems)
+    return (f"  // the memories the {stage} reads: any contents, fixed for the check\n{decl}"
+            f"{wires}  always @(posedge clk) begin       // the word addressed at the last en\n"
+            f"{reads}  end\n")
+
+
 def _fetch_check(info: dict) -> str:
     d, tps, nr, tb, rb = info["depth"], info["tps"], info["rays"], info["tb"], info["rb"]
     iw, ow, rw, tw, ab, regs_w = (info["iw"], info["ow"], info["rw"], info["tw"],
@@ -777,25 +843,14 @@ def _fetch_check(info: dict) -> str:
         f"slots[{j * iw + nt + cb - 1}:{j * iw + nt}] <= {tps}));\n" for j in range(8))
     probes = "".join(f"  wire [{regs_w[r] - 1}:0] {r}_probe;\n" for r in ("k", "credit", "g1",
                                                                            "g2", "g3"))
+    mems = (("tlist", "tlist", tb, info["spheres"] * tps, ab["tlist"],
+             f"sphere s's k-th triangle at s * {tps} + k"),
+            ("ray", "rays", rw, 2 * nr, ab["ray"], "Ray Memory, two banks"),
+            ("tri", "tris", tw, info["tris"], ab["tri"], "Triangle Memory"))
     return f"""module stream_check(input clk, input rst, input i_valid,
                     input [{iw - 1}:0] i_payload, input r_take);
   reg init = 1;
-  // the memories the fetch reads: any contents, fixed for the check
-  (* anyconst *) reg [{info["spheres"] * tps * tb - 1}:0] tlist;   // sphere s's k-th: s*{tps}+k
-  (* anyconst *) reg [{2 * nr * rw - 1}:0] rays;     // Ray Memory, two banks
-  (* anyconst *) reg [{info["tris"] * tw - 1}:0] tris;     // Triangle Memory
-  wire tlist_en, ray_en, tri_en;
-  wire [{ab["tlist"] - 1}:0] tlist_addr;
-  wire [{ab["ray"] - 1}:0] ray_addr;
-  wire [{ab["tri"] - 1}:0] tri_addr;
-  reg [{tb - 1}:0] tlist_data;
-  reg [{rw - 1}:0] ray_data;
-  reg [{tw - 1}:0] tri_data;
-  always @(posedge clk) begin               // read ports: the word addressed at the last en
-    if (tlist_en) tlist_data <= tlist >> (tlist_addr * {tb});
-    if (ray_en) ray_data <= {_word("rays", "ray_addr", rw, 2 * nr)};
-    if (tri_en) tri_data <= {_word("tris", "tri_addr", tw, info["tris"])};
-  end
+{_memories("fetch", mems)}\
   // the pair FIFO behind o, as its writer's credits see it: lvl words; the reader takes one
   // when there is one (r_take), and each read gives the fetch an entry back (freed)
   reg [2:0] lvl = 0;
@@ -820,7 +875,7 @@ def _fetch_check(info: dict) -> str:
   wire [{nb - 1}:0] queued = n_in - n_done;
 {"".join(chain)}  // the next pair out, pair kout of job n_done: its ray, its kout-th triangle,
   // their words
-  wire [{tb - 1}:0] h_tri = tlist >> ((p0_j_sid * {tps} + p0_k) * {tb});
+  wire [{tb - 1}:0] h_tri = {_word("tlist", f"p0_j_sid * {tps} + p0_k", tb, info["spheres"] * tps)};
   wire [{rw - 1}:0] h_rayw = {_word("rays", f"p0_j_bank * {nr} + p0_j_ray", rw, 2 * nr)};
   wire [{tw - 1}:0] h_triw = {_word("tris", "h_tri", tw, info["tris"])};
 {"".join(want)}  // where the fetch is: the next pair it starts
@@ -876,6 +931,122 @@ endmodule
 """
 
 
+def _feeder_check(info: dict) -> str:
+    d, ns, n, sb, iw, ow = (info["depth"], info["spheres"], info["planes"], info["sb"],
+                            info["iw"], info["ow"])
+    sw, pw, ab, rg, tag = info["sw"], info["pw"], info["abits"], info["regs"], info["tag"]
+    c_at, c_w = info["c"]
+    r_at, r_w = info["r"]
+
+    def fields(name, vec):          # the fields of a run command, as wires {name}_first, ...
+        return "".join(f"  wire [{w - 1}:0] {name}_{f} = {vec}[{off + w - 1}:{off}];\n"
+                       for f, (off, w) in info["cmd"].items())
+
+    probes = "".join(f"  wire [{rg[r] - 1}:0] {r}_probe;\n" for r in ("credit", "f1", "fs",
+                                                                       "f2", "f3"))
+    regs, checks = _stream_env(iw, ow)
+    cw = info["cmd"]["count"][1]
+    mems = (("rlist", "rlist", sb, 2 * ns, ab["rlist"], "the run lists, two banks"),
+            ("sphere", "spheres", sw, ns, ab["sphere"], "Sphere Memory"),
+            ("plane", "planes", pw, 2 * n, ab["plane"], "Plane Memory, two banks"))
+    return f"""module stream_check(input clk, input rst, input i_valid,
+                    input [{iw - 1}:0] i_payload, input o_ready, input [1:0] plane_written,
+                    input retired);
+  reg init = 1;
+{_memories("feeder", mems)}\
+  wire i_ready, o_valid, pw_en, spheres_out;
+  wire [{ow - 1}:0] o_payload;
+  wire [{info["pw_addr"] - 1}:0] pw_addr;
+  wire [{pw - 1}:0] pw_data;
+  stage dut(.clk(clk), .rst(rst), .cmd__valid(i_valid), .cmd__payload(i_payload),
+            .cmd__ready(i_ready), .o__valid(o_valid), .o__payload(o_payload),
+            .o__ready(o_ready), .plane_written(plane_written), .retired(retired),
+            .spheres(spheres_out), .pw_en(pw_en), .pw_addr(pw_addr), .pw_data(pw_data),
+            .rlist__addr(rlist_addr), .rlist__en(rlist_en), .rlist__data(rlist_data),
+            .sphere__addr(sphere_addr), .sphere__en(sphere_en), .sphere__data(sphere_data),
+            .plane__addr(plane_addr), .plane__en(plane_en), .plane__data(plane_data));
+  // the feeder's credits, the credit on its way back, its pipeline (bit 0: valid) and its
+  // sphere FIFO's inner level (connect -set)
+  wire freed_probe;
+{probes}  wire [2:0] fifo_level_probe;
+  // runs taken (run n at n mod 8, more than fit in the cycles checked); runs whose marker
+  // left; items of run n_done out
+  reg [2:0] n_in = 0, n_done = 0;
+  reg [{cw - 1}:0] pos = 0;
+  reg [{8 * iw - 1}:0] slots = 0;
+  wire [2:0] n_last = n_in - 1;
+  wire [{iw - 1}:0] head = slots >> (n_done * {iw}), last = slots >> (n_last * {iw});
+{fields("h", "head")}{fields("last", "last")}\
+  // the array behind o: items in it (taken from o, not yet retired by the selector), the
+  // bank of its planes and how many of them the current load wrote
+  reg [3:0] in_array = 0;
+  reg arr_bank = 0;
+  reg [2:0] arr_n = 0;
+  // what the head run sends next: a sphere (direct or from its bank's run list), or its marker
+  wire marker = pos == h_count;
+  wire [{sb - 1}:0] direct = h_first + pos;
+  wire [{sb - 1}:0] listed = {_word("rlist", f"h_bank * {ns} + direct", sb, 2 * ns)};
+  wire [{sb - 1}:0] sid = h_indirect ? listed : direct;
+  wire [{sw - 1}:0] word = {_word("spheres", "sid", sw, ns)};
+  wire [{pw - 1}:0] plane_word = {_word("planes", f"last_bank * {n} + pw_addr", pw, 2 * n)};
+  wire o_take = o_valid && o_ready;
+  reg [4:0] n_items = 0;                    // items out (for the covers)
+{regs}  always @(posedge clk) begin
+    init <= 0;
+    if (rst) begin
+      n_in <= 0; n_done <= 0; pos <= 0; in_array <= 0; arr_n <= 0; n_items <= 0;
+    end else begin
+      if (i_valid && i_ready) begin
+        slots[n_in * {iw} +: {iw}] <= i_payload;
+        n_in <= n_in + 1;
+      end
+      if (o_take) begin
+        pos <= marker ? 0 : pos + 1;
+        if (marker) n_done <= n_done + 1;
+        n_items <= n_items + 1;
+      end
+      in_array <= in_array + o_take - retired;
+      if (pw_en) begin
+        arr_bank <= last_bank;
+        arr_n <= pw_addr == 0 ? 1 : arr_n + 1;
+      end
+    end
+{checks}      // a run stays inside the run list and the Sphere Memory
+      if (i_valid) assume(i_payload[{info["cmd"]["first"][0] + sb - 1}:{info["cmd"]["first"][0]}]
+                          + i_payload[{info["cmd"]["count"][0] + cw - 1}:{info["cmd"]["count"][0]}]
+                          <= {ns});
+      assume(!retired || in_array != 0);     // the selector takes an item that is there
+      if (o_take) begin
+        assert(n_done != n_in);              // nothing that was not asked for
+        // the head run's next sphere, then its marker, with the run's tag bits
+        assert(o_payload[{tag["marker"]}] == marker && o_payload[{tag["bank"]}] == h_bank
+               && o_payload[{tag["keep_all"]}] == h_keep_all);
+        if (!marker) assert(o_payload[{tag["sphere"] + sb - 1}:{tag["sphere"]}] == sid
+                            && o_payload[{c_at + c_w - 1}:{c_at}] == word[{c_w - 1}:0]
+                            && o_payload[{r_at + r_w - 1}:{r_at}] == word[{c_w + r_w - 1}:{c_w}]);
+        // ... while the array holds all the planes of the run's bank
+        assert(arr_n == {n} && arr_bank == h_bank);
+      end
+      // planes are written only while no item is on its way to or through the array (every
+      // run before the last has left, the last has sent nothing), in order, the words of the
+      // last run's bank
+      if (pw_en) assert(n_done == n_last && pos == 0 && in_array == 0
+                        && (pw_addr == 0 || pw_addr == arr_n) && pw_addr < {n}
+                        && pw_data == plane_word);
+      // the credits: every entry of the sphere FIFO is free for the feeder, claimed by an
+      // item in its pipeline, full, or on its way back
+      assert(credit_probe + f1_probe[0] + fs_probe[0] + f2_probe[0] + f3_probe[0]
+             + fifo_level_probe + o_valid + freed_probe == {d});
+      cover(o_take && !marker && h_indirect);   // a sphere from a run list
+      cover(o_take && marker && h_count == 2);   // the marker of a run of two spheres
+      cover(off && o_take);                  // an item held under !o.ready, then taken
+      cover(pw_en && n_items != 0);          // a load after an item went through the array
+    end
+  end
+endmodule
+"""
+
+
 def _check_text(name: str, info: dict) -> str:
     if name in ("bram-fifo", "sync-fifo-buffered", "credit-fifo", "credit-fifo-banked"):
         return _fifo_check(info["width"], info["depth"], info.get("credits", False))
@@ -887,6 +1058,8 @@ def _check_text(name: str, info: dict) -> str:
         return _selector_check(info)
     if name == "record-fetch":
         return _fetch_check(info)
+    if name == "sphere-feeder":
+        return _feeder_check(info)
     return _merger_check(info)
 
 
