@@ -36,15 +36,23 @@ stream rule) and asserts:
   result's fields, in order, once each, with ``last`` set exactly when the next input is a
   marker; an ``empty`` beat (``last`` set, every other field 0) leaves exactly for a marker
   with no result since the previous marker or reset;
-- for the pair selector (:class:`~raplas_hdl.rtl.unit.selector.PairSelector`, without the
-  reduction's early-out), whose two read ports the harness answers as the memories do (the
-  word addressed at the last ``en``) from contents that are free but fixed for the check
-  (the spheres' triangle counts and both banks' enable bits: the host writes them between
-  runs): sphere after sphere as taken, each ray of its masks (every ray with ``keep_all``;
-  none if it has no triangle), rows ascending then columns, leaves as a job (that ray, the
-  sphere, its bank and triangle count) if the ray is enabled, or else as ``skipped`` = its
-  triangle count for one cycle; a marker gives one marker job; one ray a cycle, and a ray
-  due waits at most one cycle with ``o.ready`` high;
+- for the pair selector (:class:`~raplas_hdl.rtl.unit.selector.PairSelector`), whose two
+  read ports the harness answers as the memories do (the word addressed at the last ``en``)
+  from contents that are free but fixed for the check (the spheres' triangle counts and
+  both banks' enable bits: the host writes them between runs): sphere after sphere as
+  taken, each ray of its masks (every ray with ``keep_all``; none if it has no triangle),
+  rows ascending then columns, leaves as a job (that ray, the sphere, its bank and triangle
+  count) if the ray is enabled, or else as ``skipped`` = its triangle count for one cycle;
+  a marker gives one marker job; one ray a cycle, and a ray due waits at most one cycle
+  with ``o.ready`` high. With the reduction's early-out (``pair-selector-reduce``),
+  ``blocked`` and ``blocked_seq`` are free in every cycle (any report the reducer could
+  make, and more) and the harness numbers the runs by the marker jobs taken: an enabled ray
+  whose bit was set in the report of the cycle before, for the run with that number, is
+  dropped without a job and without ``skipped`` (a disabled one is skipped as before),
+  every other ray as without the early-out; a job is offered exactly for a marker or an
+  enabled ray not so blocked; and the stream rule on ``o`` holds except that a job offered
+  under ``!o.ready`` is withdrawn when its ray is reported blocked (harmless behind the job
+  FIFO, which writes on ``valid`` and ``ready``);
 - for the record fetch (:class:`~raplas_hdl.rtl.unit.fetch.RecordFetch` as a lane builds
   it, the job-last bit above the marker), whose three read ports the harness answers from
   free, fixed contents (the triangle lists, the Ray Memory's two banks, the Triangle
@@ -76,15 +84,15 @@ stream rule) and asserts:
 The stages and what each checks are :data:`STAGES`; :func:`check_stage` runs one
 (k-induction, ``mode prove``; a stage whose induction does not close at the depth given is
 ``unknown``, never passed; the FIFOs and the sphere feeder are checked to a stated depth
-instead, since an induction over a FIFO's memory words needs an invariant the harness cannot
-state). Cover
-statements show the checks are not vacuous: each stage must reach a full FIFO / a lane
-change / an ``empty`` beat, a ``last`` beat and a beat held under ``!ready`` / a skipped
-ray, a marker job, a job held under ``!ready``, every ray of a sphere / a job's two pairs, a
-marker's pair, the write that spends the last credit, a pair on a credit given back / a
-sphere from a run list, the marker of a run of two spheres, an item held under ``!ready``,
-a second plane load after an item went through the array / a transfer while a reset is
-free.
+instead, since an induction over a FIFO's memory words needs an invariant the harness
+cannot state). Cover statements show the checks are not vacuous: each stage must reach a
+full FIFO / a lane change / an ``empty`` beat, a ``last`` beat and a beat held under
+``!ready`` / a skipped ray, a marker job, a job held under ``!ready``, every ray of a
+sphere (with the early-out, also a blocked ray dropped, and a job of a ray blocked in
+another run's report) / a job's two pairs, a marker's pair, the write that spends the last
+credit, a pair on a credit given back / a sphere from a run list, the marker of a run of
+two spheres, an item held under ``!ready``, a second plane load after an item went through
+the array / a transfer while a reset is free.
 """
 
 from __future__ import annotations
@@ -174,6 +182,10 @@ STAGES = {s.name: s for s in (
     Stage("pair-selector", "rtl.unit.selector.PairSelector, 2 x 2 rays, 2 spheres, no "
           "reduction: stages 4 and 5, one job per enabled ray", 8,
           probes=(("e_v_probe", "dut.e_v"), ("it_probe", "dut.it"))),
+    Stage("pair-selector-reduce", "rtl.unit.selector.PairSelector, 2 x 2 rays, 2 spheres, "
+          f"reduce, {SEQ}-bit run numbers: stages 4 and 5 with the reducer's early-out", 8,
+          probes=(("e_v_probe", "dut.e_v"), ("it_probe", "dut.it"),
+                  ("seq_probe", "dut.$signal"))),      # its run number (unnamed)
     Stage("record-fetch", "rtl.unit.fetch.RecordFetch(depth=4, job_last=True), e3m2, 2 rays, "
           "2 spheres of 2 triangles: stage 6 as a lane builds it, on credits", 8, cover=14,
           probes=tuple((f"{r}_probe", f"dut.{r}")
@@ -218,8 +230,8 @@ def stage_verilog(name: str) -> tuple[str, dict]:
                 {"width": FIFO_SEQ, "depth": 4, "credits": True})
     if name == "result-framing":
         return _framing_verilog()
-    if name == "pair-selector":
-        return _selector_verilog()
+    if name in ("pair-selector", "pair-selector-reduce"):
+        return _selector_verilog(name == "pair-selector-reduce")
     if name == "record-fetch":
         return _fetch_verilog()
     if name == "sphere-feeder":
@@ -256,14 +268,14 @@ def _framing_verilog() -> tuple[str, dict]:
     return verilog.convert(comp, name="stage", emit_src=False), info
 
 
-def _selector_verilog() -> tuple[str, dict]:
+def _selector_verilog(reduce: bool = False) -> tuple[str, dict]:
     from amaranth.back import verilog
 
     from ..rtl.unit.selector import PairSelector
     from ..rtl.unit.streams import tag_layout
 
-    cfg = _config(1, rows=2)
-    comp = PairSelector(cfg)
+    cfg = replace(_config(1, rows=2), reduce=reduce)
+    comp = PairSelector(cfg, seq_bits=SEQ)
     i_layout, o_layout, tag = comp.i.payload.shape(), comp.o.payload.shape(), tag_layout(cfg)
     tag_at = i_layout["id"].offset
     info = {"rows": cfg.rows, "cols": cfg.cols, "spheres": cfg.max_spheres,
@@ -272,7 +284,8 @@ def _selector_verilog() -> tuple[str, dict]:
             "i": {**{n: tag_at + tag[n].offset for n in ("sphere", "marker", "bank", "keep_all")},
                   "row_mask": i_layout["row_mask"].offset,
                   "col_mask": i_layout["col_mask"].offset},
-            "o": {n: (o_layout[n].offset, o_layout[n].width) for n, _ in o_layout}}
+            "o": {n: (o_layout[n].offset, o_layout[n].width) for n, _ in o_layout},
+            "reduce": reduce}
     return verilog.convert(comp, name="stage", emit_src=False), info
 
 
@@ -531,16 +544,19 @@ endmodule
 """
 
 
-def _stream_env(iw: int, ow: int) -> tuple[str, str]:
+def _stream_env(iw: int, ow: int, withdrawn: str = "") -> tuple[str, str]:
     """The harness text of a stage with one input stream ``i`` and one output ``o``: the
     registers (a beat offered on ``i`` and not taken; one offered on ``o`` and not taken),
     and the text that ends the harness's clocked block and opens its checks, with the
-    stream rule assumed on ``i`` and asserted on ``o``."""
+    stream rule assumed on ``i`` and asserted on ``o`` (where ``withdrawn``, an expression
+    of the harness, is true, the beat may instead be withdrawn, its payload kept)."""
+    rule = ("o_valid && o_payload == off_data" if not withdrawn else
+            f"(o_valid || {withdrawn}) && o_payload == off_data")
     regs = f"""  reg i_held = 0, off = 0;
   reg [{iw - 1}:0] i_held_payload = 0;
   reg [{ow - 1}:0] off_data = 0;
 """
-    checks = """    i_held <= !rst && i_valid && !i_ready;
+    checks = f"""    i_held <= !rst && i_valid && !i_ready;
     i_held_payload <= i_payload;
     off <= !rst && o_valid && !o_ready;
     off_data <= o_payload;
@@ -549,7 +565,7 @@ def _stream_env(iw: int, ow: int) -> tuple[str, str]:
     if (init) assume(rst);
     if (!init && i_held) assume(i_valid && i_payload == i_held_payload);   // the stream rule
     if (!init && !rst) begin
-      if (off) assert(o_valid && o_payload == off_data);    // the stream rule
+      if (off) assert({rule});    // the stream rule
 """
     return regs, checks
 
@@ -670,11 +686,35 @@ def _selector_check(info: dict) -> str:
                 f"&& {r}_ntris == {r}_count))")
 
     records = record("q0") + record("q1")
-    regs, checks = _stream_env(iw, ow)
+    # with the early-out, a job offered under !o.ready is withdrawn when its ray is reported
+    # blocked (harmless behind the job FIFO, which writes on valid and ready)
+    regs, checks = _stream_env(iw, ow, "dropped" if info["reduce"] else "")
+    if info["reduce"]:     # the reducer's report: any rays, any run number, in every cycle
+        ports = f", input [{n - 1}:0] blocked, input [{SEQ - 1}:0] blocked_seq"
+        early = f"""  // the report as the selector takes it, a cycle late; runs whose marker left
+  reg [{n - 1}:0] blk = 0;
+  reg [{SEQ - 1}:0] blk_seq = 0, seq = 0;
+  wire [{SEQ - 1}:0] seq_probe;                  // the selector's run number (connect -set)
+  wire h_blocked = blk_seq == seq && blk[h_q];
+"""
+        tie = ", .blocked(blocked), .blocked_seq(blocked_seq)"
+        count = """    blk <= rst ? 0 : blocked;
+    blk_seq <= rst ? 0 : blocked_seq;
+    if (rst) seq <= 0;
+    else if (o_take && q0_marker) seq <= seq + 1;
+"""
+        more = """      assert(seq_probe == seq);
+      cover(dropped);
+      // a job of a ray reported blocked in another run's report
+      cover(o_take && !q0_marker && blk[h_q] && blk_seq != seq);
+"""
+    else:
+        ports = tie = count = more = ""
+        early = "  wire h_blocked = 0;\n"
     searches = (search("h", "q0", "p") + f"  wire [{pb - 1}:0] after = h_q + 1;\n"
                 + search("nx", "q0", "after") + search("q1s", "q1", "0"))
     return f"""module stream_check(input clk, input rst, input i_valid,
-                    input [{iw - 1}:0] i_payload, input o_ready);
+                    input [{iw - 1}:0] i_payload, input o_ready{ports});
   reg init = 1;
   // the memories' words the selector reads: any, fixed for the check
   (* anyconst *) reg [{cb * info["spheres"] - 1}:0] counts;    // triangles per sphere
@@ -695,7 +735,8 @@ def _selector_check(info: dict) -> str:
             .i__ready(i_ready), .o__valid(o_valid), .o__payload(o_payload),
             .o__ready(o_ready), .skipped(skipped),
             .count__addr(count_addr), .count__en(count_en), .count__data(count_data),
-            .enable__addr(enable_addr), .enable__en(enable_en), .enable__data(enable_data));
+            .enable__addr(enable_addr), .enable__en(enable_en), .enable__data(enable_data)
+            {tie});
   wire e_v_probe;                            // the enable lookup's valid (connect -set)
   wire [{it_w - 1}:0] it_probe;                  // the iterator's register
 {it_wires}  wire it_live = it_busy && (it_marker || (it_rows != 0 && it_cols != 0
@@ -721,7 +762,9 @@ def _selector_check(info: dict) -> str:
 {searches}  wire h_enabled = enables >> (q0_bank * {n} + h_q);
   wire job_enabled = enables >> ({job["bank"]} * {n} + {job["ray"]});
   wire o_take = o_valid && o_ready, skip = skipped != 0;
-  wire served = o_take || skip;              // the head's next ray (or marker) done
+{early}  // an enabled ray blocked in its run: dropped, not skipped
+  wire dropped = e_v_probe && !q0_marker && h_enabled && h_blocked;
+  wire served = o_take || skip || dropped;   // the head's next ray (or marker) done
   wire pop = served && (q0_marker || !h_more);
   wire [1:0] base = qn - pop;
   reg [{rw - 1}:0] n0, n1, n2;
@@ -742,16 +785,18 @@ def _selector_check(info: dict) -> str:
       if (served || qn == 0) starve <= 0;
       else if (o_ready) starve <= starve + 1;
     end
-{checks}      assert(!(o_take && skip));             // one ray a cycle
+{count}{checks}      assert(!(o_take && skip));             // one ray a cycle
       if (served) assert(qn != 0);           // nothing that was not sent
       if (o_take) begin                      // the head's next job, once
         assert({job["marker"]} == q0_marker && {job["sid"]} == q0_sid);
         assert({job["bank"]} == q0_bank);
-        if (!q0_marker) assert(h_found && h_enabled && {job["ray"]} == h_q
+        if (!q0_marker) assert(h_found && h_enabled && !h_blocked && {job["ray"]} == h_q
                                && {job["ntris"]} == q0_ntris);
       end
       // ... or its next ray skipped, disabled
       if (skip) assert(!q0_marker && h_found && !h_enabled && skipped == q0_ntris);
+      // a job is offered for a marker, or an enabled ray not blocked in its run
+      assert(o_valid == (e_v_probe && (q0_marker || (h_enabled && !h_blocked))));
       assert(starve <= 1);                   // a ray waits at most 1 cycle of o.ready
       // what the selector holds is what is still to come (for the induction)
       assert(qn <= 2 && p <= {n} && (qn != 0 || p == 0));
@@ -775,7 +820,7 @@ def _selector_check(info: dict) -> str:
       cover(off && o_take);                  // a job held under !o.ready, then taken
       // the last of a sphere's rays, all of them in its masks
       cover(pop && !q0_marker && q0_rows == {all_rows} && q0_cols == {all_cols});
-    end
+{more}    end
   end
 endmodule
 """
@@ -1054,7 +1099,7 @@ def _check_text(name: str, info: dict) -> str:
         return _distributor_check(info)
     if name == "result-framing":
         return _framing_check(info)
-    if name == "pair-selector":
+    if name in ("pair-selector", "pair-selector-reduce"):
         return _selector_check(info)
     if name == "record-fetch":
         return _fetch_check(info)

@@ -461,7 +461,8 @@ def test_virtex4_multiplier_mutant_gives_real_counterexample(work):
 # -- stream stages of the intersection unit (SymbiYosys) ------------------------------------
 @pytest.mark.parametrize("stage", ["bram-fifo", "sync-fifo-buffered", "credit-fifo",
                                    "credit-fifo-banked", "job-distributor", "result-merger",
-                                   "result-framing", "pair-selector", "record-fetch",
+                                   "result-framing", "pair-selector", "pair-selector-reduce",
+                                   "record-fetch",
                                    pytest.param("sphere-feeder", marks=pytest.mark.full)])
 def test_stream_stage_checked(stage, work):
     from raplas_hdl.formal.streams import STAGES, check_stage
@@ -503,6 +504,18 @@ def test_stream_stage_checked(stage, work):
     # ... the enable lookup reads bank 0 whatever the run's bank
     ("pair-selector", ("assign \\$32  = it[8] ? \\$31  : { 2'h0, \\$24 [1:0] };",
                        "assign \\$32  = { 2'h0, \\$24 [1:0] };")),
+    # with the early-out, the selector counts a blocked ray as skipped
+    ("pair-selector-reduce", ("assign \\$41  = ~ enable__data;",
+                              "assign \\$41  = ~ enable__data | \\blocked$29 ;")),
+    # ... it applies a report for an earlier run too
+    ("pair-selector-reduce", ("assign \\$27  = blk_seq == \\$signal ;",
+                              "assign \\$27  = blk_seq <= \\$signal ;")),
+    # ... it takes the blocked bits without their cycle's delay (the run number with it)
+    ("pair-selector-reduce", ("assign \\$29  = blk >> o__payload[1:0];",
+                              "assign \\$29  = blocked >> o__payload[1:0];")),
+    # ... its run number counts every job taken, not the markers
+    ("pair-selector-reduce", ("assign \\$51  = \\$50  & o__payload[6];",
+                              "assign \\$51  = \\$50 ;")),
     # the record fetch starts with 5 credits for a FIFO of 4: a write into a full FIFO
     ("record-fetch", ("3'h4", "3'h5")),
     # ... it takes the next job after any pair, not only the last: a job's pairs lost
