@@ -79,20 +79,32 @@ stream rule) and asserts:
   the Plane Memory's words of the last run's bank; credits held + items in the pipeline +
   in the sphere FIFO + reads on their way back = the FIFO's depth. Checked to a stated
   depth (``bmc``): an induction over the sphere FIFO's words needs the invariant the FIFOs'
-  checks cannot state either.
+  checks cannot state either;
+- for the reducer (:class:`~raplas_hdl.rtl.unit.reducer.Reducer`, the whole pipeline, e3m2,
+  2 x 2 rays), the send stage's order and framing: ``i``, ``run_bank`` (both under the
+  stream rule), ``o.ready`` and the host's writes free, the harness numbers the runs by the
+  ``last`` beats taken and keeps, per run, the rays with a hit beat (``hit``, not
+  ``empty``); an answer leaves only for a run whose ``last`` beat came in (at most 7 in
+  flight); within a run the rays leave ascending (each once), each with a hit beat in that
+  run; ``last`` exactly when no answer is left (the ``valid`` bits, probed: every ray left
+  above the one sent, with a hit beat), or one ``empty`` beat with ``last`` for a run
+  without answers; and the stream rule on ``o``. Checked to a stated depth (``bmc``): the
+  products and the answer RAM are state no invariant of the harness names.
 
 The stages and what each checks are :data:`STAGES`; :func:`check_stage` runs one
 (k-induction, ``mode prove``; a stage whose induction does not close at the depth given is
-``unknown``, never passed; the FIFOs and the sphere feeder are checked to a stated depth
-instead, since an induction over a FIFO's memory words needs an invariant the harness
-cannot state). Cover statements show the checks are not vacuous: each stage must reach a
-full FIFO / a lane change / an ``empty`` beat, a ``last`` beat and a beat held under
-``!ready`` / a skipped ray, a marker job, a job held under ``!ready``, every ray of a
-sphere (with the early-out, also a blocked ray dropped, and a job of a ray blocked in
-another run's report) / a job's two pairs, a marker's pair, the write that spends the last
-credit, a pair on a credit given back / a sphere from a run list, the marker of a run of
-two spheres, an item held under ``!ready``, a second plane load after an item went through
-the array / a transfer while a reset is free.
+``unknown``, never passed; the FIFOs, the sphere feeder and the reducer are checked to a
+stated depth instead, since an induction over a FIFO's memory words (the reducer's: its
+RAMs and pipeline registers) needs an invariant the harness cannot state). Cover statements
+show the checks are not vacuous: each stage must reach a full FIFO / a lane change / an
+``empty`` beat, a ``last`` beat and a beat held under ``!ready`` / a skipped ray, a marker
+job, a job held under ``!ready``, every ray of a sphere (with the early-out, also a blocked
+ray dropped, and a job of a ray blocked in another run's report) / a job's two pairs, a
+marker's pair, the write that spends the last credit, a pair on a credit given back / a
+sphere from a run list, the marker of a run of two spheres, an item held under ``!ready``,
+a second plane load after an item went through the array / a run's second answer leaving
+``last``, an ``empty`` beat, an answer held under ``!ready`` / a transfer while a reset is
+free.
 """
 
 from __future__ import annotations
@@ -195,6 +207,9 @@ STAGES = {s.name: s for s in (
           probes=(*((f"{r}_probe", f"dut.{r}") for r in ("credit", "freed", "f1", "fs", "f2",
                                                           "f3")),
                   ("fifo_level_probe", "dut.fifo.inner_level"))),
+    Stage("reducer-send", "rtl.unit.reducer.Reducer, e3m2, 2 x 2 rays, 4-bit run numbers: "
+          "the send stage's order and framing, behind the whole pipeline", 20, "bmc",
+          cover=20, probes=(("valid_probe", "dut.valid"),)),
 )}
 
 
@@ -236,6 +251,8 @@ def stage_verilog(name: str) -> tuple[str, dict]:
         return _fetch_verilog()
     if name == "sphere-feeder":
         return _feeder_verilog()
+    if name == "reducer-send":
+        return _reducer_verilog()
     from ..rtl.unit.lanes import JobDistributor, ResultMerger
 
     cfg = _config(3)
@@ -341,6 +358,23 @@ def _feeder_verilog() -> tuple[str, dict]:
     text = verilog.convert(comp, name="stage", emit_src=False)
     info["regs"] = _reg_widths(text, ("credit", "f1", "fs", "f2", "f3"))
     return text, info
+
+
+def _reducer_verilog() -> tuple[str, dict]:
+    from amaranth.back import verilog
+
+    from ..rtl.unit.reducer import Reducer
+
+    # the send stage's order and framing do not depend on the format: the narrowest keeps
+    # the products (which decide only which rays have answers) cheap
+    cfg = replace(_config(1, rows=2, fmt=FETCH_FORMAT), reduce=True)
+    comp = Reducer(cfg, seq_bits=SEQ)
+    i_layout, o_layout = comp.i.payload.shape(), comp.o.payload.shape()
+    info = {"rays": cfg.n_rays, "rb": cfg.ray_id_bits, "iw": i_layout.size,
+            "ow": o_layout.size,
+            "i": {n: i_layout[n].offset for n in ("ray_id", "hit", "last", "empty")},
+            "o": {n: o_layout[n].offset for n in ("ray_id", "last", "empty")}}
+    return verilog.convert(comp, name="stage", emit_src=False), info
 
 
 def _reg_widths(text: str, names) -> dict:
@@ -1092,6 +1126,85 @@ endmodule
 """
 
 
+def _reducer_check(info: dict) -> str:
+    n, rb, iw, ow, at, ot = (info["rays"], info["rb"], info["iw"], info["ow"], info["i"],
+                             info["o"])
+    regs, checks = _stream_env(iw, ow)
+    return f"""module stream_check(input clk, input rst, input i_valid,
+                    input [{iw - 1}:0] i_payload, input o_ready, input wr_en,
+                    input [31:0] wr_addr, input [31:0] wr_data, input rb_valid,
+                    input rb_payload);
+  reg init = 1;
+  wire i_ready, o_valid, rb_ready;
+  wire [{ow - 1}:0] o_payload;
+  wire [{n - 1}:0] blocked;
+  wire [{SEQ - 1}:0] seq;
+  stage dut(.clk(clk), .rst(rst), .i__valid(i_valid), .i__payload(i_payload),
+            .i__ready(i_ready), .o__valid(o_valid), .o__payload(o_payload),
+            .o__ready(o_ready), .wr_en(wr_en), .wr_addr(wr_addr), .wr_data(wr_data),
+            .run_bank__valid(rb_valid), .run_bank__payload(rb_payload),
+            .run_bank__ready(rb_ready), .blocked(blocked), .seq(seq));
+  wire [{n - 1}:0] valid_probe;              // the rays with an answer (connect -set)
+  wire i_take = i_valid && i_ready, o_take = o_valid && o_ready;
+  wire i_last = i_payload[{at["last"]}];
+  wire i_hit = i_payload[{at["hit"]}] && !i_payload[{at["empty"]}];   // a hit beat
+  wire [{rb - 1}:0] i_ray = i_payload[{at["ray_id"] + rb - 1}:{at["ray_id"]}];
+  wire o_last = o_payload[{ot["last"]}], o_empty = o_payload[{ot["empty"]}];
+  wire [{rb - 1}:0] o_ray = o_payload[{ot["ray_id"] + rb - 1}:{ot["ray_id"]}];
+  wire [{n - 1}:0] upto = ({n + 1}'d2 << o_ray) - 1;   // rays 0 .. o_ray
+  // runs whose last beat was taken, runs whose last answer left (mod 16); in flight: at
+  // most one per pipeline register (6) and the run being sent, whose last beat has left r
+  reg [3:0] n_in = 0, n_out = 0;
+  wire [3:0] in_flight = n_in - n_out;
+  // the rays with a hit beat, per run (run r at r mod 8: a beat is taken only while no run
+  // is sent, so with at most 6 runs in flight, and the slot the next run takes is free)
+  reg [{8 * n - 1}:0] hits = 0;
+  wire [{n - 1}:0] out_hits = hits >> (n_out[2:0] * {n});
+  wire [2:0] next_slot = n_in[2:0] + 3'd1;
+  reg sent = 0;                              // an answer of run n_out has left ...
+  reg [{rb - 1}:0] prev = 0;                 // ... this ray's the latest
+  // the run-bank stream: held until taken (assumed, as on i)
+  reg rb_held = 0, rb_held_payload = 0;
+{regs}  always @(posedge clk) begin
+    init <= 0;
+    if (rst) begin n_in <= 0; n_out <= 0; hits <= 0; sent <= 0; end
+    else begin
+      if (i_take && i_hit) hits[n_in[2:0] * {n} + i_ray] <= 1;
+      if (i_take && i_last) begin
+        n_in <= n_in + 1;
+        hits[next_slot * {n} +: {n}] <= 0;
+      end
+      if (o_take) begin
+        sent <= !o_last;
+        if (o_last) n_out <= n_out + 1;
+        prev <= o_ray;
+      end
+    end
+    rb_held <= !rst && rb_valid && !rb_ready;
+    rb_held_payload <= rb_payload;
+{checks}      if (rb_held) assume(rb_valid && rb_payload == rb_held_payload);   // the stream rule
+      assert(in_flight <= 7);
+      if (i_take) assert(in_flight <= 6);
+      if (o_valid) begin
+        assert(in_flight != 0);              // only for a run whose last beat came in
+        if (o_empty) assert(o_last && !sent && valid_probe == 0);   // one empty beat: no answer
+        else begin
+          assert(!sent || o_ray > prev);     // lowest first: ascending, each ray once
+          assert(out_hits[o_ray]);           // a ray with a hit beat in its run
+          // the rays still to send: later ones, with hits; last exactly when there is none
+          assert((valid_probe & upto) == 0 && (valid_probe & ~out_hits) == 0);
+          assert(o_last == (valid_probe == 0));
+        end
+      end
+      cover(o_take && o_last && !o_empty && sent);   // a run's second answer, last
+      cover(o_take && o_empty);              // a run without answers
+      cover(off && o_take && !o_empty);      // an answer held under !o.ready, then taken
+    end
+  end
+endmodule
+"""
+
+
 def _check_text(name: str, info: dict) -> str:
     if name in ("bram-fifo", "sync-fifo-buffered", "credit-fifo", "credit-fifo-banked"):
         return _fifo_check(info["width"], info["depth"], info.get("credits", False))
@@ -1105,6 +1218,8 @@ def _check_text(name: str, info: dict) -> str:
         return _fetch_check(info)
     if name == "sphere-feeder":
         return _feeder_check(info)
+    if name == "reducer-send":
+        return _reducer_check(info)
     return _merger_check(info)
 
 

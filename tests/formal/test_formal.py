@@ -25,7 +25,10 @@ What is checked here, and why each can fail:
   that takes a result not taken); the pair selector (k-induction) gives each ray of its
   spheres' masks in order, a job if enabled or else a skip, and four mutants of it fail
   (a disabled ray's job sent, a job overwritten under back-pressure, rays lost at a row
-  change, the enable read from the wrong bank);
+  change, the enable read from the wrong bank); the reducer's send stage (bounded, marked
+  ``full``) sends each run's answers lowest ray first with ``last`` on the final one, or one
+  ``empty`` beat, and three mutants fail (highest first, no ``last``, a beat without ``hit``
+  as a candidate);
 - the command line: exit codes 0, 1, 3 and 2.
 
 Each proof takes seconds (about 60 s in all on a quiet 2-core machine); the durations are
@@ -463,12 +466,15 @@ def test_virtex4_multiplier_mutant_gives_real_counterexample(work):
                                    "credit-fifo-banked", "job-distributor", "result-merger",
                                    "result-framing", "pair-selector", "pair-selector-reduce",
                                    "record-fetch",
-                                   pytest.param("sphere-feeder", marks=pytest.mark.full)])
+                                   pytest.param("sphere-feeder", marks=pytest.mark.full),
+                                   pytest.param("reducer-send", marks=pytest.mark.full)])
 def test_stream_stage_checked(stage, work):
     from raplas_hdl.formal.streams import STAGES, check_stage
 
-    # the feeder's bounded check takes 160 to 290 s in one solver call (docs/formal.md)
-    res = check_stage(stage, timeout=600 if stage == "sphere-feeder" else TIMEOUT, cwd=work)
+    # the feeder's and the reducer's bounded checks take 160 to 290 s and 220 to 310 s in one
+    # solver call (docs/formal.md)
+    slow = stage in ("sphere-feeder", "reducer-send")
+    res = check_stage(stage, timeout=600 if slow else TIMEOUT, cwd=work)
     print(f"{stage}: {res['result']} in {res['seconds']:.1f} s")
     expected = "proved" if STAGES[stage].mode == "prove" else "bounded"
     assert res["result"] == expected, res
@@ -535,6 +541,16 @@ def test_stream_stage_checked(stage, work):
     ("sphere-feeder", ("assign drained = \\$7  & \\$8 ;", "assign drained = 1'h1;")),
     # ... it starts with 9 credits for a FIFO of 8
     ("sphere-feeder", ("4'h8", "4'h9")),
+    # the reducer sends its answers highest ray first (the encoder's index from the valid
+    # bits, highest set)
+    ("reducer-send", ("assign \\$221  = | { \\$220 [3], \\$220 [1] };\n"
+                      "  assign \\$222  = | \\$220 [3:2];",
+                      "assign \\$221  = valid[3] | (~valid[2] & valid[1]);\n"
+                      "  assign \\$222  = valid[3] | valid[2];")),
+    # ... it never marks an answer last: the run ends in an empty beat after its answers
+    ("reducer-send", ("\\$364  = \\$323 ;", "\\$364  = 1'h0;")),
+    # ... a beat without hit can be a candidate: an answer for a ray without a hit beat
+    ("reducer-send", ("assign \\$52  = b[31] & \\$51 ;", "assign \\$52  = \\$51 ;")),
 ])
 def test_stream_stage_mutants_fail(stage, mutation, work):
     from raplas_hdl.formal.streams import check_stage
