@@ -34,10 +34,10 @@ from raplas_hdl.fp.format import FPFormat
 from raplas_hdl.fp.model import decode, encode
 from raplas_hdl.host.exact import exact_intersect_bits
 from raplas_hdl.host.scenes import get_scene
-from raplas_hdl.host.triangles import make_triangles
 from raplas_hdl.model import certified
 from raplas_hdl.model.conservative import margins
 from raplas_hdl.model.ray_triangle import intersect
+from raplas_hdl.model.triangles import make_triangles
 
 FORMATS = ("FP24/rtz", "FP24/rne", "FP24/chop", "FP20/rtz", "FP16/rtz")
 BASELINE_SCALES = (1.0, 0.05, 0.02)

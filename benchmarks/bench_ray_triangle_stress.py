@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 
 from raplas_hdl.fp import FP24, FP32
+from raplas_hdl.model import stress_cases
 from raplas_hdl.verify import stress
 
 FORMATS = [FP24.with_rounding(r) for r in ("rtz", "rne", "chop")] + \
@@ -62,7 +63,7 @@ def main(argv=None):
     results = []
     t0 = time.monotonic()
     for fmt in FORMATS:
-        cases = stress.generate(fmt, args.per_family, args.seed)
+        cases = stress_cases.generate(fmt, args.per_family, args.seed)
         enc = stress.reference(cases, fmt)
         for mode in ("paper", "conservative"):
             table = stress.evaluate(cases, enc, mode)

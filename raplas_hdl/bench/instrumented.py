@@ -14,9 +14,9 @@ import numpy as np
 from ..engine.passes import BundleBatch
 from ..fp import FPFormat
 from ..host.backends import COUNTERS, ModelBackend
-from ..host.triangles import make_triangles
 from ..model.conservative import domain
 from ..model.plane_sphere import n_passes
+from ..model.triangles import make_triangles
 from . import cost as dev
 from .plan import DEFAULT_PAIR_SAMPLE
 
@@ -204,7 +204,7 @@ class SweepBackend(ModelBackend):
 
 def out_of_domain(tris: np.ndarray, fmt: FPFormat) -> np.ndarray:
     """Per triangle: a coordinate beyond the domain or an edge below its minimum (the test of
-    :func:`raplas_hdl.host.triangles.make_triangles` with ``check_domain``)."""
+    :func:`raplas_hdl.model.triangles.make_triangles` with ``check_domain``)."""
     dom = domain(fmt)
     safe = np.where(np.isfinite(tris), tris, 0.0)
     far = (np.abs(safe) > dom.max_coord).any(axis=(1, 2))

@@ -32,6 +32,7 @@ from ..fp import FPFormat
 from ..fp.model import decode
 from ..host.exact import float64_intersect
 from ..host.output import compare
+from ..model import stress_cases
 from ..model.ray_triangle import intersect
 from ..model.records import RESULT
 from ..verify import stress
@@ -203,7 +204,7 @@ def stress_metrics(fmt: FPFormat, modes, per_family: int, seed: int) -> dict:
         ``r_t_rel_p99`` (in-domain pairs both hit), ``r_seconds``.
     """
     t0 = time.perf_counter()
-    cases = stress.generate(fmt, per_family, seed)
+    cases = stress_cases.generate(fmt, per_family, seed)
     enc = stress.reference(cases, fmt)
     t_ref = time.perf_counter() - t0
     out = {}

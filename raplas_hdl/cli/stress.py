@@ -32,7 +32,7 @@ CAMPAIGN_SHARDS = os.path.join("build", "campaign")
 
 
 def _families(text: str) -> tuple:
-    from ..verify.stress import FAMILIES
+    from ..model.stress_cases import FAMILIES
 
     names = tuple(x.strip() for x in text.split(",") if x.strip())
     if not names:
@@ -162,14 +162,15 @@ def check_ray_triangle(args) -> None:
 
 
 def run_ray_triangle(args) -> int:
+    from ..model import stress_cases
     from ..verify import stress
 
-    families = stress.FAMILIES if args.family_list is None else args.family_list
+    families = stress_cases.FAMILIES if args.family_list is None else args.family_list
     modes = MODES if args.mode in ("all", "both") else (args.mode,)
     results = []
     status = 0
     for fmt in args.fmts:
-        cases = stress.generate(fmt, args.per_family, args.seed, families)
+        cases = stress_cases.generate(fmt, args.per_family, args.seed, families)
         enc = stress.reference(cases, fmt)
         for mode in modes:
             table = stress.evaluate(cases, enc, mode, args.margin_scale)

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..fp.format import FPFormat
 from ..fp.model import decode
-from .triangles import to_scaled_ints
+from ..model.triangles import to_scaled_ints
 
 __all__ = ["exact_intersect", "exact_intersect_bits", "exact_t", "float64_intersect"]
 

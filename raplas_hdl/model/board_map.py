@@ -1,6 +1,6 @@
 """Register map of the board-level top (:class:`raplas_hdl.rtl.board_top.BoardTop`).
 
-One source for the RTL, the host driver (:mod:`raplas_hdl.host.board_driver`) and the
+One source for the RTL, the host driver (:mod:`raplas_hdl.link.driver`) and the
 documentation (``docs/board-top.md``, whose table a test compares with
 :data:`REGISTER_MAP`). No Amaranth.
 

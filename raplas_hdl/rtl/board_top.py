@@ -2,7 +2,7 @@
 
 The register map (word addresses, fields, side effects) is
 :data:`raplas_hdl.model.board_map.REGISTER_MAP`, shared with the host driver
-(:mod:`raplas_hdl.host.board_driver`) and documented in ``docs/board-top.md``.
+(:mod:`raplas_hdl.link.driver`) and documented in ``docs/board-top.md``.
 
 Ports (plain names, so that board constraints can name them; see
 :mod:`raplas_hdl.rtl.constraints`):

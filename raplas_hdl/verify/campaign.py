@@ -4,11 +4,12 @@ Two tasks, over every format and rounding asked for (default FP16, FP20, FP24, F
 ``rtz``, ``rne`` and ``chop``):
 
 ``raytri``
-    The ray-triangle stress families of :mod:`raplas_hdl.verify.stress` judged by the exact
-    reference R (:mod:`raplas_hdl.host.exact`), each pair evaluated in every mode of the
-    unit (``paper``, ``conservative`` at margin scale 1, and ``certified`` with its bounds
-    times ``certified_scale``: 1 for the guarantee, below 1 for the negative control). R
-    does not depend on the mode, so one shard computes it once and evaluates every mode.
+    The ray-triangle stress families of :mod:`raplas_hdl.model.stress_cases` judged by the
+    exact reference R (:mod:`raplas_hdl.verify.stress`, :mod:`raplas_hdl.host.exact`), each
+    pair evaluated in every mode of the unit (``paper``, ``conservative`` at margin scale 1,
+    and ``certified`` with its bounds times ``certified_scale``: 1 for the guarantee, below 1
+    for the negative control). R does not depend on the mode, so one shard computes it once
+    and evaluates every mode.
 ``culling``
     The plane-culling proof of ``tests/model/test_plane_culling.py`` at scale: seeded random
     bundles (1 to 8 rows and columns, origin within ``|O| <= O_MAX``) against spheres of
@@ -173,8 +174,8 @@ class CampaignParams:
     certified_scale: float = 1.0
 
     def __post_init__(self):
-        # lazy: verify.stress loads numba; importing the campaign (CLI, merge) needs none
-        from .stress import FAMILIES
+        # lazy: model.stress_cases loads numba; importing the campaign (CLI, merge) needs none
+        from ..model.stress_cases import FAMILIES
         if not self.families:
             object.__setattr__(self, "families", FAMILIES)
         for name in ("rays_per_family", "bundles"):
@@ -322,10 +323,11 @@ def raytri_shard(shard: Shard) -> dict:
         mode -> counts (``_RT_COUNTS``), ``t_rel_max``, ``t_rel_hist``.
     """
     # lazy: verify.stress loads numba; importing the campaign (CLI, merge) needs none
+    from ..model import stress_cases
     from . import stress
 
     fmt = parse_format(shard.fmt)
-    cases = stress.generate(fmt, shard.count, shard.derived_seed(), (shard.group,))
+    cases = stress_cases.generate(fmt, shard.count, shard.derived_seed(), (shard.group,))
     enc = stress.reference(cases, fmt)
     out = {}
     for mode in MODES:
@@ -749,7 +751,8 @@ def markdown(doc: dict) -> str:
         "",
         "The ray-triangle stress families against the exact reference R and the plane-culling "
         "proof, at scale, over every format, rounding and ray-triangle mode "
-        "(`raplas_hdl/host/campaign.py`; the data: `docs/results/stress_campaign.json`).",
+        "(`raplas_hdl/verify/campaign.py`, the families of `raplas_hdl/model/stress_cases.py`; "
+        "the data: `docs/results/stress_campaign.json`).",
         "",
         f"- command: `{doc['command']}`",
         f"- machine: {m['node']}, {m['cpus']} CPUs, Python {m['python']}, {m['platform']}",

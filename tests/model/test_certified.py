@@ -5,14 +5,14 @@ import numpy as np
 import pytest
 
 from raplas_hdl.fp.format import FPFormat
-from raplas_hdl.model import certified
+from raplas_hdl.model import certified, stress_cases
 from raplas_hdl.model.modes import MODES
 from raplas_hdl.model.ray_triangle import intersect
 from raplas_hdl.verify import stress
 
 
 def _run(fmt, per_family, seed, scale=1.0, variant=certified.DEFAULT_VARIANT):
-    cases = stress.generate(fmt, per_family, seed)
+    cases = stress_cases.generate(fmt, per_family, seed)
     enc = stress.reference(cases, fmt)
     k = enc.kept
     res = intersect(enc.o_bits[k], enc.d_bits[k], enc.v0_bits, enc.e1_bits, enc.e2_bits,
@@ -39,7 +39,7 @@ def test_outcome_agrees_with_r(fmt, variant):
     assert np.array_equal(res["hit"], oc == 1)
     # a unit that calls everything uncertain must not pass: the random family decides
     # (FP16 has 10 fraction bits: many of its pairs are within its error of a boundary)
-    rnd = cases.family[enc.kept] == stress.FAMILIES.index("random")
+    rnd = cases.family[enc.kept] == stress_cases.FAMILIES.index("random")
     assert (oc[rnd] == 2).mean() < (0.15 if fmt.man_bits >= 16 else 0.75)
 
 
@@ -77,7 +77,7 @@ def test_special_values_are_uncertain():
     from raplas_hdl.fp.kernels import rmode_code
 
     fmt = FPFormat(7, 16, "rne")
-    vec = stress.vectors(fmt, 3000, seed=4, special_rate=0.05, random_rate=0.2)
+    vec = stress_cases.vectors(fmt, 3000, seed=4, special_rate=0.05, random_rate=0.2)
     arrs = [vec[k] for k in ("o", "d", "v0", "e1", "e2", "n")]
     res = intersect(*arrs, fmt, mode="certified")
     bad = (res["flags"] & 5) != 0                   # overflow or invalid

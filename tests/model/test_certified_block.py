@@ -13,9 +13,8 @@ from raplas_hdl.host.backends import ModelBackend
 from raplas_hdl.host.modes import resolved
 from raplas_hdl.host.render import RenderSettings, render
 from raplas_hdl.host.scenes import get_scene
-from raplas_hdl.model import certified
+from raplas_hdl.model import certified, stress_cases
 from raplas_hdl.model.pair_kernels import BLOCK, vpair
-from raplas_hdl.verify import stress
 
 KEYS = ("o", "d", "v0", "e1", "e2", "n")
 FORMATS = [FPFormat(f.exp_bits, f.man_bits, rnd) for f in (FP16, FP20, FP24)
@@ -63,7 +62,7 @@ def _same(vec, fmt, scale=1.0, variant=certified.DEFAULT_VARIANT):
 def test_block_equals_pair_path(fmt):
     rng = np.random.default_rng([21, fmt.man_bits, rmode_code(fmt)])
     # the stress families (flush family included), as encoded
-    fam = stress.vectors(fmt, 600, seed=5, special_rate=0.0, random_rate=0.0)
+    fam = stress_cases.vectors(fmt, 600, seed=5, special_rate=0.0, random_rate=0.0)
     assert _common_fraction(fam, fmt) > 0.5
     res = _same(fam, fmt)
     decided = res["outcome"] != 2
@@ -73,7 +72,7 @@ def test_block_equals_pair_path(fmt):
     assert _common_fraction(rnd, fmt) > 0.3
     _same(rnd, fmt)
     # special values (zeros, infinities, NaNs, denormals, extremes) mixed into every family
-    spec = stress.vectors(fmt, 400, seed=6, special_rate=0.05, random_rate=0.1)
+    spec = stress_cases.vectors(fmt, 400, seed=6, special_rate=0.05, random_rate=0.1)
     res = _same(spec, fmt)
     assert (res["event_counts"].sum(1) > 0).sum() > 20
 
@@ -81,7 +80,7 @@ def test_block_equals_pair_path(fmt):
 @pytest.mark.parametrize("variant", sorted(certified.VARIANTS))
 def test_block_equals_pair_path_variants_and_scale(variant):
     fmt = FPFormat(7, 16, "rne")
-    vec = stress.vectors(fmt, 300, seed=8, special_rate=0.01, random_rate=0.05)
+    vec = stress_cases.vectors(fmt, 300, seed=8, special_rate=0.01, random_rate=0.05)
     full = _same(vec, fmt, 1.0, variant)
     small = _same(vec, fmt, 2.0 ** -10, variant)
     assert (small["outcome"] != 2).sum() > (full["outcome"] != 2).sum()
@@ -91,7 +90,7 @@ def test_block_boundaries():
     """Ranges that are not multiples of the block (a last partial block; pairs not
     starting at zero) give the same rows as the whole run."""
     fmt = FPFormat(6, 13, "rtz")
-    vec = stress.vectors(fmt, 2 * BLOCK + 37, seed=9, special_rate=0.01, random_rate=0.05)
+    vec = stress_cases.vectors(fmt, 2 * BLOCK + 37, seed=9, special_rate=0.01, random_rate=0.05)
     arrs = [np.ascontiguousarray(vec[k], np.uint32) for k in KEYS]
     whole = certified.intersect_certified(arrs, fmt, block=False)
     for lo, hi in ((0, 1), (3, BLOCK + 5), (BLOCK - 1, 2 * BLOCK + 37)):

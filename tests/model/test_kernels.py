@@ -18,7 +18,7 @@ from raplas_hdl.fp.format import parse_format
 from raplas_hdl.fp.kernels import add_int_k, mul_int_k, rmode_code
 from raplas_hdl.model import plane_sphere, ray_triangle
 from raplas_hdl.model.conservative import margin_constants, margin_table
-from raplas_hdl.verify.stress import vectors
+from raplas_hdl.model.stress_cases import vectors
 
 FORMATS = ["FP24/rtz", "FP24/rne", "FP24/chop", "FP16/rne", "FP32/chop", "e5m10-rtz"]
 

@@ -11,9 +11,9 @@ import pytest
 from raplas_hdl.fp import FP24, FP32, FPFormat
 from raplas_hdl.fp import model as fpm
 from raplas_hdl.host.exact import float64_intersect
-from raplas_hdl.verify.stress import vectors
 from raplas_hdl.model.conservative import margins
 from raplas_hdl.model.ray_triangle import intersect
+from raplas_hdl.model.stress_cases import vectors
 from tests.support.ray_triangle import NAMES, event_pairs
 
 

@@ -2,7 +2,7 @@
 
 - the register table of ``docs/board-top.md`` equals :data:`REGISTER_MAP`, which the RTL
   and the driver both use;
-- the host driver (:class:`~raplas_hdl.host.board_driver.BoardDriver`) runs a FP24 scene
+- the host driver (:class:`~raplas_hdl.link.driver.BoardDriver`) runs a FP24 scene
   of 30 triangles through ``board_top``'s Verilog over Wishbone, under Icarus and
   Verilator: seven runs (range and list runs, an early-out rewrite of the enable bits, an
   empty run, a keep-all run (``CMD_START.keep_all``), an all-disabled run, the first
@@ -37,7 +37,7 @@ def test_board_doc_table_matches_register_map():
 
 
 def test_board_driver_imports_no_amaranth_or_cocotb():
-    code = ("import sys, raplas_hdl.host.board_driver; "
+    code = ("import sys, raplas_hdl.link.driver; "
             "bad = [m for m in sys.modules if m.split('.')[0] in ('amaranth', 'cocotb')]; "
             "assert not bad, bad")
     subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)
@@ -170,7 +170,7 @@ class _ConfigBus:
 def test_board_driver_checks_the_build():
     from dataclasses import replace
 
-    from raplas_hdl.host.board_driver import BoardDriver, BoardMismatch
+    from raplas_hdl.link.driver import BoardDriver, BoardMismatch
 
     drv = BoardDriver(_ConfigBus(CFG))
     assert drv.config == CFG                     # taken from the board

@@ -237,7 +237,7 @@ def test_plane_sphere_array_virtex4_under_icarus(tmp_path):
 
 
 def _vectors(fmt, count, seed):
-    from raplas_hdl.verify.stress import vectors
+    from raplas_hdl.model.stress_cases import vectors
 
     return vectors(fmt, count, seed)
 

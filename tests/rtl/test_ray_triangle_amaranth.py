@@ -16,8 +16,8 @@ from amaranth.hdl import Fragment
 from amaranth.sim import Simulator
 
 from raplas_hdl.fp import FP24, FPFormat
+from raplas_hdl.model.stress_cases import vectors
 from raplas_hdl.rtl.ray_triangle import EVENTS, RayTriangleUnit
-from raplas_hdl.verify.stress import vectors
 from tests.support.ray_triangle import (NAMES, compare, event_pairs, expected, pack_inputs,
                                         unpack_outputs)
 

@@ -7,7 +7,7 @@ t', u', v', det, flags, the per-pair event counts and the IDs, in order.
 It runs through the batch harness of ``raplas-hdl cosim ray-triangle --mode certified``
 (:class:`raplas_hdl.sim.cosim.RayTriangleCosim`: random gaps in ``i.valid`` and
 back-pressure on ``o.ready``). The pairs: every stress family (edge, vertex, grazing,
-flush, ... with special patterns mixed in, :func:`raplas_hdl.verify.stress.vectors`), the
+flush, ... with special patterns mixed in, :func:`raplas_hdl.model.stress_cases.vectors`), the
 pairs with known event counts and uniformly random patterns. ``make test`` runs FP24 rtz
 under Icarus and FP24 chop under Verilator (one build each); the ``full`` runs cover FP16,
 FP20 and FP24 in all three roundings under both simulators with more pairs.
@@ -19,9 +19,9 @@ from amaranth.hdl import Fragment
 
 from raplas_hdl.fp import FP16, FP20, FP24, FPFormat
 from raplas_hdl.model.ray_triangle import intersect
+from raplas_hdl.model.stress_cases import vectors
 from raplas_hdl.rtl.ray_triangle import RayTriangleUnit
 from raplas_hdl.sim.cosim import RayTriangleCosim, compare
-from raplas_hdl.verify.stress import vectors
 from tests.support.ray_triangle import NAMES, event_pairs
 
 

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from raplas_hdl.fp import FP24
-from raplas_hdl.verify.stress import vectors
+from raplas_hdl.model.stress_cases import vectors
 from raplas_hdl.sim.build.runner import REPO_ROOT, run_cocotb
 from raplas_hdl.sim.tb.ray_triangle import read_payloads, write_payloads
 from tests.support.ray_triangle import compare, expected, pack_inputs, unpack_outputs

@@ -8,6 +8,7 @@ import pytest
 
 from raplas_hdl.cli import main
 from raplas_hdl.fp.format import parse_format
+from raplas_hdl.model import stress_cases
 from raplas_hdl.verify import campaign, stress
 from raplas_hdl.verify.campaign import CampaignParams
 
@@ -21,7 +22,7 @@ def control():
     """The negative control on exactly the pairs of the campaign's one shard."""
     (shard,) = campaign.plan(PARAMS)
     fmt = parse_format(shard.fmt)
-    cases = stress.generate(fmt, shard.count, shard.derived_seed(), (shard.group,))
+    cases = stress_cases.generate(fmt, shard.count, shard.derived_seed(), (shard.group,))
     return stress.bisect_certified(cases, stress.reference(cases, fmt))
 
 

@@ -2,11 +2,8 @@
 
 import json
 
-import pytest
-
 from raplas_hdl.cli import main
-from raplas_hdl.fp import FP24
-from raplas_hdl.verify import stress
+from raplas_hdl.model.stress_cases import FAMILIES
 
 
 def test_stress_cli_writes_the_table(tmp_path, capsys):
@@ -19,7 +16,7 @@ def test_stress_cli_writes_the_table(tmp_path, capsys):
     assert "FP24/chop certified" in text
     res = json.loads(out.read_text())
     assert [r["mode"] for r in res] == ["paper", "conservative", "certified"]
-    assert set(res[0]["families"]) == set(stress.FAMILIES)
+    assert set(res[0]["families"]) == set(FAMILIES)
     assert res[1]["pooled"]["false_misses"] == 0 and res[1]["pooled"]["leaks"] == 0
     cert = res[2]["pooled"]
     assert cert["false_hits"] == 0 and cert["false_misses"] == 0 and cert["leaks"] == 0
@@ -38,16 +35,3 @@ def test_stress_cli_certified_below_the_bound_fails(capsys):
                  "--families", "grazing", "--per-family", "60", "--margin-scale", "0.01"])
     assert code == 1
     assert "MIS-CERTIFIED" in capsys.readouterr().out
-
-
-def test_generator_is_seeded():
-    a = stress.generate(FP24, 5, seed=9)
-    b = stress.generate(FP24, 5, seed=9)
-    c = stress.generate(FP24, 5, seed=10)
-    assert (a.o == b.o).all() and (a.v2 == b.v2).all()
-    assert not (a.o == c.o).all()
-
-
-def test_unknown_family():
-    with pytest.raises(ValueError, match="family"):
-        stress.generate(FP24, 5, families=("random", "bogus"))

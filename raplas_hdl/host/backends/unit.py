@@ -1,7 +1,7 @@
 """What the ``model`` and ``rtl`` backends share: the intersection unit's host side.
 
 :class:`UnitBackend` writes the unit's memories in a format (Triangle Memory from
-:func:`raplas_hdl.host.triangles.make_triangles`, the Sphere Memory with the radius
+:func:`raplas_hdl.model.triangles.make_triangles`, the Sphere Memory with the radius
 inflation of :mod:`raplas_hdl.host.culling`), encodes the batches' Plane Memory and Ray
 Memory, culls the hierarchy with the model's arithmetic, and hands the unit's runs to
 :meth:`UnitBackend.run_runs`, which the model (:mod:`.model`) and the simulated Verilog
@@ -24,10 +24,10 @@ from ...model.config import UnitConfig
 from ...model.conservative import margin_constants, margin_table
 from ...model.memory_image import BundleMemory, SceneMemory
 from ...model.reduction import inf_pattern
+from ...model.triangles import make_triangles
 from ..culling import CullingBudget, encode_spheres, slack_arrays
 from ..modes import get_mode
 from ..spheres import unit_margin
-from ..triangles import make_triangles
 from .base import COUNTERS, Backend, RunResult
 
 __all__ = ["UnitBackend"]
@@ -124,7 +124,7 @@ class UnitBackend(Backend):
         return out
 
     def usable(self, tris):
-        """Triangles that :func:`raplas_hdl.host.triangles.make_triangles` keeps (not
+        """Triangles that :func:`raplas_hdl.model.triangles.make_triangles` keeps (not
         non-finite, degenerate, flushed, or outside the format's domain). The certified
         mode's domain is its own (:func:`raplas_hdl.model.certified.certified_domain`: a
         bound on the coordinates, no minimum edge, its bounds cover flushes)."""

@@ -11,7 +11,7 @@ from .intersection import IntersectionCosim
 class BoardCosim(IntersectionCosim):
     """``board-top``: the cases, the expected results and the vectors files of
     ``intersection-unit`` (:class:`~.intersection.IntersectionCosim`), run through
-    ``board_top``'s Wishbone port by :class:`raplas_hdl.host.board_driver.BoardDriver`
+    ``board_top``'s Wishbone port by :class:`raplas_hdl.link.driver.BoardDriver`
     under cocotb (:func:`~raplas_hdl.sim.drive.board_sim.run_board`); the bus master idles
     at random (its seed is ``seed``)."""
 

@@ -48,7 +48,7 @@ class RayTriangleCosim(UnitCosim):
 
     def random(self, n, seed):
         # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
-        from raplas_hdl.verify.stress import vectors
+        from raplas_hdl.model.stress_cases import vectors
 
         vec = vectors(self.fmt, n, seed)
         rng = np.random.default_rng([seed, 7])

@@ -3,7 +3,7 @@
 :func:`run_board` emits the top's Verilog for a
 :class:`~raplas_hdl.model.config.UnitConfig` (cached in memory and under
 ``build/sim/verilog/``), writes the scene and the runs into a stimulus file and runs
-:mod:`raplas_hdl.sim.tb.board`, in which :class:`raplas_hdl.host.board_driver.BoardDriver`
+:mod:`raplas_hdl.sim.tb.board`, in which :class:`raplas_hdl.link.driver.BoardDriver`
 drives the Wishbone port. It returns, per run, the result stream and the counters exactly as
 :func:`raplas_hdl.model.intersection.run_bundle` returns them (counters with ``cycles``).
 """

@@ -5,7 +5,7 @@ variables, ``BOARD_STIM`` (an ``.npz``: the scene's and the runs' memories, see
 :func:`raplas_hdl.sim.drive.board_sim.encode_stimulus`), ``BOARD_META`` (JSON: the unit's
 parameters, seed, bus gap density) and ``BOARD_OUT`` (where the results go).
 
-The host side is the real driver, :class:`raplas_hdl.host.board_driver.BoardDriver`, run
+The host side is the real driver, :class:`raplas_hdl.link.driver.BoardDriver`, run
 unchanged in a cocotb *bridge* thread: its bus object turns every ``read``/``write`` into a
 Wishbone classic cycle on the DUT (a :func:`cocotb.task.resume`-wrapped coroutine), so
 simulation time advances only through bus cycles and the thread never runs beside the
@@ -30,7 +30,7 @@ from cocotb.clock import Clock
 from cocotb.task import bridge, resume
 from cocotb.triggers import FallingEdge, RisingEdge
 
-from raplas_hdl.host.board_driver import BoardDriver
+from raplas_hdl.link.driver import BoardDriver
 from raplas_hdl.model.board_map import BOARD_ID, REGISTERS, STATUS_BITS, cmd_start_word
 from raplas_hdl.sim.drive.board_sim import decode_stimulus
 

@@ -27,7 +27,7 @@ import numpy as np
 
 from ..fp.format import FPFormat
 from ..fp.model import encode
-from ..model.conservative import domain
+from .conservative import domain
 
 __all__ = ["TriangleRecords", "make_triangles", "exact_edges", "to_scaled_ints", "REASONS"]
 
