@@ -349,7 +349,8 @@ def render(runs: list) -> str:
             "The ray-triangle unit alone (rtz) places at 114.7 MHz (112.9-115.0), the "
             "certified one at 105.2 MHz (104.2-106.1; 105.3 before `i.ready` was "
             "registered); the paper unit places at 111.4 MHz in rne (97.6-116.1), 111.8 in "
-            "chop (111.8-113.6) and 147.6 at speed 8 in rtz (144.5-149.1). Not "
+            "chop (111.8-113.6) and at speed 8 147.6 in rtz (144.5-149.1), 148.8 in rne "
+            "(132.6-152.3) and 148.6 in chop (146.2-150.8). Not "
             "re-measured on this RTL: two copies, the certified ray-triangle unit in rne "
             "and chop.", "",
             "**The certified mode.** Its bound datapath "
