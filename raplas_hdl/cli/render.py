@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 from pathlib import Path
 
@@ -89,13 +90,25 @@ def _overrides(args) -> dict:
     return {k: getattr(args, k, None) for k in ("camera", "look_at", "up", "fov", "light")}
 
 
+def _render_mode(text: str) -> str:
+    """A registered render mode's name (the registry loads with the host, which a render
+    needs anyway: not at the CLI's start)."""
+    from ..host.modes import mode_names
+
+    if text not in mode_names():
+        raise argparse.ArgumentTypeError(
+            f"mode must be one of {', '.join(mode_names())}, not {text!r}")
+    return text
+
+
 def add_render_options(p):
     """Options shared by ``render`` and ``demo``: the format and the render settings."""
     g.add_format_option(p, field_widths=True)
     r = p.add_argument_group("render settings")
-    r.add_argument("--mode", type=g.choice(*MODES, what="mode"),
-                   default="paper", metavar="{" + ",".join(MODES) + "}",
-                   help="ray-triangle mode of the model and rtl backends (default paper)")
+    r.add_argument("--mode", type=_render_mode, default="paper",
+                   metavar="{" + ",".join(MODES) + "}",
+                   help="render mode of the model and rtl backends, built in or registered "
+                        "(raplas_hdl.host.modes.register_mode; default paper)")
     r.add_argument("--tile", type=g.lattice_type("--tile", allow_zero=False), default=(8, 8),
                    metavar="RxC", help=f"primary bundle size, sides 1 to {g.MAX_LATTICE} "
                                        "(default 8x8)")
@@ -284,10 +297,14 @@ def check(args) -> None:
     if args.reduce and args.backend == "float64":
         raise g.UsageError("--reduce does not apply to --backend float64 (it has no unit; "
                            "use model or rtl)")
-    if args.reduce and args.mode == "conservative":
-        raise g.UsageError("--reduce has no conservative mode (its hits must reach the host "
-                           "to be resolved): use --mode paper or certified")
-    if args.mode == "certified" and args.backend != "float64":
+    from ..host.modes import get_mode, mode_names
+
+    mode = get_mode(args.mode)
+    if args.reduce and not mode.reducible:
+        usable = " or ".join(n for n in mode_names() if get_mode(n).reducible)
+        raise g.UsageError(f"--reduce has no {mode.name} mode (its hits must reach the host "
+                           f"to be resolved): use --mode {usable}")
+    if mode.unit_mode == "certified" and args.backend != "float64":
         from ..model.certified import check_certified_format
 
         try:

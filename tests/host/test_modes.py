@@ -97,3 +97,18 @@ def test_a_mode_without_reduction_refuses_reduce():
     register_mode(Plain())
     with pytest.raises(ValueError, match="on-chip reduction has no test-plain mode"):
         ModelBackend(FP24, "test-plain", reduce=True)
+
+
+def test_the_cli_renders_with_a_registered_mode(tmp_path, capsys):
+    """``render --mode`` takes the registry's names, so the mode registered above renders
+    from the command line with no change to the CLI; an unknown name is one line, exit 2."""
+    from raplas_hdl.cli import main
+
+    out = tmp_path / "c.png"
+    assert main(["render", "--scene", "cornell", "--size", "16x16", "--mode", "test-counting",
+                 "-o", str(out)]) == 0
+    assert out.exists() and "test-counting" in capsys.readouterr().out
+    assert main(["render", "--mode", "no-such-mode", "-o", str(tmp_path / "d.png")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "mode must be one of paper, conservative, certified, " in err[0]
+    assert "test-counting" in err[0] and err[0].endswith("not 'no-such-mode'")
