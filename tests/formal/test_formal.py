@@ -543,19 +543,23 @@ def test_stream_stage_checked(stage, work):
     ("sphere-feeder", ("4'h8", "4'h9")),
     # the reducer sends its answers highest ray first (the encoder's index from the valid
     # bits, highest set)
-    ("reducer-send", ("assign \\$221  = | { \\$220 [3], \\$220 [1] };\n"
-                      "  assign \\$222  = | \\$220 [3:2];",
-                      "assign \\$221  = valid[3] | (~valid[2] & valid[1]);\n"
-                      "  assign \\$222  = valid[3] | valid[2];")),
+    ("reducer-send", ("assign \\$227  = | { \\$226 [3], \\$226 [1] };\n"
+                      "  assign \\$228  = | \\$226 [3:2];",
+                      "assign \\$227  = rest[3] | (~rest[2] & rest[1]);\n"
+                      "  assign \\$228  = rest[3] | rest[2];")),
     # ... it never marks an answer last: the run ends in an empty beat after its answers
-    ("reducer-send", ("\\$364  = \\$323 ;", "\\$364  = 1'h0;")),
+    ("reducer-send", ("\\$382  = s_only;", "\\$382  = 1'h0;")),
     # ... a beat without hit can be a candidate: an answer for a ray without a hit beat
     ("reducer-send", ("assign \\$52  = b[31] & \\$51 ;", "assign \\$52  = \\$51 ;")),
 ])
 def test_stream_stage_mutants_fail(stage, mutation, work):
     from raplas_hdl.formal.streams import check_stage
 
-    res = check_stage(stage, timeout=TIMEOUT, cwd=work, mutate=lambda t: t.replace(*mutation))
+    def mutate(text):
+        assert mutation[0] in text, f"the mutation no longer applies to {stage}: {mutation[0]}"
+        return text.replace(*mutation)
+
+    res = check_stage(stage, timeout=TIMEOUT, cwd=work, mutate=mutate)
     assert res["result"] == "counterexample", res
 
 

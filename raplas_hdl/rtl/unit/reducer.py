@@ -34,9 +34,10 @@ Stages (a pipeline that moves as a whole, ``en``, while no run's answers are bei
    cycle costs no stall. On the run's ``last`` (or ``empty``) beat, in ``r``, the unit
    stops taking beats and
 4. **sends** the answers: the lowest ray with an answer each cycle (a tree of priority
-   encoders on the valid bits, :func:`lowest_set_tree`; the answer RAM read a cycle ahead),
-   the last marked ``last``, or one ``empty`` beat; then clears the valid bits and counts
-   the run (``seq``). The next run's beats wait in the stages where they are; a write
+   encoders on the valid bits, :func:`lowest_set_tree`, into registers a cycle ahead of the
+   answer RAM's read, so a scan starts with a cycle that only primes them), the last marked
+   ``last``, or one ``empty`` beat; then clears the valid bits and counts the run
+   (``seq``). The next run's beats wait in the stages where they are; a write
    history or a read of the previous run cannot matter to them, as the valid bits are
    clear.
 
@@ -394,17 +395,31 @@ class Reducer(wiring.Component):
                 with m.If(en & emit):
                     m.d.sync += [o_v.eq(1), o_unc.eq(1), o_last.eq(0), o_empty.eq(0),
                                  o_ray.eq(r3.ray), u_word.eq(new)]
-        idx, only = lowest_set_tree(m, valid, R, "next")
-        step = scanning & (~o_v | self.o.ready)
-        m.d.comb += [ar.addr.eq(Mux(scanning, idx, a2.ray)),
-                     ar.en.eq(Mux(scanning, step & (valid != 0), en))]
+        # The ray to send is registered a cycle ahead (``s_*``, from the valid bits without
+        # the one being sent), so the encoder tree ends in registers, not in the RAM's
+        # address; the first cycle of a scan only primes them.
+        primed = Signal()
+        s_idx = Signal(max(1, (R - 1).bit_length()))
+        s_only = Signal()
+        s_any = Signal()
+        sending = Signal(R)
+        m.d.comb += sending.eq(Mux(primed & s_any,
+                                   Cat(*[s_idx == k for k in range(R)]), 0))
+        rest = Signal(R)
+        m.d.comb += rest.eq(valid & ~sending)
+        idx, only = lowest_set_tree(m, rest, R, "next")
+        step = scanning & primed & (~o_v | self.o.ready)
+        with m.If(scanning & (step | ~primed)):
+            m.d.sync += [primed.eq(1), s_idx.eq(idx), s_only.eq(only), s_any.eq(rest != 0)]
+        m.d.comb += [ar.addr.eq(Mux(scanning, s_idx, a2.ray)),
+                     ar.en.eq(Mux(scanning, step & s_any, en))]
         with m.If(step):
             with m.If(o_v & o_last):
-                m.d.sync += [scanning.eq(0), o_v.eq(0), cur_any.eq(0),
+                m.d.sync += [scanning.eq(0), primed.eq(0), o_v.eq(0), cur_any.eq(0),
                              self.seq.eq(self.seq + 1)]
-            with m.Elif(valid != 0):
-                m.d.sync += [o_v.eq(1), o_ray.eq(idx), o_empty.eq(0), o_last.eq(only),
-                             valid.bit_select(idx, 1).eq(0)]
+            with m.Elif(s_any):
+                m.d.sync += [o_v.eq(1), o_ray.eq(s_idx), o_empty.eq(0), o_last.eq(s_only),
+                             valid.bit_select(s_idx, 1).eq(0)]
             with m.Else():
                 m.d.sync += [o_v.eq(1), o_empty.eq(1), o_last.eq(1)]
             if certified:
