@@ -11,7 +11,9 @@ their port-level form with SymbiYosys, ``sby``) of both units at every format (r
 default stages), and every unit's synthesised netlists (``netlist-ecp5``, ``netlist-xc4v``:
 ``synth_ecp5`` with the DSP register packing, ``synth_xilinx -family xc4v``) against its RTL
 at every format and rounding, and the ``virtex4`` target of both units (DSP48 through Yosys's
-model of it) at every format and rounding it takes (significands of at most 17 bits).
+model of it) at every format and rounding it takes (significands of at most 17 bits),
+and the ray-triangle unit by composition (paper mode, FP16 and FP24: its wiring around
+its operations as uninterpreted functions; :mod:`raplas_hdl.formal.composition`).
 One solver call at a time, each bounded by
 ``--timeout``. Each record notes the 1-minute load average before and after it (the
 machine is shared).
@@ -24,7 +26,7 @@ stages under ``streams``) and the tables between the markers of ``docs/formal.md
 Usage::
 
     python benchmarks/bench_prove.py [--timeout 300] [--formats FP16 FP24 ...]
-                                     [--only-missing]
+                                     [--only-missing] [--units ray-triangle ...]
     python benchmarks/bench_prove.py --stages credit-fifo sync-fifo-buffered
 """
 
@@ -78,6 +80,9 @@ def plan(formats):
                 jobs += [(unit, name, rnd, _default(unit, name, rnd), method)
                          for rnd in ROUNDINGS]
             jobs += [(unit, name, "rtz", 1, method) for unit in ONE_STAGE]
+        if name in ("FP16", "FP24"):
+            # the ray-triangle unit's wiring around its operations (paper mode)
+            jobs.append(("ray-triangle", name, "rtz", 0, None))
         if PRESETS[name].man_bits <= 16:
             for unit in ("fp-mul", "fp-add"):
                 jobs += [(unit, name, rnd, _default(unit, name, rnd), None, "virtex4")
@@ -155,6 +160,9 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--timeout", type=float, default=300.0, help="seconds per solver call")
     p.add_argument("--formats", nargs="+", default=list(PRESETS), help="default: all presets")
+    p.add_argument("--units", nargs="+", choices=list(UNITS), default=None,
+                   help="only these units (default all; no stream stage then, unless "
+                        "--stages)")
     p.add_argument("--only-missing", action="store_true",
                    help="skip the rows proofs.json already has")
     p.add_argument("--stages", nargs="+", choices=list(STAGES), default=None,
@@ -163,6 +171,8 @@ def main(argv=None) -> int:
     rows = {key(r): r for r in load()}
     for unit, name, rnd, stages, method, target in ([] if args.stages else
                                                      plan(args.formats)):
+        if args.units and unit not in args.units:
+            continue
         fmt = PRESETS[name].with_rounding(rnd)
         k = (unit, name, rnd, stages, method or UNITS[unit][1], target)
         if args.only_missing and k in rows:
@@ -172,11 +182,11 @@ def main(argv=None) -> int:
                     target=target)
         rec = {**res.as_dict(), "load": [round(before, 2), round(os.getloadavg()[0], 2)]}
         rows[key(rec)] = rec
-        print(f"{unit:7} {target:7} {name:5} {rnd:4} s{stages} {k[4]:6} {res.result:14} "
+        print(f"{unit:12} {target:7} {name:5} {rnd:4} s{stages} {k[4]:6} {res.result:14} "
               f"{res.seconds:7.1f} s  load {rec['load']}", flush=True)
         write(list(rows.values()))
     streams = {r["stage"]: r for r in load_streams()}
-    for stage in args.stages or STAGES:
+    for stage in args.stages or ([] if args.units else STAGES):
         if args.only_missing and stage in streams:
             continue
         before = os.getloadavg()[0]

@@ -11,7 +11,7 @@ import sys
 from . import grammar as g
 
 #: Units that can be proved so far.
-PROVE_UNITS = ("fp-add", "fp-mul", "fp-le", "fp-lt", "fp-neg")
+PROVE_UNITS = ("fp-add", "fp-mul", "fp-le", "fp-lt", "fp-neg", "ray-triangle")
 
 #: Exit code of an unknown result (0 proved, 1 counterexample, 2 usage).
 EXIT_UNKNOWN = 3
@@ -42,7 +42,11 @@ def add_parser(subparsers):
                     "'unknown after S s'; exit 0, 1 or 3. Work "
                     "files go to build/formal/ under the current directory. --target "
                     "virtex4 proves the DSP48 forms of fp-add (direct) and fp-mul (cut) "
-                    "with Yosys's DSP48 model.")
+                    "with Yosys's DSP48 model. ray-triangle (--method composition) proves "
+                    "the paper-mode unit's wiring: with every operation an uninterpreted "
+                    "function, its output register holds the contract's formula (t, u, v, "
+                    "det, hit, IDs, flags and event counts); with the operations proved "
+                    "apart, that is the unit.")
     p.add_argument("unit", type=g.choice(*PROVE_UNITS, what="unit"), metavar="UNIT",
                    help="unit to prove: " + ", ".join(PROVE_UNITS))
     g.add_format_option(p)
@@ -52,15 +56,18 @@ def add_parser(subparsers):
     p.add_argument("--timeout", type=g.float_range(0, 86400, lo_open=True), default=300.0,
                    metavar="S", help="seconds for each solver call (default 300)")
     p.add_argument("--method", type=g.choice("direct", "cut", "chain", "control", "sby",
-                                             "netlist-ecp5", "netlist-xc4v", what="method"),
+                                             "netlist-ecp5", "netlist-xc4v", "composition",
+                                             what="method"),
                    default=None,
-                   metavar="{direct,cut,chain,control,sby,netlist-ecp5,netlist-xc4v}",
+                   metavar="{direct,cut,chain,control,sby,netlist-ecp5,netlist-xc4v,"
+                           "composition}",
                    help="fp-add: direct; fp-mul: cut (default), chain or direct (the "
                         "FloatingPoint contract with real multipliers: does not close at "
                         "FP24); control (both units): the stall and reset properties "
                         "instead of the datapath; sby (both units): their port-level form "
                         "checked by SymbiYosys; netlist-ecp5, netlist-xc4v (every unit): "
-                        "the synthesised netlist equals the RTL")
+                        "the synthesised netlist equals the RTL; composition (ray-triangle): "
+                        "its wiring around uninterpreted operations")
     p.add_argument("--target", type=g.choice("generic", "virtex4", what="target"),
                    default="generic", metavar="{generic,virtex4}",
                    help="unit target: virtex4 (fp-add, fp-mul) instantiates DSP48, proved "
@@ -84,7 +91,12 @@ def check(args) -> None:
         if args.method is not None and args.method not in allowed:
             raise g.UsageError(f"--target {args.target} of {args.unit} is proved by --method "
                                f"{' or '.join(allowed)}, not {args.method}")
-    if args.unit not in UNIT_LIMITS["stages"]:
+    if args.unit == "ray-triangle":
+        if args.stages is not None:
+            raise g.UsageError("ray-triangle takes no --stages (its operations are the FP "
+                               "units at their default stage counts)")
+        lo = hi = 0
+    elif args.unit not in UNIT_LIMITS["stages"]:
         if args.stages not in (None, 1):
             raise g.UsageError(f"{args.unit} has one register stage: leave --stages out")
         lo = hi = 1
@@ -121,13 +133,18 @@ def run(args) -> int:
     res = prove(args.unit, args.fmt, args.stages, method=args.method, timeout=args.timeout,
                 target=args.target)
     plural = "" if res.stages == 1 else "s"
-    head = f"{args.unit} {args.fmt}, {res.stages} stage{plural}, {res.target}"
+    head = (f"{args.unit} {args.fmt}, paper mode" if args.unit == "ray-triangle" else
+            f"{args.unit} {args.fmt}, {res.stages} stage{plural}, {res.target}")
     if res.result == "proved":
         print(f"{head}: proved in {res.seconds:.1f} s by {res.method}")
     elif res.result == "counterexample":
         print(f"{head}: counterexample ({res.steps[-1]['proves']})")
-        for line in describe(res, args.fmt):
-            print(line)
+        if args.unit == "ray-triangle":
+            print("  claims that fail: " + ", ".join(
+                k.removeprefix("fails.") for k in res.counterexample or {}))
+        else:
+            for line in describe(res, args.fmt):
+                print(line)
     else:
         print(f"{head}: unknown after {res.seconds:.0f} s ({res.reason})")
     for step in res.steps:

@@ -57,6 +57,7 @@ from pathlib import Path
 import z3
 
 from ..fp.format import FLAG_NAMES, PRESETS, FPFormat, check_format
+from .composition import prove_composition
 from .control import PROPERTIES, control_goal
 from .cut import count_products, cut_products, product_function
 from .miter import contract_miter, equivalence_miter, unroll, violation
@@ -70,14 +71,15 @@ __all__ = ["ProofResult", "prove", "describe", "UNITS", "METHODS", "NETLIST_METH
 
 #: unit -> (operation of the reference, default method).
 UNITS = {"fp-add": ("add", "direct"), "fp-mul": ("mul", "cut"), "fp-le": ("le", "direct"),
-         "fp-lt": ("lt", "direct"), "fp-neg": ("neg", "direct")}
+         "fp-lt": ("lt", "direct"), "fp-neg": ("neg", "direct"),
+         "ray-triangle": (None, "composition")}
 
 #: Methods each unit takes.
 NETLIST_METHODS = ("netlist-ecp5", "netlist-xc4v")
 METHODS = {"fp-add": ("direct", "control", "sby", *NETLIST_METHODS),
            "fp-mul": ("cut", "chain", "direct", "control", "sby", *NETLIST_METHODS),
            "fp-le": ("direct", *NETLIST_METHODS), "fp-lt": ("direct", *NETLIST_METHODS),
-           "fp-neg": ("direct", *NETLIST_METHODS)}
+           "fp-neg": ("direct", *NETLIST_METHODS), "ray-triangle": ("composition",)}
 
 #: The methods of the ``virtex4`` target, per unit (the units without one take no target).
 TARGET_METHODS = {"fp-add": ("direct",), "fp-mul": ("cut",)}
@@ -149,6 +151,10 @@ def default_stages(unit: str, fmt: FPFormat) -> int:
 
     if unit in ONE_STAGE:
         return 1
+    if unit == "ray-triangle":
+        # its operations' stage counts (each the unit's default); the proof is of the
+        # wiring around them
+        return 0
     return (default_add_stages if unit == "fp-add" else default_mul_stages)(fmt)
 
 
@@ -228,6 +234,8 @@ def prove(unit: str, fmt: FPFormat, stages: int | None = None, *, method: str | 
     stages = default_stages(unit, fmt) if stages is None else stages
     op = UNITS[unit][0]
     t0 = time.monotonic()
+    if method == "composition":
+        return _prove_composition(fmt, timeout, cwd, t0)
     if method == "sby":
         result, seconds, detail = run_sby(unit, fmt, stages, timeout=timeout, cwd=cwd,
                                           mutate=mutate)
@@ -294,6 +302,22 @@ def prove(unit: str, fmt: FPFormat, stages: int | None = None, *, method: str | 
                        stages=stages, target=target, result=result, solver=SOLVER,
                        seconds=round(time.monotonic() - t0, 3), method=described, steps=steps,
                        counterexample=cex, reason=reason)
+
+
+def _prove_composition(fmt, timeout, cwd, t0) -> ProofResult:
+    """The ray-triangle unit's wiring, its operations uninterpreted functions
+    (:mod:`.composition`); a counterexample names the claims that fail."""
+    res = prove_composition(fmt, timeout=timeout, cwd=cwd)
+    cex = {f"fails.{k}": 1 for k in res.get("differs", ())} or None
+    return ProofResult(
+        unit="ray-triangle", format=format_label(fmt), rounding=fmt.rounding, stages=0,
+        target="generic", result=res["result"], solver=res["solver"],
+        seconds=round(time.monotonic() - t0, 3),
+        method=f"composition: {res['ops']} operations as uninterpreted functions, "
+               f"{res['cycles']} cycles unrolled",
+        steps=[{"proves": "composition: output register == contract formula (paper mode)",
+                "result": res["result"], "seconds": res["solver_seconds"]}],
+        counterexample=cex, reason=res.get("reason", ""))
 
 
 def _prove_netlist(unit, fmt, stages, method, timeout, cwd, mutate, t0) -> ProofResult:

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import z3
 
-__all__ = ["SolverRun", "solve", "TACTICS", "SOLVER"]
+__all__ = ["SolverRun", "solve", "tactic", "TACTICS", "SOLVER"]
 
 #: The tactic chain (see the module docstring).
 TACTICS = ("simplify", "fpa2bv", "ackermannize_bv", "simplify", "solve-eqs", "bit-blast", "sat")
@@ -53,9 +53,18 @@ class SolverRun:
     reason: str = ""
 
 
-def _child(goal, timeout, watch, conn):
+def tactic(ackermann_limit: int | None = None) -> z3.Tactic:
+    """The chain of :data:`TACTICS`; ``ackermann_limit`` raises ``ackermannize_bv``'s limit
+    on the consistency lemmas it adds (z3's default 1,000; above it the tactic leaves the
+    functions in place and the SAT solver gives up)."""
+    steps = [z3.With(t, div0_ackermann_limit=ackermann_limit)
+             if t == "ackermannize_bv" and ackermann_limit else t for t in TACTICS]
+    return z3.Then(*steps)
+
+
+def _child(goal, timeout, watch, conn, ackermann_limit):
     try:
-        solver = z3.Then(*TACTICS).solver()
+        solver = tactic(ackermann_limit).solver()
         solver.set("timeout", max(1, int(timeout * 1000)))
         solver.add(goal)
         r = solver.check()
@@ -74,7 +83,8 @@ def _child(goal, timeout, watch, conn):
         conn.close()
 
 
-def solve(goal: z3.BoolRef, timeout: float, watch: dict | None = None) -> SolverRun:
+def solve(goal: z3.BoolRef, timeout: float, watch: dict | None = None, *,
+          ackermann_limit: int | None = None) -> SolverRun:
     """Check ``goal`` for satisfiability within ``timeout`` seconds.
 
     Parameters
@@ -85,11 +95,14 @@ def solve(goal: z3.BoolRef, timeout: float, watch: dict | None = None) -> Solver
         Seconds for the solver; the child is killed :data:`GRACE` seconds later.
     watch : dict, optional
         Name -> bit-vector term whose value a counterexample reports.
+    ackermann_limit : int, optional
+        See :func:`tactic`.
     """
     ctx = multiprocessing.get_context("fork")
     recv, send = ctx.Pipe(duplex=False)
     t0 = time.monotonic()
-    proc = ctx.Process(target=_child, args=(goal, timeout, watch or {}, send), daemon=True)
+    proc = ctx.Process(target=_child, args=(goal, timeout, watch or {}, send, ackermann_limit),
+                       daemon=True)
     proc.start()
     send.close()
     got = None

@@ -309,12 +309,17 @@ class RayTriangleUnit(wiring.Component):
                                       name=f"dl{self._n_delay}", srl=self._srl)
         return tv._delayed[time]
 
+    def _new_op(self, kind):
+        """The unit of one operation (``mul`` or ``add``): the proofs by composition
+        (:mod:`raplas_hdl.formal.composition`) put a stand-in of the same ports and latency
+        in its place."""
+        if kind == "mul":
+            return FPMul(self._fmt, self._mul_stages, self._multiplier)
+        return FPAdd(self._fmt, self._add_stages, self._adder)
+
     def _op(self, m, kind, a: _Timed, b: _Timed, sub=False):
         t = max(a.time, b.time)
-        if kind == "mul":
-            unit = FPMul(self._fmt, self._mul_stages, self._multiplier)
-        else:
-            unit = FPAdd(self._fmt, self._add_stages, self._adder)
+        unit = self._new_op(kind)
         self._n_ops += 1
         m.submodules[f"{kind}{self._n_ops}"] = unit
         m.d.comb += [unit.a.eq(self._at(m, a, t)), unit.b.eq(self._at(m, b, t)),

@@ -318,6 +318,9 @@ def test_cli_unknown_exits_3(capsys, monkeypatch, work):
     (["fp-add", "--timeout", "-1"], "--timeout"),
     (["fp-add", "--format", "FP48"], "FP48"),
     (["fp-add", "--json", "out.txt"], ".json"),
+    (["ray-triangle", "--stages", "3"], "ray-triangle takes no --stages"),
+    (["ray-triangle", "--method", "direct"], "--method of ray-triangle must be composition"),
+    (["fp-add", "--method", "composition"], "--method of fp-add must be direct"),
 ])
 def test_cli_bad_input_is_one_line_exit_2(argv, message, capsys, monkeypatch, tmp_path):
     monkeypatch.chdir(tmp_path)
@@ -333,7 +336,8 @@ def test_cli_help_is_plain(capsys):
     assert exc.value.code == 0
     text = capsys.readouterr().out
     assert "``" not in text and ":mod:" not in text and "(default None)" not in text
-    assert "--method {direct,cut,chain,control,sby,netlist-ecp5,netlist-xc4v}" in text
+    assert ("--method {direct,cut,chain,control,sby,netlist-ecp5,netlist-xc4v,composition}"
+            in text)
 
 
 def test_model_and_host_never_import_the_prover():

@@ -1,0 +1,317 @@
+"""The ray-triangle unit's datapath proved by composition (issue 23, item 3).
+
+The FP units are proved one by one (:mod:`.prove`): for every input, each one's ``o`` and
+``flags`` after its latency are the contract's, whatever its registers held. What is left
+for the ray-triangle unit is its wiring: that its 33 operations (34 in conservative mode)
+take the operands the contract's formula gives them, at the cycle they are used, that the
+event counts sum their flags, and that the decision combines the results as the contract
+says. That is proved here with each operation an *uninterpreted function*:
+
+- the unit is built with a stand-in in place of every ``FPAdd`` and ``FPMul``
+  (:meth:`RayTriangleUnit._new_op`): the same ports and latency, its operands carried
+  through ``latency`` registers (``arg_a``, ``arg_b``, ``arg_sub``) and its ``o`` and
+  ``flags`` free in every cycle (``$anyseq``, through the kept wires ``res`` and
+  ``res_flags``);
+- Yosys writes the unit as a transition system (:mod:`.netlist`'s script) and it is
+  unrolled from a free state: ``rst`` = 0 in every cycle, a pair accepted in the first
+  (``i.valid`` and ``i.ready``), ``o.ready`` free;
+- in the cycle an operation's result of that pair comes out, its stand-in's ``o`` is
+  bound to ``F(arg_a, arg_b)`` and its ``flags`` to ``G(arg_a, arg_b)``, with one
+  function pair per kind (``mul``, ``add``, ``sub``, an adder's chosen by the ``arg_sub``
+  it took; ``z3.Function``, otherwise unconstrained): every instance of a kind computes
+  the same function, as the real units (one module per kind, format and stage count) do;
+- the reference is the contract's formula (:mod:`raplas_hdl.model.ray_triangle`'s table:
+  every dot product ``(x*x' + y*y') + z*z'``, ``u' = neg(Q.E2)``) over the same functions,
+  its comparisons and ``neg`` the contract's (:func:`.reference.reference`), and the
+  claim is that the output register (cycle ``decision_cycle + 2``) holds the pair's IDs,
+  ``t``, ``u``, ``v``, ``det``, ``hit``, ``flags`` and the three event counts as the
+  reference gives them, with its valid bit set.
+
+Unsatisfiable means proved for *every* interpretation of the functions, so in particular
+for the proved units: the unit equals the contract's formula on the contract's operations.
+The output FIFO behind the register is a stream stage (proved apart, :mod:`.streams`).
+
+Modes: ``paper`` (the default); ``conservative`` adds ``w = det - s`` and the margins of
+:mod:`raplas_hdl.model.conservative`, and ``certified`` a bound datapath: neither is
+stated here yet.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import time
+from pathlib import Path
+
+import z3
+from amaranth.asserts import AnySeq
+from amaranth.back import rtlil
+from amaranth.hdl import Module, Signal
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
+
+from ..fp.format import FPFormat, check_format
+from ..rtl.fp_add import FPAdd
+from ..rtl.fp_mul import FPMul
+from ..rtl.ray_triangle import RayTriangleUnit, input_layout, output_layout
+from ..synth.yosys import yosys_command
+from .miter import ports
+from .netlist import WORK_DIR
+from .reference import reference
+from .solve import SOLVER, solve
+
+__all__ = ["StandIn", "ComposedUnit", "composition_goal", "prove_composition", "TOP"]
+
+#: Keeps a stand-in's operands and results under their names through Yosys's clean-up.
+_KEEP = {"keep": 1}
+
+#: ``ackermannize_bv``'s lemma limit: each function is applied about 70 times (the unit's
+#: operations and the formula's), some 2,400 lemmas, above z3's default of 1,000.
+ACKERMANN_LIMIT = 100_000
+
+#: Module name of the emitted unit.
+TOP = "rt_composed"
+
+
+class StandIn(wiring.Component):
+    """An operation's ports and latency, its result free: the operands are delayed
+    ``latency`` cycles (``arg_a``, ``arg_b``, ``arg_sub``) beside an ``o`` and ``flags``
+    that are free in every cycle."""
+
+    def __init__(self, fmt: FPFormat, latency: int, kind: str):
+        self._fmt, self.latency, self.kind = fmt, latency, kind
+        w = fmt.width
+        members = {"a": In(w), "b": In(w), "i_valid": In(1), "en": In(1), "o": Out(w),
+                   "flags": Out(3), "o_valid": Out(1)}
+        if kind == "add":
+            members["sub"] = In(1)
+        super().__init__(members)
+
+    def elaborate(self, platform):
+        m = Module()
+        w = self._fmt.width
+        args = {"a": self.a, "b": self.b}
+        if self.kind == "add":
+            args["sub"] = self.sub
+        for name, value in args.items():
+            for k in range(self.latency):
+                r = Signal(len(value), name=f"arg_{name}" if k == self.latency - 1
+                           else f"arg_{name}_{k}", attrs=_KEEP)
+                m.d.sync += r.eq(value)
+                value = r
+        res, fl = Signal(w, name="res", attrs=_KEEP), Signal(3, name="res_flags", attrs=_KEEP)
+        m.d.comb += [res.eq(AnySeq(w)), fl.eq(AnySeq(3)), self.o.eq(res), self.flags.eq(fl),
+                     self.o_valid.eq(1)]
+        return m
+
+
+class ComposedUnit(RayTriangleUnit):
+    """A :class:`RayTriangleUnit` with a :class:`StandIn` in place of each operation; the
+    operations of the last build are listed in :attr:`ops` as ``(name, kind, sub, out
+    cycle)`` (``name`` the submodule's: ``mul4``, ``add1``)."""
+
+    def _new_op(self, kind):
+        real = (FPMul(self._fmt, self._mul_stages, self._multiplier) if kind == "mul"
+                else FPAdd(self._fmt, self._add_stages, self._adder))
+        real._MustUse__silence = True          # built only for its latency
+        return StandIn(self._fmt, real.latency, kind)
+
+    def _datapath(self, m, p):
+        self.ops = []
+        return super()._datapath(m, p)
+
+    def _op(self, m, kind, a, b, sub=False):
+        out = super()._op(m, kind, a, b, sub)
+        self.ops.append((f"{kind}{self._n_ops}", kind, bool(sub), out.time))
+        return out
+
+
+def _emit(fmt: FPFormat, mode: str, unit_class) -> tuple[str, ComposedUnit]:
+    """The composed unit as RTLIL (its stand-ins' free values are ``$anyseq`` cells, which
+    Verilog has no construct for)."""
+    unit = unit_class(fmt, mode=mode)
+    text = rtlil.convert(unit, name=TOP, emit_src=False)
+    return text, unit
+
+
+def _smt2(text: str, workdir) -> str:
+    """Yosys's transition system of the emitted ``text`` (:mod:`.netlist`'s script, with the
+    stand-ins' results cut into inputs)."""
+    workdir.mkdir(parents=True, exist_ok=True)
+    (workdir / "top.il").write_text(text)
+    script = (f"read_rtlil top.il; prep -top {TOP}; flatten; "
+              "expose -input w:*.res w:*.res_flags; memory_map; dffunmap; opt_clean; "
+              "write_smt2 -stbv -wires top.smt2")
+    res = subprocess.run([*yosys_command(), "-q", "-p", script], cwd=workdir,
+                         capture_output=True, text=True, check=False)
+    if res.returncode != 0:
+        raise RuntimeError(f"yosys failed: {(res.stderr or res.stdout).strip()[-400:]}")
+    return (workdir / "top.smt2").read_text()
+
+
+def _contract(fmt, pay, fns):
+    """The contract's paper-mode formula over the functions ``fns`` (kind -> (o, flags)):
+    ``(values, flag terms of every operation, hit)``. The operations are listed in the
+    order the unit builds them (a dot product's three products, then its two sums; the six
+    products of ``Q``, then its three differences): the order of a list of independent
+    operations, not of the formula, which the event counts' proof matches them by."""
+    flags = []
+
+    def op(kind, a, b):
+        f, g = fns[kind]
+        flags.append(g(a, b))
+        return f(a, b)
+
+    def dot(a, b):
+        p = [op("mul", x, y) for x, y in zip(a, b)]
+        return op("add", op("add", p[0], p[1]), p[2])
+
+    o, d, v0, e1, e2, n = (pay[k] for k in ("o", "d", "v0", "e1", "e2", "n"))
+    t = [op("sub", v0[k], o[k]) for k in range(3)]
+    det = dot(n, d)
+    tp = dot(n, t)
+    prods = [(op("mul", d[a], t[b]), op("mul", d[b], t[a])) for a, b in ((1, 2), (2, 0), (0, 1))]
+    q = [op("sub", pc, rc) for pc, rc in prods]
+    up = reference(fmt, "neg", dot(q, e2), None)[0]
+    vp = dot(q, e1)
+    s = op("add", up, vp)
+    zero = z3.BitVecVal(0, fmt.width)
+
+    def le(a, b):
+        return reference(fmt, "le", a, b)[0] == 1
+
+    def lt(a, b):
+        return reference(fmt, "lt", a, b)[0] == 1
+
+    hit = z3.Or(z3.And(lt(zero, det), le(zero, up), le(zero, vp), le(s, det), le(zero, tp)),
+                z3.And(lt(det, zero), le(up, zero), le(vp, zero), le(det, s), le(tp, zero)))
+    return {"det": det, "t": tp, "u": up, "v": vp}, flags, hit
+
+
+def composition_goal(fmt: FPFormat, *, mode: str = "paper", cwd=None,
+                     unit_class=ComposedUnit):
+    """``(goal, claims, unit, cycles)``: ``goal`` is satisfiable exactly when some pair, some
+    register contents and some interpretation of the operations give an output register
+    that differs from the contract's formula; ``claims`` names its parts. ``unit_class``:
+    a :class:`ComposedUnit` or a subclass (the tests' deliberately wrong units)."""
+    fmt = check_format(fmt)
+    if mode != "paper":
+        raise ValueError(f"the composition proof states the paper mode only, not {mode!r}")
+
+    workdir = (Path(cwd or ".") / WORK_DIR
+               / f"composition-{fmt.name}-{mode}-{unit_class.__name__}")
+    text, unit = _emit(fmt, mode, unit_class)
+    smt2 = _smt2(text, workdir)
+    found = ports(smt2)
+    n = unit.decision_cycle + 2
+    st = [f"|{TOP}@{k}|" for k in range(n + 1)]
+    lines = [f"(declare-const {s} |{TOP}_s|)" for s in st]
+    lines += [f"(assert (|{TOP}_t| {st[k]} {st[k + 1]}))" for k in range(n)]
+    lines += [f"(assert (not (|{TOP}_n rst| {s})))" for s in st[:-1]]
+    lines += [f"(assert (|{TOP}_n i__valid| {st[0]}))", f"(assert (|{TOP}_n i__ready| {st[0]}))"]
+    wanted = {}
+
+    def term(name, state, width):
+        key = f"v{len(wanted)}"
+        lines.append(f"(declare-const {key} (_ BitVec {width}))")
+        read = f"(|{TOP}_n {name}| {state})"
+        lines.append(f"(assert (= {key} {read if width > 1 else f'(ite {read} #b1 #b0)'}))")
+        wanted[key] = z3.BitVec(key, width)
+        return wanted[key]
+
+    w = fmt.width
+    pay_w = found["i__payload"][1]
+    payload = term("i__payload", st[0], pay_w)
+    binds = []
+    for name, kind, _, out_t in unit.ops:
+        a, b = (term(f"{name}.arg_{x}", st[out_t], w) for x in ("a", "b"))
+        sub = term(f"{name}.arg_sub", st[out_t], 1) if kind == "add" else None
+        binds.append((kind, sub, a, b, term(f"{name}.res", st[out_t], w),
+                      term(f"{name}.res_flags", st[out_t], 3)))
+    out_w = len(unit.o.payload.as_value())
+    out = term("out", st[n], out_w)
+    out_valid = term("out_valid", st[n], 1)
+    facts = list(z3.parse_smt2_string(smt2 + "\n" + "\n".join(lines) + "\n"))
+
+    bv = z3.BitVecSort(w)
+    fns = {k: (z3.Function(f"{k}_o", bv, bv, bv), z3.Function(f"{k}_flags", bv, bv,
+                                                              z3.BitVecSort(3)))
+           for k in ("mul", "add", "sub")}
+    for kind, sub, a, b, o, fl in binds:
+        # an adder's function is chosen by the subtract bit it took, as the netlist has it
+        if kind == "add":
+            (fa, ga), (fs, gs) = fns["add"], fns["sub"]
+            facts += [o == z3.If(sub == 1, fs(a, b), fa(a, b)),
+                      fl == z3.If(sub == 1, gs(a, b), ga(a, b))]
+        else:
+            f, g = fns[kind]
+            facts += [o == f(a, b), fl == g(a, b)]
+
+    lay = input_layout(fmt, unit._ray_id_bits, unit._tri_id_bits)
+
+    def field(layout, value, name):
+        fld = layout[name]
+        return z3.Extract(fld.offset + fld.width - 1, fld.offset, value)
+
+    pay = {}
+    for vec in ("o", "d", "v0", "e1", "e2", "n"):
+        base = lay[vec].offset
+        sub_l = lay[vec].shape
+        pay[vec] = [z3.Extract(base + sub_l[c].offset + w - 1, base + sub_l[c].offset, payload)
+                    for c in ("x", "y", "z")]
+    values, op_flags, hit = _contract(fmt, pay, fns)
+    olay = output_layout(fmt, unit._ray_id_bits, unit._tri_id_bits)
+    claims = {k: field(olay, out, k) == v for k, v in values.items()}
+    claims["hit"] = (field(olay, out, "hit") == 1) == hit
+    claims["valid"] = out_valid == 1
+    for k in ("ray_id", "tri_id"):
+        claims[k] = field(olay, out, k) == field(lay, payload, k)
+    cw = olay["n_overflow"].width
+    # The counts in two steps: each operation's flags are the contract's operation's (the
+    # operations matched in the order both build them), and each count is the sum of the
+    # operations' flags, summed in the order the unit's operations finish (its running
+    # sums). Together: the count is the contract's, a sum whatever the order of its terms.
+    # (Stated as one claim, the SAT solver would have to find the matching of 33 terms.)
+    if len(op_flags) != len(binds):
+        raise AssertionError(f"{len(binds)} operations in the unit, {len(op_flags)} in the "
+                             f"contract's formula")
+    claims["op_flags"] = z3.And(*(bd[5] == ref for bd, ref in zip(binds, op_flags)))
+    order = sorted(range(len(binds)), key=lambda k: (unit.ops[k][3], k))
+    for b, ev in enumerate(("overflow", "underflow", "invalid")):
+        count = z3.BitVecVal(0, cw)
+        for k in order:
+            count = count + z3.ZeroExt(cw - 1, z3.Extract(b, b, binds[k][5]))
+        claims[f"n_{ev}"] = field(olay, out, f"n_{ev}") == count
+        claims[f"flag_{ev}"] = ((z3.Extract(b, b, field(olay, out, "flags")) == 1)
+                                == (count != 0))
+    return z3.And(*facts, z3.Not(z3.And(*claims.values()))), claims, unit, n
+
+
+def prove_composition(fmt: FPFormat, *, mode: str = "paper", timeout: float = 600,
+                      cwd=None, unit_class=ComposedUnit) -> dict:
+    """Prove the ray-triangle unit's datapath by composition (module docstring).
+
+    Returns
+    -------
+    dict
+        ``result`` ("proved", "counterexample" or "unknown"), ``ops`` (the operations
+        bound), ``cycles`` (unrolled), ``seconds``, ``solver``; for a counterexample, the
+        claims that fail (``differs``).
+
+    Raises
+    ------
+    ValueError
+        For a mode other than ``paper``.
+    """
+    t0 = time.monotonic()
+    goal, claims, unit, n = composition_goal(fmt, mode=mode, cwd=cwd, unit_class=unit_class)
+    one, nil = z3.BitVecVal(1, 1), z3.BitVecVal(0, 1)
+    run = solve(goal, timeout, watch={k: z3.If(c, one, nil) for k, c in claims.items()},
+                ackermann_limit=ACKERMANN_LIMIT)
+    res = {"result": run.result, "ops": len(unit.ops), "cycles": n, "solver": SOLVER,
+           "solver_seconds": round(run.seconds, 1),
+           "seconds": round(time.monotonic() - t0, 1)}
+    if run.result == "counterexample":
+        res["differs"] = [k for k, v in run.values.items() if v == 0]
+    elif run.result == "unknown":
+        res["reason"] = run.reason
+    return res
