@@ -30,7 +30,7 @@ demo: setup
 verilog: setup
 	$(VPY) -c 'from raplas_hdl.rtl.units import emit_all; [print(p) for p in emit_all("build/verilog")]'
 
-## The tests (about 14 minutes on 2 cores from a fresh clone; both simulators, place and route, proofs).
+## The tests (about 20 minutes on 2 quiet cores from a fresh clone; both simulators, place and route, proofs).
 test: setup
 	$(VENV)/bin/lint-imports
 	$(PYTEST) -m "not full" tests

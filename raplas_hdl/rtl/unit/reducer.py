@@ -413,6 +413,11 @@ class Reducer(wiring.Component):
             m.d.sync += [primed.eq(1), s_idx.eq(idx), s_only.eq(only), s_any.eq(rest != 0)]
         m.d.comb += [ar.addr.eq(Mux(scanning, s_idx, a2.ray)),
                      ar.en.eq(Mux(scanning, step & s_any, en))]
+        if certified:
+            # a passed-on pair still in the output register when the scan starts may be
+            # taken in its priming cycle (the only beat that can be there then)
+            with m.If(scanning & ~primed & o_v & self.o.ready):
+                m.d.sync += o_v.eq(0)
         with m.If(step):
             with m.If(o_v & o_last):
                 m.d.sync += [scanning.eq(0), primed.eq(0), o_v.eq(0), cur_any.eq(0),
