@@ -50,8 +50,6 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from ..fp.format import FPFormat, check_format
-from ..rtl.fp_add import FPAdd
-from ..rtl.fp_mul import FPMul
 from ..rtl.ray_triangle import RayTriangleUnit, input_layout, output_layout
 from ..synth.yosys import yosys_command
 from .miter import ports
@@ -110,8 +108,7 @@ class ComposedUnit(RayTriangleUnit):
     cycle)`` (``name`` the submodule's: ``mul4``, ``add1``)."""
 
     def _new_op(self, kind):
-        real = (FPMul(self._fmt, self._mul_stages, self._multiplier) if kind == "mul"
-                else FPAdd(self._fmt, self._add_stages, self._adder))
+        real = super()._new_op(kind)
         real._MustUse__silence = True          # built only for its latency
         return StandIn(self._fmt, real.latency, kind)
 
@@ -208,15 +205,13 @@ def composition_goal(fmt: FPFormat, *, mode: str = "paper", cwd=None,
     lines += [f"(assert (|{TOP}_t| {st[k]} {st[k + 1]}))" for k in range(n)]
     lines += [f"(assert (not (|{TOP}_n rst| {s})))" for s in st[:-1]]
     lines += [f"(assert (|{TOP}_n i__valid| {st[0]}))", f"(assert (|{TOP}_n i__ready| {st[0]}))"]
-    wanted = {}
-
     def term(name, state, width):
-        key = f"v{len(wanted)}"
+        """A constant equal to ``name`` in ``state`` (1-bit signals as ``BitVec(1)``)."""
+        key = f"v{len(lines)}"
         lines.append(f"(declare-const {key} (_ BitVec {width}))")
         read = f"(|{TOP}_n {name}| {state})"
         lines.append(f"(assert (= {key} {read if width > 1 else f'(ite {read} #b1 #b0)'}))")
-        wanted[key] = z3.BitVec(key, width)
-        return wanted[key]
+        return z3.BitVec(key, width)
 
     w = fmt.width
     pay_w = found["i__payload"][1]
