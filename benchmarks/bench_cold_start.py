@@ -6,12 +6,14 @@ nothing is loaded from a previous compile; a second process then loads the same 
 run in first-use order within one process, so a group's time is what it adds over the
 groups before it (the scalar FP kernels are compiled with the first group that calls
 them). Also timed end to end: the first ``raplas-hdl render --backend model`` of cornell at
-32x32 from an empty cache, and the same command again.
+32x32 from an empty cache, and the same command again, in each mode of ``--modes`` (default
+paper and certified; each first render with an empty cache of its own).
 
 CPU time is reported beside wall time (the machine may be shared). Results go to
 ``build/bench/cold_start.json`` unless ``--out`` says otherwise.
 
-    python benchmarks/bench_cold_start.py [--format FP24/rtz] [--out FILE]
+    python benchmarks/bench_cold_start.py [--format FP24/rtz] [--modes paper,certified]
+        [--out FILE]
 """
 
 from __future__ import annotations
@@ -74,17 +76,19 @@ group("unit models: ray-triangle, paper",
       lambda: ray_triangle.intersect(*v, fmt, "paper"))
 group("unit models: ray-triangle, conservative",
       lambda: ray_triangle.intersect(*v, fmt, "conservative"))
+group("unit models: ray-triangle, certified",
+      lambda: ray_triangle.intersect(*v, fmt, "certified"))
 
-def engine(cons):
+def engine(mode):
     from raplas_hdl.host.backends import make_backend
     from raplas_hdl.host.render import RenderSettings, render
     from raplas_hdl.host.scenes import get_scene
     st = RenderSettings(width=8, height=8, shadow_rows=2, shadow_cols=2, progress=False)
-    mode = "conservative" if cons else "paper"
     render(get_scene("cornell"), make_backend("model", fmt, mode=mode), st)
 
-group("engine: model passes, paper", lambda: engine(False))
-group("engine: model passes, conservative", lambda: engine(True))
+group("engine: model passes, paper", lambda: engine("paper"))
+group("engine: model passes, conservative", lambda: engine("conservative"))
+group("engine: model passes, certified", lambda: engine("certified"))
 
 def f64():
     from raplas_hdl.host.backends import make_backend
@@ -104,11 +108,11 @@ def _child(spec: str, cache: str) -> list[dict]:
     return [json.loads(line) for line in out.stdout.splitlines() if line.startswith("{")]
 
 
-def _render(cache: str, png: str) -> dict:
+def _render(cache: str, png: str, mode: str) -> dict:
     env = dict(os.environ, NUMBA_CACHE_DIR=cache)
     cmd = [sys.executable, "-c", "import sys; from raplas_hdl.cli import main; "
            "sys.exit(main(sys.argv[1:]))", "render", "--scene", "cornell", "--size", "32x32",
-           "--backend", "model", "--no-progress", "-o", png]
+           "--backend", "model", "--mode", mode, "--no-progress", "-o", png]
     c0 = os.times()
     t0 = time.perf_counter()
     subprocess.run(cmd, env=env, check=True, capture_output=True, cwd=ROOT)
@@ -122,6 +126,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--format", default="FP24/rtz", help="format of the model kernels "
                     "(default FP24/rtz)")
+    ap.add_argument("--modes", default="paper,certified",
+                    help="modes of the first-render rows (default paper,certified)")
     ap.add_argument("--out", default=str(ROOT / "build" / "bench" / "cold_start.json"),
                     help="JSON results (default build/bench/cold_start.json)")
     args = ap.parse_args(argv)
@@ -134,8 +140,11 @@ def main(argv=None) -> int:
         res["groups"] = [{"group": c["group"], "cold_cpu": c["cpu"], "cold_wall": c["wall"],
                           "warm_cpu": w["cpu"], "warm_wall": w["wall"]}
                          for c, w in zip(cold, warm)]
-        res["first_render_cold"] = _render(str(Path(tmp) / "render"), str(Path(tmp) / "a.png"))
-        res["first_render_warm"] = _render(str(Path(tmp) / "render"), str(Path(tmp) / "b.png"))
+        res["first_render"] = {}
+        for mode in args.modes.split(","):
+            cache, png = str(Path(tmp) / f"render-{mode}"), str(Path(tmp) / "a.png")
+            res["first_render"][mode] = {"cold": _render(cache, png, mode),
+                                         "warm": _render(cache, png, mode)}
     res["machine"]["load_after"] = os.getloadavg()
     print(f"cold start, {args.format}, {os.cpu_count()} cores, load "
           f"{res['machine']['load_before'][0]:.2f}")
@@ -145,8 +154,10 @@ def main(argv=None) -> int:
               f"{g['warm_cpu']:9.2f} {g['warm_wall']:9.2f}")
     tot = sum(g["cold_cpu"] for g in res["groups"])
     print(f"{'total':45s} {tot:9.2f}")
-    for k in ("first_render_cold", "first_render_warm"):
-        print(f"{k.replace('_', ' '):45s} cpu {res[k]['cpu']:.2f} s, wall {res[k]['wall']:.2f} s")
+    for mode, runs in res["first_render"].items():
+        for k, r in runs.items():
+            print(f"{'first render, ' + mode + ', ' + k + ' cache':45s} cpu {r['cpu']:.2f} s, "
+                  f"wall {r['wall']:.2f} s")
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(res, indent=2) + "\n")

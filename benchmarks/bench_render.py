@@ -21,6 +21,12 @@ When the ``embreex`` package is importable (never a dependency), Embree's neares
 on the frame's rays (primary and shadow, no ``tmax``) is timed beside the render; otherwise
 a note says it was skipped.
 
+``--compare-modes paper,certified``: the model backend in each mode, one warm-up render each,
+then ``--repeat`` rounds (default 3) of one render per mode, alternating: per mode the wall
+and CPU time of every run and their medians, and each mode's median wall time over the first
+mode's (the cost of the certified mode against the paper's, on the same machine in the same
+minutes).
+
 Results go to ``build/render-bench/render_bench.json`` (written after every backend, so a
 long run leaves partial results), images beside it; ``--out
 docs/results/render_bench.json`` updates the committed one.
@@ -29,7 +35,7 @@ Usage::
 
     python benchmarks/bench_render.py [--mesh FILE] [--size 256x256] [--shadow 3x3]
         [--backends float64,model] [--format FP24] [--mode paper] [--rtl-sim icarus]
-        [--limit-pairs N] [--out FILE.json]
+        [--limit-pairs N] [--compare-modes paper,certified [--repeat 3]] [--out FILE.json]
 """
 
 from __future__ import annotations
@@ -251,6 +257,36 @@ def embree_limit(meter: StageMeter, tris: np.ndarray) -> dict:
             "query": "nearest hit, tnear 0, no tmax (shadow rays too)"}
 
 
+def compare_modes(scene, settings, fmt, modes, repeat) -> dict:
+    """The model backend's render in each of ``modes``, alternating (module docstring)."""
+    backends = {mode: make_backend("model", fmt, mode=mode) for mode in modes}
+    for mode, backend in backends.items():            # warm: kernels compiled or loaded
+        render(scene, backend, settings)
+    runs = []
+    for i in range(repeat):
+        for mode, backend in backends.items():
+            load = os.getloadavg()[0]
+            t0, c0 = time.perf_counter(), time.process_time()
+            res = render(scene, backend, settings)
+            runs.append({"round": i, "mode": mode, "wall_seconds": time.perf_counter() - t0,
+                         "cpu_seconds": time.process_time() - c0, "load_before": load,
+                         "pairs_issued": res.stats["pairs_issued"]})
+            print(f"  round {i + 1}/{repeat} {mode:12s} wall {runs[-1]['wall_seconds']:6.2f} s "
+                  f"CPU {runs[-1]['cpu_seconds']:6.2f} s (load {load:.2f})", flush=True)
+    med = {mode: float(np.median([r["wall_seconds"] for r in runs if r["mode"] == mode]))
+           for mode in modes}
+    cpu = {mode: float(np.median([r["cpu_seconds"] for r in runs if r["mode"] == mode]))
+           for mode in modes}
+    first = modes[0]
+    out = {"modes": list(modes), "repeat": repeat, "runs": runs, "median_wall_seconds": med,
+           "median_cpu_seconds": cpu,
+           "wall_ratio_to_" + first: {mode: med[mode] / med[first] for mode in modes}}
+    for mode in modes:
+        print(f"  {mode:12s} median wall {med[mode]:6.2f} s, CPU {cpu[mode]:6.2f} s: "
+              f"{med[mode] / med[first]:.2f}x {first}", flush=True)
+    return out
+
+
 @contextmanager
 def _threads(n):
     import numba
@@ -322,8 +358,20 @@ def main(argv=None) -> int:
                    help="pairs of the frame sampled for the flat kernel (default 2,000,000)")
     p.add_argument("--rtl-sim", default=None, choices=("icarus", "verilator"),
                    help="also time the rtl backend on a small scene (soup, 16x16)")
+    p.add_argument("--compare-modes", default=None, metavar="MODES",
+                   help="comma-separated modes of the model backend to time alternately "
+                        "(e.g. paper,certified; the first is the reference)")
+    p.add_argument("--repeat", type=int, default=3,
+                   help="rounds of --compare-modes (default 3)")
     p.add_argument("--out", default=str(DEFAULT_OUT))
     args = p.parse_args(argv)
+    modes = args.compare_modes.split(",") if args.compare_modes else []
+    bad = [m for m in modes if m not in MODES]
+    if bad or (args.compare_modes is not None and len(modes) < 2):
+        p.error(f"--compare-modes takes two or more of {', '.join(MODES)}, not "
+                f"{args.compare_modes!r}")
+    if args.repeat < 1:
+        p.error("--repeat must be at least 1")
 
     mesh = MESHES.get(args.mesh, args.mesh)
     if not Path(mesh).exists():
@@ -354,7 +402,10 @@ def main(argv=None) -> int:
                                                                               sys.argv[1:])),
               "backends": {}}
     results = {}
-    for name in args.backends.split(","):
+    if modes:
+        report["compare_modes"] = compare_modes(scene, settings, fmt, modes, args.repeat)
+        out.write_text(json.dumps(jsonable(report), indent=2))
+    for name in (args.backends.split(",") if args.backends else []):
         backend = make_backend(name, fmt, mode=args.mode,
                                **({"sim": args.rtl_sim or "verilator"} if name == "rtl" else {}))
         meter = StageMeter(backend, n_tiles, args.limit_pairs, keep_rays=have_embree)
@@ -415,8 +466,11 @@ def main(argv=None) -> int:
         except BackendUnavailable as exc:
             report["rtl_small"] = {"unavailable": str(exc)}
         out.write_text(json.dumps(jsonable(report), indent=2))
-    bf = next(iter(report["backends"].values()))
-    print(f"pairs issued / brute force: {bf['pair_fraction']:.5f}; wrote {out}")
+    if report["backends"]:
+        bf = next(iter(report["backends"].values()))
+        print(f"pairs issued / brute force: {bf['pair_fraction']:.5f}")
+    out.write_text(json.dumps(jsonable(report), indent=2))
+    print(f"wrote {out}")
     return 0
 
 

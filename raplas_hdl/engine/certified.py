@@ -75,16 +75,11 @@ def _push(pend, npend, b, ray, tid):
 
 
 @njit(cache=True, error_model="numpy")
-def _tail(outcome, cnt, u, b, ray, di, tid, o64, d64, tri64, tmin, tmax, excl, any_hit,
+def _tail(outcome, u, b, ray, di, tid, o64, d64, tri64, tmin, tmax, excl, any_hit,
           best_lo, best_hi, best_tri, counters, pend, npend):
-    """One pair's outcome and event counts (``cnt``: overflow, underflow, invalid) into run
-    ``u``'s counters and ray ``(b, ray)``'s state: the filter, the fold and the pending list
-    (module docstring); returns the new pending count."""
-    counters[u, 5] += cnt[0]
-    counters[u, 6] += cnt[1]
-    counters[u, 7] += cnt[2]
-    if outcome == 0:
-        return npend
+    """One pair's outcome, a hit or uncertain, into run ``u``'s counters and ray ``(b,
+    ray)``'s state: the filter, the fold and the pending list (module docstring); returns
+    the new pending count."""
     if outcome == 1:
         counters[u, 4] += 1
     else:
@@ -162,12 +157,18 @@ def trace_certified(pn, pp, enable, keep_all, rows, cols, run_b, run_start, run_
 @njit(nogil=True, cache=True, error_model="numpy")
 def _tails(lanes, n, outc, cnt, o64, d64, tri64, tmin, tmax, excl, any_hit, best_lo, best_hi,
            best_tri, counters, pend, npend):
-    """The listed pairs' outcomes and counts into the counters and the rays' state, in
-    stream order (:func:`_tail`); returns the pending count."""
+    """The listed pairs' outcomes and event counts (``cnt``: overflow, underflow, invalid)
+    into the counters and the rays' state, in stream order (:func:`_tail` for the pairs that
+    are not misses: a miss is only counted, without a call); returns the pending count."""
     for q in range(n):
-        npend = _tail(outc[q], cnt[q], lanes[4, q], lanes[0, q], lanes[1, q], lanes[2, q],
-                      lanes[3, q], o64, d64, tri64, tmin, tmax, excl, any_hit, best_lo,
-                      best_hi, best_tri, counters, pend, npend)
+        u = lanes[4, q]
+        counters[u, 5] += cnt[q, 0]
+        counters[u, 6] += cnt[q, 1]
+        counters[u, 7] += cnt[q, 2]
+        if outc[q] != 0:
+            npend = _tail(outc[q], u, lanes[0, q], lanes[1, q], lanes[2, q], lanes[3, q], o64,
+                          d64, tri64, tmin, tmax, excl, any_hit, best_lo, best_hi, best_tri,
+                          counters, pend, npend)
     return npend
 
 

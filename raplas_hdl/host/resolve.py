@@ -11,8 +11,11 @@ folded hit; a candidate counts when R hits it, ``t = t'/det`` lies in ``[tmin, t
 - *any* (shadow rays): a ray already blocked needs nothing; otherwise it is blocked by the
   lowest-ID counting candidate, if any.
 
-Rays without pending entries keep the folded hit, whose ``t`` interval is float64-tight;
-their ``t`` is the interval's midpoint.
+A nearest-hit ray without pending entries keeps its folded hit; its ``t`` is R's exact
+``t'/det`` of that hit too, rounded to the nearest float64 (one exact evaluation per hit
+ray: about 0.3 s for the bunny frame's 39,000 primary hits), not the midpoint of the
+filter's interval. So every nearest hit's ``t`` is R's, correctly rounded, whatever the
+folding saw of its neighbours (with or without the on-chip reduction).
 """
 
 from __future__ import annotations
@@ -50,17 +53,15 @@ def resolve_pending(pending, origin, directions, tris, best_lo, best_hi, best_tr
     pending = np.asarray(pending, np.int64).reshape(-1, 3)
     if any_hit:
         pending = pending[~hit[pending[:, 0], pending[:, 1]]]
-    if not pending.size:
+    if not pending.size and (any_hit or not hit.any()):
         return 0
-    # candidates: the pending pairs and, for nearest, each pending ray's folded hit
+    # candidates: the pending pairs and, for nearest, every ray's folded hit (its exact t)
     b, r, tid = pending.T
     if not any_hit:
-        keys = np.unique(b * best_tri.shape[1] + r)
-        fb, fr = np.divmod(keys, best_tri.shape[1])
-        own = best_tri[fb, fr] >= 0
-        b = np.concatenate([b, fb[own]])
-        r = np.concatenate([r, fr[own]])
-        tid = np.concatenate([tid, best_tri[fb[own], fr[own]]])
+        fb, fr = np.nonzero(hit)
+        b = np.concatenate([b, fb])
+        r = np.concatenate([r, fr])
+        tid = np.concatenate([tid, best_tri[fb, fr]])
     cand = np.unique(np.stack([b, r, tid], 1), axis=0)      # sorted: ray, then triangle
     b, r, tid = cand.T
     t_hit, t_exact = exact_t(origin[b], directions[b, r], tris[tid, 0], tris[tid, 1],

@@ -45,8 +45,9 @@ pair the bound datapath is 65 round-up bound adders, 27 bound products and 5 com
 DSP48 (estimates per variant in ``docs/certified-mode.md``).
 
 The model runs the pairs 128 at a time (:func:`block_pairs`: paper mode's vector loops for
-the values, vector loops for the bounds of the lanes in the common case, :func:`pair_full`
-for the other lanes), the same bits as one pair at a time (:func:`pairs_one`).
+the values, a vector loop of *screen bounds* that dominate the unit's and decide almost
+every lane's outcome without the bound floats, :func:`pair_full` for the other lanes), the
+same bits as one pair at a time (:func:`pairs_one`).
 """
 
 from __future__ import annotations
@@ -58,7 +59,7 @@ from llvmlite import ir
 from numba import njit, types
 from numba.extending import intrinsic
 
-from ..fp.fast import common_add, common_mul
+from ..fp.fast import fast_add, fast_mul
 from ..fp.format import FLAG_OVERFLOW, FPFormat, check_format
 from ..fp.kernels import neg_k, rmode_code
 from ..fp.numba_cache import drop_stale_cache
@@ -67,7 +68,9 @@ from .pair_kernels import BLOCK, add_op, mul_op, store, sub_op, tally, vpair
 
 __all__ = ["VARIANTS", "DEFAULT_VARIANT", "N_OPS", "MAX_EXP_BITS", "certified_constants",
            "certified_domain", "check_certified_format", "pair_certified", "intersect_certified",
-           "block_pairs", "pairs_one", "vbounds", "N_BOUND_ROWS"]
+           "block_pairs", "block_screened", "exact_pairs", "pairs_listed", "pairs_one",
+           "pair_bounds",
+           "vscreen", "voutcome", "SCREEN_SLACK", "RECOMPUTE"]
 
 #: Bound variants: name -> (j leading fraction bits read from each |x|, k fraction bits of
 #: the bound float).
@@ -349,8 +352,9 @@ def _classify(x, g, e, m):
 
 
 @njit(cache=True)
-def pair_full(o, oi, d, di, v0, e1, e2, nn, ti, e, m, r, cc):
-    """:func:`pair_certified` with every result: ``(outcome, t', u', v', det, counts)``."""
+def pair_bounds(o, oi, d, di, v0, e1, e2, nn, ti, e, m, r, cc):
+    """The pair's results and their bounds, as the unit forms them: ``(t', u', v', det, w,
+    B_det, B_t', B_u', B_v', B_w, counts)``."""
     j = np.int64(cc[1])
     k = np.int64(cc[2])
     bv = np.empty(3)
@@ -386,6 +390,14 @@ def pair_full(o, oi, d, di, v0, e1, e2, nn, ti, e, m, r, cc):
     gw = _add_b(det, gdet, neg_k(s, e, m), gs, w, e, m, r, k)
     cnt = (tally(f0) + tally(f1) + tally(f2) + c3 + c4 + c5 + c6 + c7 + c8 + c9
            + tally(f10) + tally(f11))
+    return tp, up, vp, det, w, gdet, gt, gu, gv, gw, cnt
+
+
+@njit(cache=True)
+def pair_full(o, oi, d, di, v0, e1, e2, nn, ti, e, m, r, cc):
+    """:func:`pair_certified` with every result: ``(outcome, t', u', v', det, counts)``."""
+    tp, up, vp, det, w, gdet, gt, gu, gv, gw, cnt = pair_bounds(o, oi, d, di, v0, e1, e2, nn,
+                                                                ti, e, m, r, cc)
     emf = (np.int64(1) << e) - 1
     special = False
     for x in (det, tp, up, vp, w):
@@ -428,144 +440,285 @@ def pair_certified(o, oi, d, di, v0, e1, e2, nn, ti, e, m, r, cc):
 
 # -- pairs a block at a time ------------------------------------------------------------------
 # The values of a block come from :func:`~raplas_hdl.model.pair_kernels.vpair` (the 34
-# operations as vector loops of the common case, BLOCK lanes); their bounds from the loops
-# below, one per stage of :func:`pair_full`, over every lane. In a lane whose operations all
-# took the common case every operand and result is a normal number and no flag is raised, so
-# no zero test of the bound terms applies (:func:`_rnd_add_nz`, :func:`_ulp`), the counts are
-# 0 and no result is special: the lane's bounds are :func:`pair_full`'s, bit for bit. The
-# products and partial sums of the dot products, which vpair does not keep, are recomputed
-# with the same common-case kernels. Every other lane is recomputed alone by
-# :func:`pair_full`. Rows of the bound block ``gb`` (float64, (N_BOUND_ROWS, BLOCK)):
-_BV, _B1, _B2, _BN = 0, 3, 6, 9        # input bounds of V0, E1, E2, N (x, y, z)
-_GT = 12                               # T = V0 - O (x, y, z)
-_GDET, _GTP = 15, 16
-_GQ = 17                               # Q = D x T (x, y, z)
-_GU, _GV, _GS, _GW, _ZERO = 20, 21, 22, 23, 24
-N_BOUND_ROWS = 25
+# operations as vector loops of the common case, BLOCK lanes); a lane that leaves the common
+# case only through zero operands or an exact zero sum (axis-aligned geometry: a floor, a
+# wall) is recomputed alone with the flag-free fast paths of :mod:`raplas_hdl.fp.fast`
+# (:func:`_lane_fast`), which give the same bits. The outcome of each of these lanes is
+# decided from *screen bounds* ``G_x >= B_x`` (:func:`vscreen`), one vector loop of plain
+# float64 arithmetic over the block; a lane the screen leaves uncertain, and every lane with
+# an event flag or a special value, is recomputed alone by :func:`pair_full` with the
+# unit's bounds. The outcome is the same bits either way (the screen's argument, below).
+#
+# **Why a screen decision is the unit's.** ``_outcome`` is monotone in the bounds: each of
+# ``ge, gt, le, lt`` with a larger bound implies the same comparison with a smaller one,
+# and *hit* and *miss* are ANDs and ORs of them; *hit* and *miss* exclude each other for
+# any bounds ``>= 0``. So if the outcome from bounds ``G >= B`` is hit (miss), the outcome
+# from ``B`` is hit (miss) too, and only where the screen says *uncertain* is ``B`` needed.
+# ``G >= B``, per step of :func:`pair_bounds`, with ``K = 1 + 2**-k``:
+#
+# - the bound floats round up to ``k + 1`` bits: ``badd(a, b) <= K (a + b)``,
+#   ``bmul(a, b) <= K a b`` (exact products), and each bound operation is monotone in its
+#   operands, so a step's screen formula over screen operands dominates the step;
+# - ``mul_b = badd(badd(bmul(U(a), B_b), bmul(badd(U(b), B_b), B_a)), rnd)`` is at most
+#   ``K^3 U(a) B_b + K^4 (U(b) + B_b) B_a + K rnd``; ``add_b = badd(badd(B_a, B_b), rnd)``
+#   at most ``K^2 (B_a + B_b) + K rnd``; the input bounds at most ``(ulp + eta)`` times
+#   ``(1 + 2**-20) K`` (``K`` and the slack only for E1, E2, N);
+# - rounding terms, with ``ulp_r`` the ulp (rne: half of it) and ``eta`` the flush
+#   bound: each of the unit's terms is 0, ``eta`` or ``ulp_r`` of the result for rtz and rne
+#   (at most ``ulp_r(s) + eta``); for chop ``2**(max exponent - m)`` or
+#   ``badd(2**(top - m), eta)`` (at most ``K (2**-m A + 2**(e_s - m) + eta)`` with ``A``
+#   an upper bound of ``|a| + |b|``). Inside the dot products and cross products the
+#   products and the first partial sum are not kept, so their magnitudes are bounded from
+#   the operands: ``|p| <= (1 + 2**-m) U(a) U(b)`` (rne may round up by half an ulp) and
+#   ``|s01| <= (1 + 2**-m) (|p0| + |p1|)``; a product's term is at most ``2**-m |p| +
+#   eta``, the partial sum's at most ``K (2**-m |s01| + eta)`` in every rounding;
+# - float64 evaluates these sums and products of non-negative numbers (none below
+#   ``eta**2``, none near overflow for ``exp_bits <= 9``) each at most ``2**-53`` low, a few
+#   hundred of them per bound: the final factor :data:`SCREEN_SLACK` covers them, and the
+#   comparison ``x >= G * scale`` rounds monotonically.
+#
+# ``tests/model/test_certified_screen.py`` checks ``G >= B`` against :func:`pair_bounds` lane
+# by lane (stress families, specials, every format and variant).
+
+#: Factor on every screen bound: float64's rounding of the screen's arithmetic.
+SCREEN_SLACK = 1.0 + 2.0 ** -30
 
 
-# Branch-free forms of the bound operations for those lanes (LLVM vectorises their loops):
-# every bound there is finite (below 2**800 for exp_bits <= 9) and non-negative, and every
-# pattern normal, so the tests of :func:`_ru`, :func:`_badd` and :func:`_upper` for zero,
-# infinite and NaN values never apply; the results are the same floats.
-@njit(cache=True)
-def _ru_nz(x, k):
-    """:func:`_ru` of a finite ``x >= 0``."""
-    mask = (np.int64(1) << (52 - k)) - 1
-    return _i2f((_f2i(x) + mask) & ~mask)
+# The screen's helpers are inlined into its one loop (calls would keep LLVM from
+# vectorising it).
+@njit(inline="always")
+def _s_pow2(n):
+    return _i2f((np.int64(n) + 1023) << 52)
 
 
-@njit(cache=True)
-def _badd_nz(a, b, k):
-    """:func:`_badd` of finite bound floats with a finite sum."""
-    s = a + b
-    bb = s - a
-    err = (a - (s - bb)) + (b - bb)
-    r = _ru_nz(s, k)
-    bump = np.int64((err > 0.0) & (r == s))
-    return _i2f(_f2i(r) + (bump << (52 - k)))
+@njit(inline="always")
+def _s_exp(x, e, m):
+    return ((np.int64(x) >> m) & ((np.int64(1) << e) - 1)) - ((np.int64(1) << (e - 1)) - 1)
 
 
-@njit(cache=True)
-def _upper_nz(x, e, m, j):
-    """:func:`_upper` of a pattern that is not zero, built as float64 bits: exponent ``ex``,
-    fraction the ``j`` leading bits plus one unit of the ``j``-th (a carry adds into the
-    exponent)."""
+@njit(inline="always")
+def _s_upper(x, e, m, j):
+    """:func:`_upper` of any finite pattern, branch-free, built as float64 bits: exponent
+    ``ex``, fraction the ``j`` leading bits plus one unit of the ``j``-th (a carry adds into
+    the exponent)."""
     x = np.int64(x)
     field = (x >> m) & ((np.int64(1) << e) - 1)
     bias = (np.int64(1) << (e - 1)) - 1
     lead = (x & ((np.int64(1) << m) - 1)) >> (m - j)
-    return _i2f((((field - bias + 1023) << 52) | (lead << (52 - j))) + (np.int64(1) << (52 - j)))
+    u = _i2f((((field - bias + 1023) << 52) | (lead << (52 - j))) + (np.int64(1) << (52 - j)))
+    return u if field != 0 else 0.0
+
+
+@njit(inline="always")
+def _s_ulp(x, e, m, r, eta):
+    """``ulp_r(x) + eta`` of any finite pattern: at least ``ulp_r(x)`` and at least ``eta``
+    (a zero pattern's exponent is the field's, ``-bias``)."""
+    return _s_pow2(_s_exp(x, e, m) - m - (1 if r == 1 else 0)) + eta
+
+
+@njit(inline="always")
+def _s_rnd(s, a_mag, e, m, r, kk, eta):
+    """Screen of an adder's rounding term, result pattern ``s``, ``a_mag`` an upper bound
+    of the operands' ``|a| + |b|``."""
+    if r == 2:
+        return kk * (_s_pow2(-m) * a_mag + _s_pow2(_s_exp(s, e, m) - m) + eta)
+    return _s_ulp(s, e, m, r, eta)
+
+
+@njit(inline="always")
+def _s_dot(ua0, ua1, ua2, ba0, ba1, ba2, ub0, ub1, ub2, bb0, bb1, bb2, s, e, m, r, kk, eta):
+    """Screen of ``_dot_b``: ``(a0*b0 + a1*b1) + a2*b2`` with the operands' magnitudes ``U``
+    and screen bounds ``B``, result pattern ``s``."""
+    k2 = kk * kk
+    k3 = k2 * kk
+    k4 = k2 * k2
+    um = _s_pow2(-m)
+    c1 = 1.0 + um
+    p0 = c1 * ua0 * ub0
+    p1 = c1 * ua1 * ub1
+    p2 = c1 * ua2 * ub2
+    q0 = k3 * ua0 * bb0 + k4 * (ub0 + bb0) * ba0 + kk * (um * p0 + eta)
+    q1 = k3 * ua1 * bb1 + k4 * (ub1 + bb1) * ba1 + kk * (um * p1 + eta)
+    q2 = k3 * ua2 * bb2 + k4 * (ub2 + bb2) * ba2 + kk * (um * p2 + eta)
+    s01 = c1 * (p0 + p1)
+    g01 = k2 * (q0 + q1) + kk * kk * (um * s01 + eta)
+    return k2 * (g01 + q2) + kk * _s_rnd(s, s01 + p2, e, m, r, kk, eta)
+
+
+@njit(inline="always")
+def _s_cross(ua, ub, bb, uc, ud, bd, x, e, m, r, kk, eta):
+    """Screen of ``_cross_b``: ``a*b - c*d``, ``a, c`` exact."""
+    k2 = kk * kk
+    k4 = k2 * k2
+    um = _s_pow2(-m)
+    c1 = 1.0 + um
+    pp = c1 * ua * ub
+    pq = c1 * uc * ud
+    gp = k4 * ua * bb + kk * (um * pp + eta)
+    gq = k4 * uc * bd + kk * (um * pq + eta)
+    return k2 * (gp + gq) + kk * _s_rnd(x, pp + pq, e, m, r, kk, eta)
+
+
+#: Rows of the screen block ``gs`` (float64, (N_SCREEN_ROWS, BLOCK)): the five screen
+#: bounds (det, t', u', v', w); then, x, y, z each, the magnitudes ``U`` and screen bounds
+#: ``G`` of D, E1, E2, N (the inputs, in that order), of T and of Q; a row of zeros (D's
+#: bound).
+_UIN, _BIN, _UT, _BT, _UQ, _BQ, _ZERO = 5, 17, 29, 32, 35, 38, 41
+N_SCREEN_ROWS = 42
+_D, _E1, _E2, _N = 0, 3, 6, 9                  # offsets of the inputs in _UIN and _BIN
 
 
 @njit(cache=True)
-def _mul_nz(a, ba, b, bb, p, e, m, r, j, k):
-    """:func:`_mul_b` of normal patterns (:func:`_mul_bound`)."""
-    t1 = _ru_nz(_upper_nz(a, e, m, j) * bb, k)
-    t2 = _ru_nz(_badd_nz(_upper_nz(b, e, m, j), bb, k) * ba, k)
-    return _badd_nz(_badd_nz(t1, t2, k), _ulp(p, e, m, r), k)
-
-
-@njit(cache=True)
-def _add_nz(a, ba, b, bb, s, e, m, r, k):
-    """:func:`_add_b` of normal patterns."""
-    return _badd_nz(_badd_nz(ba, bb, k), _rnd_add_nz(a, b, s, e, m, r), k)
-
-
-@njit(cache=True)
-def _vinput(x, out, slack, n, e, m, r, k):
-    for q in range(n):
-        b = _ulp(x[q], e, m, r)
-        out[q] = _ru_nz(b + b * _pow2(-INPUT_SLACK_EXP), k) if slack else b
-
-
-@njit(cache=True)
-def _vsub_b(a, ba, b, s, out, n, e, m, r, k):
-    """Bound of ``s = sub(a, b)``, ``b`` exact."""
-    for q in range(n):
-        out[q] = _add_nz(a[q], ba[q], b[q], 0.0, s[q], e, m, r, k)
-
-
-@njit(cache=True)
-def _vdot_b(a0, a1, a2, ba0, ba1, ba2, b0, b1, b2, bb0, bb1, bb2, s, out, n, e, m, r, j, k):
-    """Bound of ``s = (a0*b0 + a1*b1) + a2*b2`` (:func:`_dot_b`)."""
-    for q in range(n):
-        p0 = common_mul(a0[q], b0[q], e, m, r)
-        p1 = common_mul(a1[q], b1[q], e, m, r)
-        p2 = common_mul(a2[q], b2[q], e, m, r)
-        s01 = common_add(p0, p1, e, m, r)
-        q0 = _mul_nz(a0[q], ba0[q], b0[q], bb0[q], p0, e, m, r, j, k)
-        q1 = _mul_nz(a1[q], ba1[q], b1[q], bb1[q], p1, e, m, r, j, k)
-        q2 = _mul_nz(a2[q], ba2[q], b2[q], bb2[q], p2, e, m, r, j, k)
-        g01 = _add_nz(p0, q0, p1, q1, s01, e, m, r, k)
-        out[q] = _add_nz(s01, g01, p2, q2, s[q], e, m, r, k)
-
-
-@njit(cache=True)
-def _vcross_b(a, b, bb, c, d, bd, x, out, n, e, m, r, j, k):
-    """Bound of ``x = a*b - c*d``, ``a, c`` exact (:func:`_cross_b`)."""
-    for q in range(n):
-        p = common_mul(a[q], b[q], e, m, r)
-        pq = common_mul(c[q], d[q], e, m, r)
-        gp = _mul_nz(b[q], bb[q], a[q], 0.0, p, e, m, r, j, k)
-        gq = _mul_nz(d[q], bd[q], c[q], 0.0, pq, e, m, r, j, k)
-        out[q] = _add_nz(p, gp, pq, gq, x[q], e, m, r, k)
-
-
-@njit(cache=True)
-def vbounds(g, w, gb, n, e, m, r, cc):
-    """The bounds of a block after :func:`~raplas_hdl.model.pair_kernels.vpair` (``g``
-    the operands, ``w`` its results, conservative layout), into ``gb``; exact for the lanes
-    whose ``w[11]`` is not negative."""
+def vscreen(g, w, gs, n, e, m, r, cc):
+    """Screen bounds of a block's lanes (after :func:`~raplas_hdl.model.pair_kernels.vpair`
+    and :func:`_lane_fast`: ``g`` the operands, ``w`` the results) into rows 0-4 of ``gs``:
+    ``G`` of det, t', u', v', w, each at least the unit's bound where the lane's operations
+    are flag-free (the section comment). Branch-free loops over the lanes (LLVM vectorises
+    them), each written once and run over the rows it serves (the compile stays short)."""
     j = np.int64(cc[1])
-    k = np.int64(cc[2])
-    for c in range(3):
-        _vinput(g[6 + c], gb[_BV + c], False, n, e, m, r, k)
-        _vinput(g[9 + c], gb[_B1 + c], True, n, e, m, r, k)
-        _vinput(g[12 + c], gb[_B2 + c], True, n, e, m, r, k)
-        _vinput(g[15 + c], gb[_BN + c], True, n, e, m, r, k)
-        _vsub_b(g[6 + c], gb[_BV + c], g[c], w[6 + c], gb[_GT + c], n, e, m, r, k)
-    z = gb[_ZERO]
-    z[:] = 0.0
-    bn = gb[_BN], gb[_BN + 1], gb[_BN + 2]
-    _vdot_b(g[15], g[16], g[17], *bn, g[3], g[4], g[5], z, z, z, w[3], gb[_GDET], n,
-            e, m, r, j, k)
-    _vdot_b(g[15], g[16], g[17], *bn, w[6], w[7], w[8], gb[_GT], gb[_GT + 1], gb[_GT + 2],
-            w[0], gb[_GTP], n, e, m, r, j, k)
-    tx, ty, tz = w[6], w[7], w[8]
-    gtx, gty, gtz = gb[_GT], gb[_GT + 1], gb[_GT + 2]
-    _vcross_b(g[4], tz, gtz, g[5], ty, gty, w[9], gb[_GQ], n, e, m, r, j, k)
-    _vcross_b(g[5], tx, gtx, g[3], tz, gtz, w[10], gb[_GQ + 1], n, e, m, r, j, k)
-    _vcross_b(g[3], ty, gty, g[4], tx, gtx, w[12], gb[_GQ + 2], n, e, m, r, j, k)
-    gq = gb[_GQ], gb[_GQ + 1], gb[_GQ + 2]
-    _vdot_b(g[12], g[13], g[14], gb[_B2], gb[_B2 + 1], gb[_B2 + 2], w[9], w[10], w[12], *gq,
-            w[1], gb[_GU], n, e, m, r, j, k)
-    _vdot_b(g[9], g[10], g[11], gb[_B1], gb[_B1 + 1], gb[_B1 + 2], w[9], w[10], w[12], *gq,
-            w[2], gb[_GV], n, e, m, r, j, k)
-    gu, gv, gs, gw = gb[_GU], gb[_GV], gb[_GS], gb[_GW]
+    kk = 1.0 + _s_pow2(-np.int64(cc[2]))
+    slack = (1.0 + _s_pow2(-INPUT_SLACK_EXP)) * kk
+    eta = _eta(e)
+    k2 = kk * kk
     for q in range(n):
-        gs[q] = _add_nz(w[1, q], gu[q], w[2, q], gv[q], w[4, q], e, m, r, k)
-        gw[q] = _add_nz(w[3, q], gb[_GDET, q], w[4, q], gs[q], w[5, q], e, m, r, k)
+        gs[_ZERO, q] = 0.0
+    for x in range(12):                         # D, E1, E2, N: g's rows 3-5 and 9-17
+        row = 3 + x + 3 * (x >= 3)
+        for q in range(n):
+            gs[_UIN + x, q] = _s_upper(g[row, q], e, m, j)
+            gs[_BIN + x, q] = slack * _s_ulp(g[row, q], e, m, r, eta)
+    for c in range(3):                          # T = V0 - O
+        for q in range(n):
+            gs[_UT + c, q] = _s_upper(w[6 + c, q], e, m, j)
+            gs[_BT + c, q] = kk * (kk * _s_ulp(g[6 + c, q], e, m, r, eta) + _s_rnd(
+                w[6 + c, q], _s_upper(g[6 + c, q], e, m, j) + _s_upper(g[c, q], e, m, j),
+                e, m, r, kk, eta))
+    for c in range(3):                          # Q = D x T (w's rows 9, 10, 12)
+        c1 = (c + 1) % 3
+        c2 = (c + 2) % 3
+        wr = 9 + c + (c == 2)
+        for q in range(n):
+            gs[_BQ + c, q] = _s_cross(gs[_UIN + _D + c1, q], gs[_UT + c2, q], gs[_BT + c2, q],
+                                      gs[_UIN + _D + c2, q], gs[_UT + c1, q], gs[_BT + c1, q],
+                                      w[wr, q], e, m, r, kk, eta)
+            gs[_UQ + c, q] = _s_upper(w[wr, q], e, m, j)
+    for x in range(4):                          # det = N.D, t' = N.T, u' = -(E2.Q), v' = E1.Q
+        a = _N if x < 2 else (_E2 if x == 2 else _E1)
+        ub = (_UIN + _D, _UT, _UQ, _UQ)[x]
+        bb = (_ZERO, _BT, _BQ, _BQ)[x]
+        step = 0 if x == 0 else 1               # the zero row serves x, y and z
+        wr = (3, 0, 1, 2)[x]
+        for q in range(n):
+            gs[x, q] = _s_dot(gs[_UIN + a, q], gs[_UIN + a + 1, q], gs[_UIN + a + 2, q],
+                              gs[_BIN + a, q], gs[_BIN + a + 1, q], gs[_BIN + a + 2, q],
+                              gs[ub, q], gs[ub + 1, q], gs[ub + 2, q], gs[bb, q],
+                              gs[bb + step, q], gs[bb + 2 * step, q], w[wr, q], e, m, r, kk,
+                              eta)
+    for q in range(n):                          # s = u' + v', w = det - s
+        gsum = k2 * (gs[2, q] + gs[3, q]) + kk * _s_rnd(
+            w[4, q], _s_upper(w[1, q], e, m, j) + _s_upper(w[2, q], e, m, j), e, m, r, kk, eta)
+        gs[4, q] = (k2 * (gs[0, q] + gsum) + kk * _s_rnd(
+            w[5, q], _s_upper(w[3, q], e, m, j) + _s_upper(w[4, q], e, m, j), e, m, r, kk,
+            eta)) * SCREEN_SLACK
+    for x in range(4):
+        for q in range(n):
+            gs[x, q] *= SCREEN_SLACK
+
+
+@njit(inline="always")
+def _s_value(x, e, m):
+    """:func:`_value`, branch-free."""
+    x = np.int64(x)
+    field = (x >> m) & ((np.int64(1) << e) - 1)
+    bias = (np.int64(1) << (e - 1)) - 1
+    v = _i2f(((field - bias + 1023) << 52) | ((x & ((np.int64(1) << m) - 1)) << (52 - m))
+             | (((x >> (e + m)) & 1) << 63))
+    return v if field != 0 else 0.0
+
+
+#: The block path's outcome of a lane it leaves to :func:`pair_full` (one that left the fast
+#: paths; a lane the screen leaves uncertain has outcome 2).
+RECOMPUTE = 3
+
+
+@njit(cache=True)
+def voutcome(w, gs, oc, n, sc, e, m):
+    """:func:`_outcome` of a block's lanes from their screen bounds into ``oc``, and
+    :data:`RECOMPUTE` where ``w[11]`` marks a lane that left the fast paths. One vector
+    loop."""
+    for q in range(n):
+        vd, vt, vu, vv, vw = (_s_value(w[3, q], e, m), _s_value(w[0, q], e, m),
+                              _s_value(w[1, q], e, m), _s_value(w[2, q], e, m),
+                              _s_value(w[5, q], e, m))
+        gd, gt, gu, gv, gw = gs[0, q] * sc, gs[1, q] * sc, gs[2, q] * sc, gs[3, q] * sc, \
+            gs[4, q] * sc
+        hit = (((vd > gd) & (vu >= gu) & (vv >= gv) & (vw >= gw) & (vt >= gt))
+               | ((vd < -gd) & (vu <= -gu) & (vv <= -gv) & (vw <= -gw) & (vt <= -gt)))
+        miss = (((vd <= -gd) | (vu < -gu) | (vv < -gv) | (vw < -gw) | (vt < -gt))
+                & ((vd >= gd) | (vu > gu) | (vv > gv) | (vw > gw) | (vt > gt)))
+        out = np.int64(1) if hit else (np.int64(0) if miss else np.int64(2))
+        oc[q] = out if w[11, q] >= 0 else np.int64(RECOMPUTE)
+
+
+@njit(cache=True)
+def _fdot(a0, a1, a2, b0, b1, b2, e, m, r):
+    """``(a0*b0 + a1*b1) + a2*b2`` by the fast paths (the order of ``vpair``'s ``_vdot``);
+    -1 when one of them needs the reference kernel."""
+    p0 = fast_mul(a0, b0, e, m, r)
+    p1 = fast_mul(a1, b1, e, m, r)
+    p2 = fast_mul(a2, b2, e, m, r)
+    if p0 < 0 or p1 < 0 or p2 < 0:
+        return np.int64(-1)
+    s = fast_add(p0, p1, e, m, r)
+    if s < 0:
+        return np.int64(-1)
+    return fast_add(s, p2, e, m, r)
+
+
+@njit(cache=True)
+def _fcross(a, b, c, d, e, m, r):
+    """``a*b - c*d`` by the fast paths (the order of ``vpair``'s ``_vcross``), or -1."""
+    p = fast_mul(a, b, e, m, r)
+    pq = fast_mul(c, d, e, m, r)
+    if p < 0 or pq < 0:
+        return np.int64(-1)
+    return fast_add(p, pq ^ (np.int64(1) << (e + m)), e, m, r)
+
+
+@njit(cache=True)
+def _lane_fast(g, w, q, e, m, r):
+    """Lane ``q``'s results (``w``'s rows as :func:`vpair` writes them) by the flag-free
+    fast paths of :mod:`raplas_hdl.fp.fast`, which also take zero operands and exact zero
+    sums; the reference's bits. False when an operation needs the reference kernel (an
+    event flag, an infinite or NaN operand)."""
+    sb = np.int64(1) << (e + m)
+    for c in range(3):
+        t = fast_add(g[6 + c, q], g[c, q] ^ sb, e, m, r)
+        if t < 0:
+            return False
+        w[6 + c, q] = t
+    det = _fdot(g[15, q], g[16, q], g[17, q], g[3, q], g[4, q], g[5, q], e, m, r)
+    tp = _fdot(g[15, q], g[16, q], g[17, q], w[6, q], w[7, q], w[8, q], e, m, r)
+    qx = _fcross(g[4, q], w[8, q], g[5, q], w[7, q], e, m, r)
+    qy = _fcross(g[5, q], w[6, q], g[3, q], w[8, q], e, m, r)
+    qz = _fcross(g[3, q], w[7, q], g[4, q], w[6, q], e, m, r)
+    if det < 0 or tp < 0 or qx < 0 or qy < 0 or qz < 0:
+        return False
+    qe2 = _fdot(qx, qy, qz, g[12, q], g[13, q], g[14, q], e, m, r)
+    vp = _fdot(qx, qy, qz, g[9, q], g[10, q], g[11, q], e, m, r)
+    if qe2 < 0 or vp < 0:
+        return False
+    up = qe2 ^ sb
+    s = fast_add(up, vp, e, m, r)
+    if s < 0:
+        return False
+    ww = fast_add(det, s ^ sb, e, m, r)
+    if ww < 0:
+        return False
+    w[0, q], w[1, q], w[2, q], w[3, q], w[4, q], w[5, q] = tp, up, vp, det, s, ww
+    w[9, q], w[10, q], w[12, q] = qx, qy, qz
+    w[11, q] = 0
+    return True
 
 
 @njit(cache=True)
@@ -573,12 +726,13 @@ def gather(g, q, o, oi, d, di, v0, e1, e2, nn, ti):
     """Lane ``q`` of a block's operands ``g`` (18, BLOCK): ray row ``oi`` of ``o``, ``di``
     of ``d``, triangle row ``ti`` (the layout of
     :func:`~raplas_hdl.model.pair_kernels.vpair`)."""
-    g[0:3, q] = o[oi]
-    g[3:6, q] = d[di]
-    g[6:9, q] = v0[ti]
-    g[9:12, q] = e1[ti]
-    g[12:15, q] = e2[ti]
-    g[15:18, q] = nn[ti]
+    for c in range(3):                # element by element: slices cost seconds of compile
+        g[c, q] = o[oi, c]
+        g[3 + c, q] = d[di, c]
+        g[6 + c, q] = v0[ti, c]
+        g[9 + c, q] = e1[ti, c]
+        g[12 + c, q] = e2[ti, c]
+        g[15 + c, q] = nn[ti, c]
 
 
 @njit(nogil=True, cache=True)
@@ -594,48 +748,82 @@ def pairs_one(o, d, v0, e1, e2, nn, cc, lane_o, lane_d, lane_t, lo, hi, outc, t_
 
 
 @njit(nogil=True, cache=True)
-def block_pairs(o, d, v0, e1, e2, nn, cc, lane_o, lane_d, lane_t, lo, hi, outc, t_o, u_o, v_o,
-                det_o, cnt_o, e, m, r):
-    """Pairs ``lo .. hi-1`` of the lane lists (pair ``i``: ``o`` row ``lane_o[i]``, ``d``
-    row ``lane_d[i]``, triangle row ``lane_t[i]``) a block at a time; row ``i`` of the
-    outputs as :func:`intersect_certified`, the same bits as :func:`pair_full`.
+def block_screened(o, d, v0, e1, e2, nn, cc, lane_o, lane_d, lane_t, lo, hi, outc, t_o, u_o,
+                   v_o, det_o, cnt_o, e, m, r):
+    """:func:`block_pairs` but for the lanes it leaves to :func:`pair_full` (the screen's
+    uncertain ones and those that left the fast paths): their outcome is :data:`RECOMPUTE`
+    (their other outputs unset). Returns how many there are.
 
     Per block: the operands gathered (:func:`gather`), the values by
-    :func:`~raplas_hdl.model.pair_kernels.vpair`, the bounds by :func:`vbounds`, the
-    outcome of each common-case lane; the other lanes (and every lane of a block with fewer
-    than a quarter of its lanes in the common case, where the bounds are skipped) by
-    :func:`pair_full`. The one compiled kernel of the block path (each level of compiled
-    callers would optimise the vector loops again): :func:`intersect_certified` and the
-    renderer's certified pass both run it."""
+    :func:`~raplas_hdl.model.pair_kernels.vpair` (lanes with zero operands again by
+    :func:`_lane_fast`), the screen bounds by :func:`vscreen` and each lane's outcome from
+    them (:func:`voutcome`). ``pair_full`` is not called from here: compiled into this
+    kernel, LLVM would optimise its code a second time (seconds of a cold start)."""
     g = np.empty((18, BLOCK), np.int64)
     w = np.empty((13, BLOCK), np.int64)
-    gb = np.empty((N_BOUND_ROWS, BLOCK), np.float64)
+    gs = np.empty((N_SCREEN_ROWS, BLOCK), np.float64)
+    oc = np.empty(BLOCK, np.int64)
     sc = cc[0]
+    left = 0
     for start in range(lo, hi, BLOCK):
         n = min(BLOCK, hi - start)
         for q in range(n):
             i = start + q
             gather(g, q, o, lane_o[i], d, lane_d[i], v0, e1, e2, nn, lane_t[i])
         vpair(g, w, n, True, e, m, r)
-        common = 0
         for q in range(n):
-            common += w[11, q] >= 0
-        vector = 4 * common >= n
-        if vector:
-            vbounds(g, w, gb, n, e, m, r, cc)
+            if w[11, q] < 0:
+                _lane_fast(g, w, q, e, m, r)
+        vscreen(g, w, gs, n, e, m, r, cc)
+        voutcome(w, gs, oc, n, sc, e, m)
         for q in range(n):
             i = start + q
-            if vector and w[11, q] >= 0:
-                oc = _outcome(w[3, q], w[0, q], w[1, q], w[2, q], w[5, q], gb[_GDET, q],
-                              gb[_GTP, q], gb[_GU, q], gb[_GV, q], gb[_GW, q], sc, e, m)
-                outc[i] = oc
+            if oc[q] < 2:
+                outc[i] = oc[q]
                 store(i, np.uint32(w[0, q]), np.uint32(w[1, q]), np.uint32(w[2, q]),
                       np.uint32(w[3, q]), 0, t_o, u_o, v_o, det_o, cnt_o)
             else:
-                oc, tp, up, vp, det, cnt = pair_full(o, lane_o[i], d, lane_d[i], v0, e1, e2,
-                                                     nn, lane_t[i], e, m, r, cc)
-                outc[i] = oc
-                store(i, tp, up, vp, det, cnt, t_o, u_o, v_o, det_o, cnt_o)
+                outc[i] = RECOMPUTE
+                left += 1
+    return left
+
+
+@njit(nogil=True, cache=True)
+def pairs_listed(o, d, v0, e1, e2, nn, cc, lane_o, lane_d, lane_t, rows, outc, t_o, u_o, v_o,
+                 det_o, cnt_o, e, m, r):
+    """:func:`pair_full` for the pairs ``rows`` of the lane lists (the outputs' rows)."""
+    for i in rows:
+        oc, tp, up, vp, det, cnt = pair_full(o, lane_o[i], d, lane_d[i], v0, e1, e2, nn,
+                                             lane_t[i], e, m, r, cc)
+        outc[i] = oc
+        store(i, tp, up, vp, det, cnt, t_o, u_o, v_o, det_o, cnt_o)
+
+
+def exact_pairs(o, d, v0, e1, e2, nn, cc, lane_o, lane_d, lane_t, lo, hi, outc, t_o, u_o, v_o,
+                det_o, cnt_o, e, m, r):
+    """:func:`block_pairs` with every pair through :func:`pair_full` (:func:`pairs_listed`):
+    the same results, without the block kernel (the warm-up's pass while another process
+    compiles it, :mod:`raplas_hdl.engine.compile_ahead`)."""
+    pairs_listed(o, d, v0, e1, e2, nn, cc, lane_o, lane_d, lane_t, np.arange(lo, hi), outc,
+                 t_o, u_o, v_o, det_o, cnt_o, e, m, r)
+
+
+def block_pairs(o, d, v0, e1, e2, nn, cc, lane_o, lane_d, lane_t, lo, hi, outc, t_o, u_o, v_o,
+                det_o, cnt_o, e, m, r):
+    """Pairs ``lo .. hi-1`` of the lane lists (pair ``i``: ``o`` row ``lane_o[i]``, ``d``
+    row ``lane_d[i]``, triangle row ``lane_t[i]``) a block at a time; row ``i`` of the
+    outputs as :func:`intersect_certified`, the same bits as :func:`pair_full`.
+
+    :func:`block_screened` decides almost every lane from the screen bounds (the section
+    comment above); the lanes it leaves (uncertain to the screen, or with an event or a
+    special value) then go through :func:`pair_full` (:func:`pairs_listed`).
+    :func:`intersect_certified` and the renderer's certified pass both run it."""
+    left = block_screened(o, d, v0, e1, e2, nn, cc, lane_o, lane_d, lane_t, lo, hi, outc, t_o,
+                          u_o, v_o, det_o, cnt_o, e, m, r)
+    if left:
+        rows = np.flatnonzero(outc[lo:hi] == RECOMPUTE) + lo
+        pairs_listed(o, d, v0, e1, e2, nn, cc, lane_o, lane_d, lane_t, rows, outc, t_o, u_o,
+                     v_o, det_o, cnt_o, e, m, r)
 
 
 def intersect_certified(arrs, fmt: FPFormat, scale: float = 1.0,

@@ -127,3 +127,23 @@ def test_certified_renders_fp16_where_the_paper_domain_ends():
     ref = exact_reference(result, scene.triangles, "tree")
     assert compare_reference(result, ref) == {"pixels": 256, "tri_id_differ": 0,
                                               "visibility_differ": 0}
+
+
+@pytest.mark.parametrize("name,fmt", [("cornell", FP24), ("soup", FP16)])
+def test_certified_t_is_rs_correctly_rounded(name, fmt):
+    """Every primary hit's ``t`` is R's exact ``t'/det`` rounded to the nearest float64
+    (not a point of the float64 filter's interval)."""
+    scene = get_scene(name)
+    result = render(scene, ModelBackend(fmt, mode="certified"), SMALL)
+    rays = result.rays
+    yx = rays["primary_yx"]
+    tid = result.tri_id[yx[:, 0], yx[:, 1]]
+    hit = tid >= 0
+    assert hit.sum() > 50
+    tri = scene.triangles[tid[hit]]
+    r_hit, t = exact_t(rays["primary_o"][hit], rays["primary_d"][hit], tri[:, 0], tri[:, 1],
+                       tri[:, 2])
+    assert r_hit.all()
+    got = result.t[yx[hit, 0], yx[hit, 1]]
+    want = np.array([float(x) for x in t])
+    assert np.array_equal(got, want), np.flatnonzero(got != want)[:5]

@@ -121,12 +121,17 @@ class Backend:
         t0 = time.perf_counter()
         saved = dict(self.mode_stats)           # a throw-away pass counts nothing
         beats = dict(self.beats)
-        batch = self.batch(origins, centres, col_axes, row_axes, rows, cols)
-        cr = self.cull(batch)
-        best_t = np.full((batch.n_bundles, batch.n_rays), np.inf)
-        best_tri = np.full(best_t.shape, -1, np.int64)
-        self.trace(batch, *round_runs(cr.start, cr.leaves, None, 0), best_t, best_tri, 0.0,
-                   np.full(best_t.shape, np.inf), np.full(batch.n_bundles, -1, np.int64))
+
+        def run():
+            batch = self.batch(origins, centres, col_axes, row_axes, rows, cols)
+            cr = self.cull(batch)
+            best_t = np.full((batch.n_bundles, batch.n_rays), np.inf)
+            best_tri = np.full(best_t.shape, -1, np.int64)
+            self.trace(batch, *round_runs(cr.start, cr.leaves, None, 0), best_t, best_tri,
+                       0.0, np.full(best_t.shape, np.inf),
+                       np.full(batch.n_bundles, -1, np.int64))
+
+        self.render_mode.warm(self, run)
         self.mode_stats.update(saved)
         self.beats.update(beats)
         return time.perf_counter() - t0

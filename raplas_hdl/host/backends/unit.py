@@ -57,6 +57,10 @@ class UnitBackend(Backend):
         For a format, mode or reduction the unit does not have (one line).
     """
 
+    #: The certified pass's pair kernel when not :func:`~raplas_hdl.model.certified.
+    #: block_pairs` (None); the certified mode's warm-up sets it for one pass.
+    certified_unit = None
+
     def __init__(self, fmt: FPFormat = FP24, mode: str = "conservative", testers=None,
                  margin_scale: int = 1, reduce: bool = False):
         check_format(fmt)

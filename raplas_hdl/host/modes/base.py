@@ -82,6 +82,11 @@ class RenderMode:
     def report(self, backend, stats: dict) -> None:
         """Add the mode's figures of a finished render to its ``stats``."""
 
+    def warm(self, backend, run) -> None:
+        """The backend's throw-away warm-up pass: ``run()`` runs it (compiling the kernels
+        it meets); a mode may run it its own way."""
+        run()
+
 
 _REGISTRY: dict[str, RenderMode] = {}
 

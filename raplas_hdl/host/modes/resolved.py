@@ -20,10 +20,11 @@ import time
 
 import numpy as np
 
+from ...engine import compile_ahead
 from ...engine.certified import (CERT_COUNTERS, certified_pass, conservative_pairs,
                                  fold_outcomes)
 from ...engine.passes import COUNTER_NAMES, result_beats, runs_of
-from ...model.certified import check_certified_format
+from ...model.certified import check_certified_format, exact_pairs
 from ..resolve import resolve_pending
 from .base import RenderMode, register_mode
 
@@ -52,7 +53,8 @@ class ResolvedMode(RenderMode):
         ctr, pending = certified_pass(backend.arithmetic(), backend.scene, batch, run_b,
                                       run_start, run_sph, backend.tris, lo, hi, best_tri, tmin,
                                       tmax, exclude, any_hit,
-                                      unit=conservative_pairs if cons else None)
+                                      unit=conservative_pairs if cons
+                                      else backend.certified_unit)
         _resolve_pending(backend, batch, pending, lo, hi, best_t, best_tri, tmin, tmax,
                          exclude, any_hit)
         st = backend.mode_stats
@@ -115,6 +117,24 @@ class CertifiedMode(ResolvedMode):
         cert["uncertain_fraction"] = (cert.get("uncertain", 0) / stats["pairs_issued"]
                                       if stats["pairs_issued"] else 0.0)
         stats["certified"] = cert
+
+    def warm(self, backend, run):
+        """From an empty numba cache, compile the block kernel in a second process
+        (:mod:`raplas_hdl.engine.compile_ahead`) while a first throw-away pass with every
+        pair on the exact path compiles the rest here; then the pass again, which loads the
+        block kernel from the cache. Otherwise the one pass."""
+        child = (compile_ahead.start() if backend.runs_compiled and not backend.reduce
+                 else None)
+        if child is None:
+            run()
+            return
+        backend.certified_unit = exact_pairs
+        try:
+            run()
+        finally:
+            backend.certified_unit = None
+            compile_ahead.join(child)
+        run()
 
 
 class ConservativeMode(ResolvedMode):
