@@ -10,7 +10,15 @@ that took, pixels whose nearest triangle or shadow visibility differ from R, and
 composed hardware cost of the format's ray-triangle unit (fraction of one XC4VSX35,
 :func:`raplas_hdl.bench.cost.format_cost`).
 
-    .venv/bin/python benchmarks/bench_certified_render.py [--quick] [--out FILE.json]
+The showcase (every ray type: three generations of reflection and refraction, 3x3 glossy and
+ambient-occlusion bundles, 3x3 soft shadows, its scene file's defaults) at FP24, paper and
+certified, with and without the on-chip reduction's model: every recorded ray of every pass
+against R (:func:`raplas_hdl.host.reference.check_passes`): rays whose triangle (nearest
+passes) or blocked state (any-hit passes) differ from R's, and nearest hits whose ``t`` is not
+R's correctly rounded ``t``, per ray type.
+
+    .venv/bin/python benchmarks/bench_certified_render.py [--quick] [--showcase SIZE]
+        [--showcase-only] [--out FILE.json]
 
 Writes ``docs/results/certified_render.json`` by default. Run it on a quiet machine for
 the wall times; the CPU times are reported beside them.
@@ -27,7 +35,7 @@ from pathlib import Path
 
 from raplas_hdl.fp import parse_format
 from raplas_hdl.host.backends import ModelBackend
-from raplas_hdl.host.reference import compare_reference, exact_reference
+from raplas_hdl.host.reference import check_passes, compare_reference, exact_reference
 from raplas_hdl.host.render import RenderSettings, render
 from raplas_hdl.host.scenes import get_scene
 
@@ -62,11 +70,40 @@ def _point(scene, fmt, mode, settings):
     return row
 
 
+def _showcase(size, mode, reduce):
+    """Every pass of the showcase against R (module docstring)."""
+    scene = get_scene("showcase")
+    d = scene.render_defaults
+    gr, gc = (int(x) for x in str(d.get("glossy", "3x3")).split("x"))
+    ar, ac = (int(x) for x in str(d.get("ao", "3x3")).split("x"))
+    settings = RenderSettings(width=size, height=size, rows=8, cols=8, shadow_rows=3,
+                              shadow_cols=3, progress=False, record_rays=True,
+                              depth=int(d.get("depth", 3)), glossy_rows=gr, glossy_cols=gc,
+                              ao_rows=ar, ao_cols=ac, ao_angle=float(d.get("ao_angle", 60.0)),
+                              ao_distance=float(d.get("ao_distance", 0.25)))
+    backend = ModelBackend(parse_format("FP24"), mode=mode, reduce=reduce)
+    t0, c0 = time.perf_counter(), _cpu()
+    res = render(scene, backend, settings)
+    wall, cpu = time.perf_counter() - t0, _cpu() - c0
+    t1 = time.perf_counter()
+    kinds = check_passes(res, scene.triangles, "tree")
+    return {"scene": "showcase", "size": f"{size}x{size}", "format": "FP24", "mode": mode,
+            "reduce": reduce, "wall_s": round(wall, 2), "cpu_s": round(cpu, 2),
+            "pairs_issued": res.stats["pairs_issued"], "rays": res.stats["rays"],
+            "reference_s": round(time.perf_counter() - t1, 2), "passes": kinds}
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="small sizes (a minute)")
+    ap.add_argument("--showcase", type=int, default=128, metavar="SIZE",
+                    help="size of the showcase's every-ray check (default 128; 0: skip)")
+    ap.add_argument("--showcase-only", action="store_true",
+                    help="only the showcase's check (the scene rows kept from --out)")
     ap.add_argument("--out", default=str(ROOT / "docs/results/certified_render.json"))
     args = ap.parse_args(argv)
+    if args.showcase_only and not args.showcase:
+        ap.error("--showcase-only needs a --showcase size")
     if args.quick:
         cases = [("cornell", 32), ("stanford-bunny", 32)]
     else:
@@ -75,6 +112,10 @@ def main(argv=None):
     from raplas_hdl.bench.cost import format_cost
 
     rows = []
+    if args.showcase_only:
+        cases = []
+        if Path(args.out).exists():
+            rows = json.loads(Path(args.out).read_text()).get("rows", [])
     for name, size in cases:
         scene = get_scene(name)
         settings = RenderSettings(width=size, height=size, rows=8, cols=8, shadow_rows=3,
@@ -103,14 +144,27 @@ def main(argv=None):
                       f"cpu {row['cpu_s']:7.2f}s pairs {row['pairs_issued']:>11,} "
                       f"differ from R: ids {row['tri_id_differ']}, vis "
                       f"{row['visibility_differ']}  {unc}", flush=True)
+    showcase = []
+    size = 32 if args.quick and args.showcase else args.showcase
+    for mode, reduce in (("paper", False), ("certified", False), ("certified", True)):
+        if not size:
+            break
+        row = _showcase(size, mode, reduce)
+        showcase.append(row)
+        differ = {k: (v["differ"], v["t_differ"]) for k, v in row["passes"].items()}
+        print(f"showcase        {size}x{size} FP24  {mode:10s}{' reduce' if reduce else ''} "
+              f"wall {row['wall_s']:7.2f}s cpu {row['cpu_s']:7.2f}s rays {row['rays']:,}; "
+              f"rays differing from R (triangle or blocked, t) per type: {differ}", flush=True)
     out = {"machine": {"platform": platform.platform(), "cpus": __import__("os").cpu_count()},
            "settings": "8x8 primary bundles, 3x3 shadow bundles, FP rounding rtz",
-           "rows": rows}
+           "rows": rows, "showcase": showcase}
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(out, indent=1) + "\n")
     print(f"wrote {args.out}")
     bad = [r for r in rows if r["mode"] == "certified"
            and (r.get("tri_id_differ") or r.get("visibility_differ"))]
+    bad += [r for r in showcase if r["mode"] == "certified"
+            and any(v["differ"] or v["t_differ"] for v in r["passes"].values())]
     return 1 if bad else 0
 
 

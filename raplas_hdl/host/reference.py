@@ -17,6 +17,9 @@ brute force, without culling and without the unit, from
   hierarchy that the ray's *line* passes within (float64 distance test, radii recomputed
   here to contain their triangles and children with a relative slack of ``1e-9``, far
   above float64's error on these few operations): meshes.
+
+:func:`check_passes` checks every recorded pass of every ray type (secondary rays too) ray
+by ray, with ``t`` as well.
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ from .exact import exact_t
 from .resolve import resolve_pending
 from .spheres import build_sphere_tree
 
-__all__ = ["exact_reference", "compare_reference"]
+__all__ = ["exact_reference", "compare_reference", "check_passes"]
 
 
 @njit(nogil=True, cache=True)
@@ -214,21 +217,7 @@ def exact_reference(result, tris, method: str = "exact") -> dict:
     dict
         ``tri_id`` (H, W) int64 and ``visibility`` (H, W) float64 (NaN where no point).
     """
-    if result.rays is None:
-        raise ValueError("the render did not record its rays (RenderSettings(record_rays="
-                         "True))")
-    if method not in ("exact", "filtered", "tree"):
-        raise ValueError(f"method must be 'exact', 'filtered' or 'tree', not {method!r}")
-    rays = result.rays
-    tris = np.ascontiguousarray(tris, np.float64)
-    ids = np.asarray(rays["loaded"], np.int64)
-    if method == "tree":
-        tree = _safe_tree(tris, ids)
-
-        def fn(*a):
-            return _filtered(*a, tree=tree)
-    else:
-        fn = _exact if method == "exact" else _filtered
+    rays, tris, ids, fn = _setup(result, tris, method)
     po, pd, yx = rays["primary_o"], rays["primary_d"], rays["primary_yx"]
     n = len(po)
     tri_id = np.full(result.tri_id.shape, -1, np.int64)
@@ -251,6 +240,69 @@ def exact_reference(result, tris, method: str = "exact") -> dict:
         rest[point] = False
         vis[ys[rest], xs[rest]] = result.visibility[ys[rest], xs[rest]]
     return {"tri_id": tri_id, "visibility": vis}
+
+
+def _setup(result, tris, method):
+    """The recorded rays, the triangles, the loaded IDs and R's answer function of
+    ``method`` (``fn(o, d, tris, ids, tmin, tmax, exclude, any_hit)`` -> triangle IDs)."""
+    if result.rays is None:
+        raise ValueError("the render did not record its rays (RenderSettings(record_rays="
+                         "True))")
+    if method not in ("exact", "filtered", "tree"):
+        raise ValueError(f"method must be 'exact', 'filtered' or 'tree', not {method!r}")
+    rays = result.rays
+    tris = np.ascontiguousarray(tris, np.float64)
+    ids = np.asarray(rays["loaded"], np.int64)
+    if method == "tree":
+        tree = _safe_tree(tris, ids)
+
+        def fn(*a):
+            return _filtered(*a, tree=tree)
+    else:
+        fn = _exact if method == "exact" else _filtered
+    return rays, tris, ids, fn
+
+
+def check_passes(result, tris, method: str = "tree") -> dict:
+    """Every recorded pass of a render against R, ray by ray: primary, shadow and every
+    secondary ray type (``RenderResult.rays["passes"]``, recorded with
+    ``RenderSettings(record_rays=True)``).
+
+    For a nearest-hit pass, R's nearest triangle in the pass's window (ties to the lowest
+    ID) and, where it hits, its exact ``t`` rounded to the nearest float64; for an any-hit
+    pass, whether R has a hit in the window. Arguments as :func:`exact_reference`.
+
+    Returns
+    -------
+    dict
+        Per ray type: ``rays`` (traced), ``differ`` (rays whose triangle, or for any-hit
+        passes whose blocked state, is not R's), ``t_differ`` (nearest hits whose ``t`` is
+        not R's correctly rounded ``t``; 0 for any-hit passes).
+    """
+    rays, tris, ids, fn = _setup(result, tris, method)
+    out: dict = {}
+    for p in rays.get("passes") or ():
+        en = p["enable"].reshape(-1)
+        B, R = p["enable"].shape
+        o = np.repeat(p["origin"], R, axis=0)[en]
+        d = p["directions"].reshape(-1, 3)[en]
+        tmax = p["tmax"].reshape(-1)[en]
+        excl = np.repeat(p["exclude"], R)[en]
+        ref = fn(o, d, tris, ids, p["tmin"], tmax, excl, p["any_hit"])
+        got = p["answer"].reshape(-1)[en]
+        row = out.setdefault(p["kind"], {"rays": 0, "differ": 0, "t_differ": 0})
+        row["rays"] += int(en.sum())
+        if p["any_hit"]:
+            row["differ"] += int(np.count_nonzero((ref >= 0) != got))
+            continue
+        row["differ"] += int(np.count_nonzero(ref != got))
+        hit = (got >= 0) & (ref == got)
+        if hit.any():
+            k = got[hit]
+            r_hit, t = exact_t(o[hit], d[hit], tris[k, 0], tris[k, 1], tris[k, 2])
+            want = np.array([float(x) if h else np.nan for x, h in zip(t, r_hit)])
+            row["t_differ"] += int(np.count_nonzero(want != p["t"].reshape(-1)[en][hit]))
+    return out
 
 
 def compare_reference(result, reference: dict) -> dict:

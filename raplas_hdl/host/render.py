@@ -189,7 +189,11 @@ class RenderResult:
         (S, r, 3), ``shadow_tmax`` (S, r), ``shadow_own`` (S,), ``shadow_point`` (S,) (the
         index of the shaded point, in ``np.nonzero(tri_id >= 0)`` order), ``shadow_tmin``;
         ``loaded``: the IDs of the triangles the backend loaded. Only the shadow rays of
-        primary points are recorded (not those of secondary hits).
+        primary points are recorded here (not those of secondary hits). ``passes``: every
+        pass of every ray type (primary, shadow, reflection, refraction, glossy, ambient
+        occlusion), chunk by chunk, with its rays, window and answers
+        (:meth:`raplas_hdl.host.tracing.Tally.record`;
+        :func:`raplas_hdl.host.reference.check_passes` checks them).
     layers : dict
         Per-pixel (H, W) arrays of the first secondary bounce (empty when no secondary ray
         ran): ``reflection_tri``, ``refraction_tri`` (nearest triangle of the pixel's
@@ -270,7 +274,7 @@ def _render(scene: Scene, backend: Backend, settings: RenderSettings):
     with timer("load"):
         stats.update(backend.load(tris, tree, s.bound) or {})
     normals_all = face_normals(tris)
-    tally = Tally(scene.n_triangles, tree.levels, s.hierarchy)
+    tally = Tally(scene.n_triangles, tree.levels, s.hierarchy, record=s.record_rays)
     tiles = _Tiles.of(scene, s)
     rec = {k: [] for k in ("primary_o", "primary_d", "primary_yx", "shadow_o", "shadow_d",
                            "shadow_tmax", "shadow_own", "shadow_point")}
@@ -300,6 +304,7 @@ def _render(scene: Scene, backend: Backend, settings: RenderSettings):
         rays = {k: np.concatenate(v) if v else np.zeros((0,)) for k, v in rec.items()}
         rays["shadow_tmin"] = eps
         rays["loaded"] = usable
+        rays["passes"] = tally.passes
     return RenderResult(img, prim.tri, prim.t, vis_img, stats, dict(timer.times), rays,
                         layers)
 

@@ -53,11 +53,16 @@ class Tally:
         Levels of the sphere hierarchy.
     hierarchy : bool
         Cull the hierarchy on the host (:meth:`Backend.cull`).
+    record : bool
+        Keep every pass's rays and answers in :attr:`passes` (:meth:`record`), for the
+        exact reference (:func:`raplas_hdl.host.reference.check_passes`).
     """
 
-    def __init__(self, n_triangles: int, levels: int, hierarchy: bool = True):
+    def __init__(self, n_triangles: int, levels: int, hierarchy: bool = True,
+                 record: bool = False):
         self.n_triangles = int(n_triangles)
         self.hierarchy = hierarchy
+        self.passes: list | None = [] if record else None
         self.kinds: dict = {}
         self.unit: dict = {}
         self.hier = {"tested": np.zeros(levels, np.int64), "dropped": np.zeros(levels, np.int64),
@@ -91,6 +96,26 @@ class Tally:
         self.kind(kind)["host_plane_tests"] += cr.plane_tests
         self.unguaranteed_bundles += int(np.count_nonzero(batch.keep_all))
         return cr
+
+    def record(self, kind: str, batch, enable, tmin, tmax, exclude, any_hit: bool, tri, t=None):
+        """Keep a chunk of a pass when recording: the rays as the unit saw them
+        (``batch.origin`` (B, 3), ``batch.directions`` (B, R, 3)), the rays traced
+        (``enable`` (B, R), before any early-out), the window (``tmin``; ``tmax`` (B, R) or
+        None), ``exclude`` (B,) or None, and the answer: ``tri`` (B, R), the nearest
+        triangle (-1: none) or, with ``any_hit``, whether the ray is blocked; ``t`` (B, R) of
+        a nearest pass."""
+        if self.passes is None:
+            return
+        B, R = np.asarray(enable).shape
+        self.passes.append({
+            "kind": kind, "any_hit": bool(any_hit),
+            "origin": np.array(batch.origin, np.float64),
+            "directions": np.array(batch.directions, np.float64).reshape(B, R, 3),
+            "enable": np.array(enable, bool), "tmin": float(tmin),
+            "tmax": np.full((B, R), np.inf) if tmax is None else np.array(tmax, np.float64),
+            "exclude": (np.full(B, -1, np.int64) if exclude is None
+                        else np.array(exclude, np.int64)),
+            "answer": np.array(tri), "t": None if t is None else np.array(t, np.float64)})
 
     def add_unit(self, kind: str, counters: np.ndarray):
         """The unit's counters of a trace (U, 8)."""
@@ -209,6 +234,8 @@ def nearest_pass(backend: Backend, origins, centres, col_axes, row_axes, rows: i
                                 best_tri, tmin, _rows(tmax, lo, hi), _rows(exclude, lo, hi))
             tally.add_unit(kind, ctr)
         best_t_all[lo:hi], best_tri_all[lo:hi] = best_t, best_tri
+        tally.record(kind, batch, batch.enable, tmin, _rows(tmax, lo, hi),
+                     _rows(exclude, lo, hi), False, best_tri, best_t)
         if keep_rays:
             o_all[lo:hi], d_all[lo:hi] = batch.origin, batch.directions
         if on_chunk is not None:
@@ -250,6 +277,7 @@ def any_hit_pass(backend: Backend, origins, centres, col_axes, row_axes, rows: i
             cr = tally.cull(backend, batch, kind)
             own = np.asarray(exclude)[lo:hi]
             hi_t = np.asarray(tmax)[lo:hi]
+            traced = batch.enable.copy() if tally.passes is not None else None
             best_t = np.full((k, R), np.inf)
             best_tri = np.full((k, R), -1, np.int64)
         rnd = 0
@@ -270,6 +298,7 @@ def any_hit_pass(backend: Backend, origins, centres, col_axes, row_axes, rows: i
                 batch.enable &= ~(best_tri >= 0)
             rnd += 1
         blocked[lo:hi] = best_tri >= 0
+        tally.record(kind, batch, traced, tmin, hi_t, own, True, blocked[lo:hi])
         if on_chunk is not None:
             on_chunk(lo, hi, batch, blocked[lo:hi])
         if progress is not None:

@@ -147,3 +147,37 @@ def test_certified_t_is_rs_correctly_rounded(name, fmt):
     got = result.t[yx[hit, 0], yx[hit, 1]]
     want = np.array([float(x) for x in t])
     assert np.array_equal(got, want), np.flatnonzero(got != want)[:5]
+
+
+SECONDARY = RenderSettings(width=20, height=20, rows=4, cols=4, shadow_rows=2, shadow_cols=2,
+                           progress=False, record_rays=True, depth=2, glossy_rows=2,
+                           glossy_cols=2, ao_rows=2, ao_cols=2, ao_angle=60.0,
+                           ao_distance=0.25)
+
+
+@pytest.mark.parametrize("reduce", [False, True], ids=["unreduced", "reduce"])
+def test_certified_secondary_rays_equal_exact_reference(reduce):
+    """Every ray type of the showcase (primary, shadow, reflection, refraction, glossy,
+    ambient occlusion), ray by ray: R's nearest triangle and its correctly rounded ``t``,
+    or R's blocked state; through the model and through the model of the unit with the
+    on-chip reduction."""
+    from raplas_hdl.host.reference import check_passes
+
+    scene = get_scene("showcase")
+    result = render(scene, ModelBackend(FP24, mode="certified", reduce=reduce), SECONDARY)
+    got = check_passes(result, scene.triangles, "tree")
+    assert {"primary", "shadow", "reflection", "refraction", "glossy", "ao"} <= set(got)
+    for kind, row in got.items():
+        assert row["rays"] > 0, kind
+        assert row["differ"] == 0 and row["t_differ"] == 0, (kind, row)
+
+
+def test_check_passes_sees_the_errors_of_the_other_modes():
+    """Negative control of the check above: the conservative unit's hits folded unchecked
+    (on the soup) differ from R on some rays."""
+    from raplas_hdl.host.reference import check_passes
+
+    scene = get_scene("soup")
+    result = render(scene, ModelBackend(FP24, mode=RAW_CONSERVATIVE), SMALL)
+    got = check_passes(result, scene.triangles, "exact")
+    assert sum(row["differ"] for row in got.values()) > 0
