@@ -53,7 +53,8 @@ COMMANDS = {
     "render": (
         "Renders a scene (procedural, a mesh file or a TOML scene file, "
         "[scenes.md](scenes.md)) through the float64 reference, the golden model or the RTL "
-        "(one live Icarus or Verilator simulation per unit configuration). Secondary rays "
+        "(live Icarus or Verilator simulations, two per unit configuration on two cores). "
+        "Secondary rays "
         "(`--depth`, `--glossy`, `--ao`: [secondary-rays.md](secondary-rays.md)) go through "
         "every backend as bundles. `--mode certified` gives the exact reference's nearest "
         "triangle and shadow visibility on every pixel ([certified-render.md]"

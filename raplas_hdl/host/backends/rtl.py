@@ -8,9 +8,13 @@ import contextlib
 import importlib
 import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+import numpy as np
+
 from ...fp.format import FP24, FPFormat
+from ...model.memory_image import as_run
 from .base import BackendUnavailable
 from .unit import UnitBackend
 
@@ -22,10 +26,13 @@ class RtlBackend(UnitBackend):
     (:class:`~raplas_hdl.host.backends.unit.UnitBackend`); the render mode folds the runs'
     streams (:meth:`stream`) or, with ``reduce``, the unit's answers. The runs go
     through live simulations of the unit (:class:`raplas_hdl.sim.drive.unit_harness.UnitSession`):
-    one per unit configuration a render needs (the primary and the shadow bundle sizes),
-    started on first use with the scene loaded once, then fed one round of runs per
-    :meth:`stream` call; the simulator builds are cached on disk across renders. A new
-    scene (:meth:`load`) or :meth:`close` ends the sessions. With waveforms asked for
+    ``instances`` per unit configuration a render needs (the primary and the shadow bundle
+    sizes), started on first use with the scene loaded once each, then fed one round of
+    runs per :meth:`stream` call, the round's runs cut into one contiguous share per
+    instance (by their sphere counts) and simulated at once; the results are put back in
+    run order, and each run's stream and counters do not depend on the runs simulated
+    before it, so they are those of one instance. The simulator builds are cached on disk
+    across renders. A new scene (:meth:`load`) or :meth:`close` ends the sessions. With waveforms asked for
     (``WAVES=1``, ``render --waves``) the runs go through the per-cycle cocotb driver
     (:func:`raplas_hdl.sim.drive.unit_driver.run_runs`, one simulation per round) instead.
 
@@ -39,9 +46,19 @@ class RtlBackend(UnitBackend):
     runs_compiled = False
     DRIVER = "raplas_hdl.sim.drive.unit_harness"
 
+    #: Live simulations per unit configuration by default: one per core, at most two (a
+    #: render's passes are sequential, so two cover its rounds; the host needs the rest).
+    DEFAULT_INSTANCES = max(1, min(2, os.cpu_count() or 1))
+
     def __init__(self, fmt: FPFormat = FP24, mode: str = "conservative", testers=None,
-                 margin_scale: int = 1, sim: str = "icarus", reduce: bool = False):
+                 margin_scale: int = 1, sim: str = "icarus", reduce: bool = False,
+                 instances: int | None = None):
         super().__init__(fmt, mode, testers, margin_scale, reduce)
+        instances = self.DEFAULT_INSTANCES if instances is None else instances
+        if not isinstance(instances, int) or instances < 1:
+            raise ValueError(f"instances must be a positive integer, not {instances!r}")
+        self.instances = instances
+        self._pool = None
         try:    # lazy: the simulator side loads only for an rtl render
             from raplas_hdl.sim.build.runner import SimulatorNotFound, require_simulator
         except ImportError as exc:
@@ -65,11 +82,12 @@ class RtlBackend(UnitBackend):
                                      f"cannot drive the unit")
         self.sim = sim
         self._sessions = {}
-        #: per configuration: clock cycles, scene-load cycles and seconds, rounds, and
-        #: ``rounds_s`` (wall seconds in the rounds: sending jobs, simulating, decoding)
+        #: per configuration: clock cycles (summed over its instances), scene-load cycles
+        #: (summed) and seconds (the slowest instance), rounds (summed), ``rounds_s`` (wall
+        #: seconds in the rounds: sending jobs, simulating, decoding) and ``instances``
         self.session_stats = {}
-        #: a directory to record each session's op stream in (``<rows>x<cols>.ops``; the
-        #: benchmark replays them without a host), or None
+        #: a directory to record each session's op stream in (``<rows>x<cols>.<k>.ops`` for
+        #: instance ``k``; the benchmark replays them without a host), or None
         self.record_dir = None
 
     def describe(self):
@@ -80,21 +98,55 @@ class RtlBackend(UnitBackend):
         self.close()
         return super().load(tris, tree, bound)
 
+    def _map(self, fn, items):
+        """``[fn(x) for x in items]``, at once on the backend's threads when more than one
+        (the simulators run in processes of their own; the threads wait on them)."""
+        if len(items) == 1:
+            return [fn(items[0])]
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(self.instances, thread_name_prefix="rtl-session")
+        return list(self._pool.map(fn, items))
+
+    def sessions(self, config):
+        """The live simulations of ``config`` (started, and the scene loaded into each, on
+        first use)."""
+        ss = self._sessions.get(config)
+        if ss is None:
+            def start(k):
+                record = None
+                if self.record_dir is not None:
+                    Path(self.record_dir).mkdir(parents=True, exist_ok=True)
+                    record = Path(self.record_dir) / f"{config.rows}x{config.cols}.{k}.ops"
+                return self._driver.UnitSession(self.sim, config, self.scene_memory,
+                                                record=record)
+
+            # the first alone: it emits and builds the harness (cached on disk), which two
+            # threads of one process would race on; the others then start at once
+            first = start(0)
+            ss = self._sessions[config] = [first] + (
+                self._map(start, list(range(1, self.instances))) if self.instances > 1 else [])
+            self.session_stats[config] = {
+                "cycles": sum(s.cycles for s in ss), "load_cycles": sum(s.load_cycles for s in ss),
+                "load_s": max(s.load_s for s in ss), "rounds": sum(s.rounds for s in ss),
+                "rounds_s": 0.0, "instances": len(ss)}
+        return ss
+
     def session(self, config):
-        """The live simulation of ``config`` (started, and the scene loaded, on first use)."""
-        s = self._sessions.get(config)
-        if s is None:
-            record = None
-            if self.record_dir is not None:
-                Path(self.record_dir).mkdir(parents=True, exist_ok=True)
-                record = Path(self.record_dir) / f"{config.rows}x{config.cols}.ops"
-            s = self._sessions[config] = self._driver.UnitSession(self.sim, config,
-                                                                   self.scene_memory,
-                                                                   record=record)
-            self.session_stats[config] = {"cycles": s.cycles, "load_cycles": s.load_cycles,
-                                          "load_s": s.load_s, "rounds": s.rounds,
-                                          "rounds_s": 0.0}
-        return s
+        """The first live simulation of ``config`` (:meth:`sessions`)."""
+        return self.sessions(config)[0]
+
+    def _shares(self, runs):
+        """``runs`` cut into at most :attr:`instances` contiguous shares of about equal
+        sphere counts (a run without a sphere list counts every sphere)."""
+        n = min(self.instances, len(runs))
+        if n <= 1:
+            return [list(runs)]
+        weight = np.array([1 + (self.scene_memory.n_spheres if r[1] is None
+                                else np.asarray(r[1]).size) for r in runs], np.float64)
+        cum = np.cumsum(weight)
+        cuts = np.searchsorted(cum, cum[-1] * np.arange(1, n) / n, side="right")
+        edges = [0, *np.clip(cuts, 1, len(runs) - 1).tolist(), len(runs)]
+        return [list(runs[a:b]) for a, b in zip(edges, edges[1:]) if b > a]
 
     def run_runs(self, config, runs):
         if os.environ.get("WAVES", "") not in ("", "0"):
@@ -102,19 +154,25 @@ class RtlBackend(UnitBackend):
             from raplas_hdl.sim.drive.unit_driver import run_runs    # lazy: cocotb
 
             return run_runs(self.sim, config, self.scene_memory, runs)
-        s = self.session(config)
+        ss = self.sessions(config)
+        runs = [as_run(r) for r in runs]
+        shares = self._shares(runs)
         t0 = time.perf_counter()
-        out = s.run(runs)
+        parts = self._map(lambda k: ss[k].run(shares[k]), list(range(len(shares))))
         st = self.session_stats[config]
-        st.update(cycles=s.cycles, rounds=s.rounds)
+        st.update(cycles=sum(s.cycles for s in ss), rounds=sum(s.rounds for s in ss))
         st["rounds_s"] += time.perf_counter() - t0
-        return out
+        return [res for part in parts for res in part]
 
     def close(self):
         """End every live simulation (a later run starts a new one)."""
         sessions, self._sessions = self._sessions, {}
-        for s in sessions.values():
-            s.close()
+        for ss in sessions.values():
+            for s in ss:
+                s.close()
+        pool, self._pool = self._pool, None
+        if pool is not None:
+            pool.shutdown(wait=True)
 
     def __del__(self):
         with contextlib.suppress(Exception):   # interpreter shutdown
