@@ -46,7 +46,7 @@ from numba import njit
 from ..fp.kernels import decode_k, rmode_code
 from ..fp.numba_cache import drop_stale_cache
 from ..model.plane_sphere import plane_keep
-from ..model.pair_kernels import BLOCK, vpair
+from ..model.pair_kernels import BLOCK, gather, vpair
 from ..model.ray_triangle import hit_common, pair_exact, pair_fast, pair_margins
 
 drop_stale_cache(__file__)
@@ -314,13 +314,7 @@ def trace_model(pn, pp, ro, rd, enable, keep_all, rows, cols, run_b, run_start, 
                 di = b * n_rays + ray
                 for k in range(nt):
                     tid = tlist[s, k]
-                    for c in range(3):
-                        g[c, n] = ro[b, c]
-                        g[3 + c, n] = rd[di, c]
-                        g[6 + c, n] = v0[tid, c]
-                        g[9 + c, n] = e1[tid, c]
-                        g[12 + c, n] = e2[tid, c]
-                        g[15 + c, n] = nn[tid, c]
+                    gather(g, n, ro, b, rd, di, v0, e1, e2, nn, tid)
                     lane_b[n] = b
                     lane_ray[n] = ray
                     lane_di[n] = di

@@ -64,7 +64,7 @@ from ..fp.format import FLAG_OVERFLOW, FPFormat, check_format
 from ..fp.kernels import neg_k, rmode_code
 from ..fp.numba_cache import drop_stale_cache
 from ..parallel import run_chunks
-from .pair_kernels import BLOCK, add_op, mul_op, store, sub_op, tally, vpair
+from .pair_kernels import BLOCK, add_op, gather, mul_op, store, sub_op, tally, vpair
 
 __all__ = ["VARIANTS", "DEFAULT_VARIANT", "N_OPS", "MAX_EXP_BITS", "certified_constants",
            "certified_domain", "check_certified_format", "pair_certified", "intersect_certified",
@@ -526,37 +526,34 @@ def _s_rnd(s, a_mag, e, m, r, kk, eta):
 
 
 @njit(inline="always")
+def _s_mul(ua, ba, ub, bb, m, kk, eta):
+    """Screen of ``_mul_b`` (``U(a) B_b + (U(b) + B_b) B_a + rnd``, rounded up thrice) from
+    the operands' magnitudes ``U`` and screen bounds ``B``; returns ``(G, P)``, ``P >= |p|``
+    the product's magnitude bound, which its rounding term and the sums after it use."""
+    um = _s_pow2(-m)
+    p = (1.0 + um) * ua * ub
+    k3 = kk * kk * kk
+    return k3 * ua * bb + k3 * kk * (ub + bb) * ba + kk * (um * p + eta), p
+
+
+@njit(inline="always")
 def _s_dot(ua0, ua1, ua2, ba0, ba1, ba2, ub0, ub1, ub2, bb0, bb1, bb2, s, e, m, r, kk, eta):
     """Screen of ``_dot_b``: ``(a0*b0 + a1*b1) + a2*b2`` with the operands' magnitudes ``U``
     and screen bounds ``B``, result pattern ``s``."""
-    k2 = kk * kk
-    k3 = k2 * kk
-    k4 = k2 * k2
-    um = _s_pow2(-m)
-    c1 = 1.0 + um
-    p0 = c1 * ua0 * ub0
-    p1 = c1 * ua1 * ub1
-    p2 = c1 * ua2 * ub2
-    q0 = k3 * ua0 * bb0 + k4 * (ub0 + bb0) * ba0 + kk * (um * p0 + eta)
-    q1 = k3 * ua1 * bb1 + k4 * (ub1 + bb1) * ba1 + kk * (um * p1 + eta)
-    q2 = k3 * ua2 * bb2 + k4 * (ub2 + bb2) * ba2 + kk * (um * p2 + eta)
-    s01 = c1 * (p0 + p1)
-    g01 = k2 * (q0 + q1) + kk * kk * (um * s01 + eta)
-    return k2 * (g01 + q2) + kk * _s_rnd(s, s01 + p2, e, m, r, kk, eta)
+    q0, p0 = _s_mul(ua0, ba0, ub0, bb0, m, kk, eta)
+    q1, p1 = _s_mul(ua1, ba1, ub1, bb1, m, kk, eta)
+    q2, p2 = _s_mul(ua2, ba2, ub2, bb2, m, kk, eta)
+    s01 = (1.0 + _s_pow2(-m)) * (p0 + p1)
+    g01 = kk * kk * (q0 + q1) + kk * kk * (_s_pow2(-m) * s01 + eta)
+    return kk * kk * (g01 + q2) + kk * _s_rnd(s, s01 + p2, e, m, r, kk, eta)
 
 
 @njit(inline="always")
 def _s_cross(ua, ub, bb, uc, ud, bd, x, e, m, r, kk, eta):
-    """Screen of ``_cross_b``: ``a*b - c*d``, ``a, c`` exact."""
-    k2 = kk * kk
-    k4 = k2 * k2
-    um = _s_pow2(-m)
-    c1 = 1.0 + um
-    pp = c1 * ua * ub
-    pq = c1 * uc * ud
-    gp = k4 * ua * bb + kk * (um * pp + eta)
-    gq = k4 * uc * bd + kk * (um * pq + eta)
-    return k2 * (gp + gq) + kk * _s_rnd(x, pp + pq, e, m, r, kk, eta)
+    """Screen of ``_cross_b``: ``a*b - c*d``, ``a, c`` exact (``_mul_b(b, B_b, a, 0)``)."""
+    gp, pp = _s_mul(ub, bb, ua, 0.0, m, kk, eta)
+    gq, pq = _s_mul(ud, bd, uc, 0.0, m, kk, eta)
+    return kk * kk * (gp + gq) + kk * _s_rnd(x, pp + pq, e, m, r, kk, eta)
 
 
 #: Rows of the screen block ``gs`` (float64, (N_SCREEN_ROWS, BLOCK)): the five screen
@@ -721,20 +718,6 @@ def _lane_fast(g, w, q, e, m, r):
     return True
 
 
-@njit(cache=True)
-def gather(g, q, o, oi, d, di, v0, e1, e2, nn, ti):
-    """Lane ``q`` of a block's operands ``g`` (18, BLOCK): ray row ``oi`` of ``o``, ``di``
-    of ``d``, triangle row ``ti`` (the layout of
-    :func:`~raplas_hdl.model.pair_kernels.vpair`)."""
-    for c in range(3):                # element by element: slices cost seconds of compile
-        g[c, q] = o[oi, c]
-        g[3 + c, q] = d[di, c]
-        g[6 + c, q] = v0[ti, c]
-        g[9 + c, q] = e1[ti, c]
-        g[12 + c, q] = e2[ti, c]
-        g[15 + c, q] = nn[ti, c]
-
-
 @njit(nogil=True, cache=True)
 def pairs_one(o, d, v0, e1, e2, nn, cc, lane_o, lane_d, lane_t, lo, hi, outc, t_o, u_o, v_o,
               det_o, cnt_o, e, m, r):
@@ -754,7 +737,8 @@ def block_screened(o, d, v0, e1, e2, nn, cc, lane_o, lane_d, lane_t, lo, hi, out
     uncertain ones and those that left the fast paths): their outcome is :data:`RECOMPUTE`
     (their other outputs unset). Returns how many there are.
 
-    Per block: the operands gathered (:func:`gather`), the values by
+    Per block: the operands gathered (:func:`~raplas_hdl.model.pair_kernels.gather`), the
+    values by
     :func:`~raplas_hdl.model.pair_kernels.vpair` (lanes with zero operands again by
     :func:`_lane_fast`), the screen bounds by :func:`vscreen` and each lane's outcome from
     them (:func:`voutcome`). ``pair_full`` is not called from here: compiled into this

@@ -7,7 +7,8 @@ fused kernels (:mod:`raplas_hdl.engine.kernels`).
   signature for every caller); :func:`tally` packs an operation's flags into event counts.
 - :func:`vpair`: the pair's 33 (34) operations over a block of :data:`BLOCK` pairs, in the
   branch-free common case of :mod:`raplas_hdl.fp.fast`.
-- :func:`store`: one pair's outputs into the result arrays.
+- :func:`gather`: one pair's operands into a block; :func:`store`: one pair's outputs into
+  the result arrays.
 
 The bits are those of :class:`raplas_hdl.rtl.ray_triangle.RayTriangleUnit`; the order of
 the operations is documented in :mod:`.ray_triangle`.
@@ -23,7 +24,7 @@ from ..fp.format import FLAG_INVALID, FLAG_OVERFLOW, FLAG_UNDERFLOW
 from ..fp.kernels import add_int_k, mul_int_k, neg_k
 from ..fp.numba_cache import drop_stale_cache
 
-__all__ = ["BLOCK", "add_op", "mul_op", "store", "sub_op", "tally", "vpair"]
+__all__ = ["BLOCK", "add_op", "gather", "mul_op", "store", "sub_op", "tally", "vpair"]
 
 drop_stale_cache(__file__)
 
@@ -98,6 +99,21 @@ def _vcross(a, b, c, d, out, acc, n, E, M, R):
         r = common_add(p, q ^ sb, E, M, R)
         out[k] = r
         acc[k] |= p | q | r
+
+
+@njit(inline="always")
+def gather(g, q, o, oi, d, di, v0, e1, e2, nn, ti):
+    """Lane ``q`` of a block's operands ``g`` (18, BLOCK): ray row ``oi`` of ``o``, ``di``
+    of ``d``, triangle row ``ti`` (the layout :func:`vpair` reads). Element by element:
+    slice assignments compile into numba's broadcasting machinery (seconds of a cold
+    start)."""
+    for c in range(3):
+        g[c, q] = o[oi, c]
+        g[3 + c, q] = d[di, c]
+        g[6 + c, q] = v0[ti, c]
+        g[9 + c, q] = e1[ti, c]
+        g[12 + c, q] = e2[ti, c]
+        g[15 + c, q] = nn[ti, c]
 
 
 @njit(cache=True)

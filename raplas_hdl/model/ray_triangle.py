@@ -60,7 +60,7 @@ from ..parallel import run_chunks
 from .certified import DEFAULT_VARIANT, intersect_certified
 from .conservative import margin_constants, margin_k, margin_table
 from .modes import MODES, check_mode
-from .pair_kernels import BLOCK, add_op, mul_op, store, sub_op, tally, vpair
+from .pair_kernels import BLOCK, add_op, gather, mul_op, store, sub_op, tally, vpair
 
 __all__ = ["EVENTS", "MODES", "N_OPS", "intersect"]
 
@@ -260,13 +260,7 @@ def pairs_loop(o, d, v0, e1, e2, nn, mc, lo, hi, hit, t_o, u_o, v_o, det_o, cnt_
         n = min(BLOCK, hi - start)
         for k in range(n):
             i = start + k
-            for c in range(3):
-                g[c, k] = o[i, c]
-                g[3 + c, k] = d[i, c]
-                g[6 + c, k] = v0[i, c]
-                g[9 + c, k] = e1[i, c]
-                g[12 + c, k] = e2[i, c]
-                g[15 + c, k] = nn[i, c]
+            gather(g, k, o, i, d, i, v0, e1, e2, nn, i)
         vpair(g, w, n, cons, e, m, r)
         for k in range(n):
             i = start + k
