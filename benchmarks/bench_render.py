@@ -34,7 +34,7 @@ docs/results/render_bench.json`` updates the committed one.
 Usage::
 
     python benchmarks/bench_render.py [--mesh FILE] [--size 256x256] [--shadow 3x3]
-        [--backends float64,model] [--format FP24] [--mode paper] [--rtl-sim icarus]
+        [--backends float64,model] [--format FP24] [--mode certified] [--rtl-sim icarus]
         [--limit-pairs N] [--compare-modes paper,certified [--repeat 3]] [--out FILE.json]
 """
 
@@ -350,7 +350,9 @@ def main(argv=None) -> int:
     p.add_argument("--shadow", default="3x3")
     p.add_argument("--backends", default="float64,model")
     p.add_argument("--format", default="FP24")
-    p.add_argument("--mode", default="paper", choices=MODES)
+    p.add_argument("--mode", default="certified", choices=MODES,
+                   help="mode of the model and rtl backends (default certified, the render's "
+                        "default; paper: the paper's own inequalities)")
     p.add_argument("--batch", type=int, default=32)
     p.add_argument("--threads", type=int, default=None,
                    help="threads of the compiled passes (default: every core)")

@@ -63,9 +63,10 @@ def emit_verilog(outdir: Path, fmt) -> tuple[list, list]:
 
 
 def check(args) -> None:
-    from .render import check_scene
+    from .render import check_scene, resolve_mode
 
     args.fmt = g.format_from_args(args)
+    resolve_mode(args)
     if args.no_verilog:
         g.reject(args, ("verilog_dir",), "with --no-verilog")
     else:

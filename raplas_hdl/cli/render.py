@@ -10,18 +10,23 @@ from ..model.modes import MODES
 from . import grammar as g
 
 __all__ = [
+    "DEFAULT_MODE",
     "add_parser",
     "add_render_options",
     "add_secondary_options",
     "add_view_options",
     "check",
     "check_scene",
+    "resolve_mode",
     "run",
     "scene_from_args",
     "settings_from_args",
 ]
 
 #: Limits of the render options (stated in --help, checked while parsing).
+#: The render mode without ``--mode``: the exact reference's nearest triangle and visibility
+#: on every ray (docs/certified-render.md); ``--mode paper`` is the paper's own behaviour.
+DEFAULT_MODE = "certified"
 MAX_TRIS_PER_SPHERE = 4096
 MAX_FANOUT = 64
 MAX_BATCH = 4096
@@ -101,14 +106,36 @@ def _render_mode(text: str) -> str:
     return text
 
 
+def resolve_mode(args, backend: str = "model"):
+    """Set ``args.mode`` (:data:`DEFAULT_MODE` when ``--mode`` is not given) and return the
+    registered mode, after checking that a certified mode fits the format (a one-line
+    ``UsageError`` naming the format and ``--mode paper`` otherwise)."""
+    from ..host.modes import get_mode
+
+    given = args.mode is not None
+    args.mode = args.mode if given else DEFAULT_MODE
+    mode = get_mode(args.mode)
+    if mode.unit_mode == "certified" and backend != "float64":
+        from ..model.certified import check_certified_format
+
+        try:
+            check_certified_format(args.fmt)
+        except ValueError as exc:
+            raise g.UsageError(f"--mode {args.mode}{'' if given else ' (the default)'}: "
+                               f"{exc}; --mode paper renders any format") from None
+    return mode
+
+
 def add_render_options(p):
     """Options shared by ``render`` and ``demo``: the format and the render settings."""
     g.add_format_option(p, field_widths=True)
     r = p.add_argument_group("render settings")
-    r.add_argument("--mode", type=_render_mode, default="paper",
+    r.add_argument("--mode", type=_render_mode, default=None,
                    metavar="{" + ",".join(MODES) + "}",
                    help="render mode of the model and rtl backends, built in or registered "
-                        "(raplas_hdl.host.modes.register_mode; default paper)")
+                        "(raplas_hdl.host.modes.register_mode; default certified: the exact "
+                        "reference's nearest triangle and visibility on every ray; paper: "
+                        "the paper's inequalities on the unit's arithmetic alone)")
     r.add_argument("--tile", type=g.lattice_type("--tile", allow_zero=False), default=(8, 8),
                    metavar="RxC", help=f"primary bundle size, sides 1 to {g.MAX_LATTICE} "
                                        "(default 8x8)")
@@ -299,18 +326,11 @@ def check(args) -> None:
                            "use model or rtl)")
     from ..host.modes import get_mode, mode_names
 
-    mode = get_mode(args.mode)
+    mode = resolve_mode(args, args.backend)
     if args.reduce and not mode.reducible:
         usable = " or ".join(n for n in mode_names() if get_mode(n).reducible)
         raise g.UsageError(f"--reduce has no {mode.name} mode (its hits must reach the host "
                            f"to be resolved): use --mode {usable}")
-    if mode.unit_mode == "certified" and args.backend != "float64":
-        from ..model.certified import check_certified_format
-
-        try:
-            check_certified_format(args.fmt)
-        except ValueError as exc:
-            raise g.UsageError(f"--mode certified: {exc}") from None
     if args.reduce:
         from ..model.reduction import check_reduce_format
 

@@ -104,6 +104,36 @@ def test_render_command(tmp_path):
     assert data["tri_id"].shape == (12, 16) and (data["tri_id"] >= 0).any()
     summary = json.loads(js.read_text())
     assert summary["comparison"]["psnr"] != 0 and summary["stats"]["primary_rays"] == 192
+    # no --mode: the certified render (its stats), whose triangles are R's
+    assert "certified" in summary["stats"], sorted(summary["stats"])
+
+
+def test_render_mode_default_is_certified(tmp_path, capsys):
+    from raplas_hdl.cli import build_parser, demo
+    from raplas_hdl.cli.render import check
+
+    for cmd, checker in ((["render", "-o", str(tmp_path / "x.png")], check),
+                         (["demo"], demo.check)):
+        args = build_parser().parse_args(cmd)
+        assert args.mode is None
+        checker(args)
+        assert args.mode == "certified"
+    # a format the certified mode cannot take: one line, naming the default and the way out
+    for cmd in (["render", "--size", "8x8", "-o", str(tmp_path / "x.png")],
+                ["demo", "--no-verilog", "--out-dir", str(tmp_path / "d")]):
+        assert main([*cmd, "--exp-bits", "10", "--man-bits", "16"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "--mode certified (the default)" in err[0] \
+            and "exp_bits <= 9" in err[0] and "--mode paper" in err[0], err
+        assert not (tmp_path / "x.png").exists() and not (tmp_path / "d").exists()
+    # given explicitly, no "(the default)"; paper takes the format
+    assert main(["render", "--mode", "certified", "--exp-bits", "10", "--man-bits", "16",
+                 "-o", str(tmp_path / "x.png")]) == 2
+    assert "(the default)" not in capsys.readouterr().err
+    args = build_parser().parse_args(["render", "--mode", "paper", "--exp-bits", "10",
+                                      "--man-bits", "16", "-o", str(tmp_path / "x.png")])
+    check(args)
+    assert args.mode == "paper"
 
 
 def test_render_command_errors(tmp_path, capsys):
