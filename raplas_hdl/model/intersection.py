@@ -23,15 +23,19 @@ In ``certified`` mode (``UnitConfig(mode="certified")``) each beat also carries 
 ``outcome`` (:data:`~raplas_hdl.model.records.RESULT_CERTIFIED`: 0 miss, 1 certain hit, 2
 uncertain, from :func:`raplas_hdl.model.certified.intersect_certified` with the bound
 variant the RTL builds, :data:`UNIT_BOUND_VARIANT`); ``hit`` (and the ``hits`` counter) is
-``outcome == 1``.
+``outcome == 1``; and ``tight`` (:func:`raplas_hdl.model.ordering.tight_flags`: a certain hit
+whose ``t'`` and ``det`` the unit knows to ``2**-tight_bits``, the ones its reduction folds).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ..fp.kernels import rmode_code
+from .certified import certified_constants
 from .config import COUNTER_NAMES, UnitConfig
 from .memory_image import BundleMemory, Run, SceneMemory, as_run
+from .ordering import tight_flags
 from .plane_sphere import tester_flags
 from .ray_triangle import EVENTS, intersect
 from .records import RESULT, result_record
@@ -225,6 +229,14 @@ def run_runs(config: UnitConfig, scene: SceneMemory, runs) -> list:
                         scene.n[tri_all], config.fmt, mode=config.mode,
                         margin_scale=config.margin_scale,
                         bound_variant=UNIT_BOUND_VARIANT if certified else None)
+        if certified:
+            arrs = [np.ascontiguousarray(x, np.uint32) for x in
+                    (o, d, scene.v0[tri_all], scene.e1[tri_all], scene.e2[tri_all],
+                     scene.n[tri_all])]
+            res["tight"] = tight_flags(arrs, res["outcome"], config.fmt,
+                                       certified_constants(config.fmt, config.margin_scale,
+                                                           UNIT_BOUND_VARIANT),
+                                       rmode_code(config.fmt))
     out, pos = [], 0
     dtype = result_dtype(config)
     for _, ray, tri, c in parts:
@@ -241,6 +253,7 @@ def run_runs(config: UnitConfig, scene: SceneMemory, runs) -> list:
         beats["hit"] = res["hit"][sl]
         if certified:
             beats["outcome"] = res["outcome"][sl]
+            beats["tight"] = res["tight"][sl]
         for key in ("t", "u", "v", "det"):
             beats[key] = res[key][sl]
         beats["flags"] = res["flags"][sl]

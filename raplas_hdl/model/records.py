@@ -29,7 +29,8 @@ for a unit build):
 - :data:`ANSWER`: one beat of the result stream of a unit built with the on-chip reduction
   (``UnitConfig.reduce``): one answer per ray (``ray_id_bits``, ``tri_id_bits``, ``W``);
 - in ``certified`` mode each of ``RT_RESULT``, ``RESULT`` and ``ANSWER`` carries one more
-  field on top, :data:`OUTCOME` (2 bits): :data:`RT_RESULT_CERTIFIED`,
+  field on top, :data:`OUTCOME` (2 bits), and ``RT_RESULT`` and ``RESULT`` one more above
+  it, :data:`TIGHT` (1 bit): :data:`RT_RESULT_CERTIFIED`,
   :data:`RESULT_CERTIFIED`, :data:`ANSWER_CERTIFIED`; :func:`rt_result_record`,
   :func:`result_record`, :func:`answer_record` and :func:`output_record` pick a build's;
 - :data:`COUNTERS`: the intersection unit's ``counters`` port (32 bits each);
@@ -56,9 +57,9 @@ from .config import COUNTER_NAMES, UnitConfig
 __all__ = ["Field", "Record", "Layout", "Slot", "unit_params", "words_to_ints",
            "ints_to_words", "PARAMETERS", "EVENT_COUNT_BITS", "RAY", "TRIANGLE", "PAIR",
            "RT_RESULT", "RESULT", "ANSWER", "OUTCOME", "OUTCOME_MISS", "OUTCOME_HIT",
-           "OUTCOME_UNCERTAIN", "RT_RESULT_CERTIFIED", "RESULT_CERTIFIED", "ANSWER_CERTIFIED",
-           "rt_result_record", "result_record", "answer_record", "output_record", "CMD",
-           "COUNTERS", "PLANE", "SPHERE", "PS_RESULT", "RECORDS"]
+           "OUTCOME_UNCERTAIN", "TIGHT", "RT_RESULT_CERTIFIED", "RESULT_CERTIFIED",
+           "ANSWER_CERTIFIED", "rt_result_record", "result_record", "answer_record",
+           "output_record", "CMD", "COUNTERS", "PLANE", "SPHERE", "PS_RESULT", "RECORDS"]
 
 #: Width parameters a field may name, and what they are.
 PARAMETERS = {
@@ -554,15 +555,22 @@ OUTCOME = Field("outcome", 2, "certified mode: 0 miss, 1 certain hit, 2 uncertai
                               "(hit = outcome == 1)")
 
 
-def _with_outcome(record: Record, name: str, meaning: str) -> Record:
-    return Record(name, record.fields + (OUTCOME.with_(meaning=meaning),),
-                  record.doc + ", certified mode")
+#: The field a certified pair carries above its outcome
+#: (:mod:`raplas_hdl.model.ordering`): a certain hit whose ``t'`` and ``det`` are within a
+#: relative ``2**-tight_bits(fmt)`` of R's, so that the reducer may order it.
+TIGHT = Field("tight", 1, "certified mode: a certain hit whose t' and det are within "
+                          "2**-tight_bits of R's (model/ordering.py); 0 otherwise")
+
+
+def _with_outcome(record: Record, name: str, meaning: str, tight: bool = False) -> Record:
+    return Record(name, record.fields + (OUTCOME.with_(meaning=meaning),)
+                  + ((TIGHT,) if tight else ()), record.doc + ", certified mode")
 
 
 #: The certified ray-triangle unit's output (``RayTriangleUnit(mode="certified")``).
-RT_RESULT_CERTIFIED = _with_outcome(RT_RESULT, "rt_result_certified", OUTCOME.meaning)
+RT_RESULT_CERTIFIED = _with_outcome(RT_RESULT, "rt_result_certified", OUTCOME.meaning, True)
 #: One beat of a certified intersection unit's result stream.
-RESULT_CERTIFIED = _with_outcome(RESULT, "result_certified", OUTCOME.meaning)
+RESULT_CERTIFIED = _with_outcome(RESULT, "result_certified", OUTCOME.meaning, True)
 #: One beat of a certified unit's reduced stream: a run's uncertain pairs (``outcome`` 2, in
 #: stream order), then its answers (``outcome`` 1, ascending rays), or, when it has no
 #: answer, one ``empty`` beat (``outcome`` 0) after its uncertain pairs

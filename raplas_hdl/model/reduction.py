@@ -17,15 +17,20 @@ the reduction) into the answers of its rays (:data:`~raplas_hdl.model.records.AN
   ``last``; a run without any gives one ``empty`` beat (``last`` set, all else 0).
 
 A ``certified`` unit (:data:`~raplas_hdl.model.records.ANSWER_CERTIFIED`, ``outcome`` on
-every beat): only a certain hit (``outcome`` 1) is a candidate; an *uncertain* pair
-(``outcome`` 2) is not folded but leaves the unit for the host as its own beat
-(:func:`uncertain_pairs`): every uncertain pair of the run except those of the excluded
-triangle (no window test: its ``t'/det`` is not trusted; NaN, say, when the pair is
-uncertain because an operation overflowed) and, in an any-hit bundle, except those after
-their ray's first candidate (the ray is blocked; only a certain candidate blocks). A run's
-beats: its uncertain pairs in stream order (``outcome`` 2), then its answers (``outcome``
-1) as above, or, when it has no answer, the ``empty`` beat (``outcome`` 0). The host
-re-checks both kinds (``docs/intersection-unit.md``).
+every beat) orders only what it knows the order of (:mod:`raplas_hdl.model.ordering`,
+:func:`certified_classes`): a candidate must be a *tight* certain hit (``outcome`` 1 and
+``tight``, its ``t'`` and ``det`` within a relative ``2**-tight_bits`` of R's) whose
+``t'/det`` is not *near* ``tmin`` or ``tmax``; in a nearest-hit bundle a candidate near its
+ray's answer (:func:`~raplas_hdl.model.ordering.near`, in stream order) neither replaces
+the answer nor is dropped. Everything the unit cannot order leaves it for the host as its
+own beat (``outcome`` 2, the pair's fields): an uncertain pair, a certain hit that is not
+tight, a tight one near the window, a candidate near its ray's answer; none of the excluded
+triangle (no window test on an untrusted ``t'/det``: NaN, say, when the pair is uncertain
+because an operation overflowed), and in an any-hit bundle none after its ray's first
+candidate (the ray is blocked; only a candidate blocks). A run's beats: those passed on in
+stream order, then its answers (``outcome`` 1) as above, or, when it has no answer, the
+``empty`` beat (``outcome`` 0). The host resolves both kinds exactly, and R's nearest hit
+is among them (``docs/intersection-unit.md``).
 
 Every comparison is exact: ``t'/det`` against ``t2'/det2`` is ``t'*|det2|`` against
 ``t2'*|det|`` with the signs of ``det`` moved onto the numerators (the RTL multiplies the
@@ -46,9 +51,11 @@ from __future__ import annotations
 import numpy as np
 
 from ..fp import model as fpm
+from .ordering import near, near_shift, product_key
 from .records import ANSWER, OUTCOME_HIT, OUTCOME_UNCERTAIN, answer_record
 
-__all__ = ["ANSWER_DTYPE", "answer_dtype", "uncertain_pairs", "check_reduce_format",
+__all__ = ["ANSWER_DTYPE", "answer_dtype", "uncertain_pairs", "certified_classes",
+           "check_reduce_format",
            "check_window", "candidates", "reduce_run", "first_answers", "early_out_saving",
            "inf_pattern"]
 
@@ -149,25 +156,122 @@ def first_answers(n_rays: int, ray_id, ok, key=None, tri_id=None) -> np.ndarray:
     return best
 
 
+def certified_classes(config, beats, bundle):
+    """What a certified unit's reduction does with each beat of a run's unreduced stream
+    (bool arrays; :mod:`raplas_hdl.model.ordering`):
+
+    - ``cand``: a *candidate*, a tight certain hit certainly inside the window (the window
+      test of :func:`candidates`, and not near ``tmin`` or ``tmax``);
+    - ``passed``: passed on to the host as an uncertain pair, subject only to its ray being
+      blocked in an any-hit bundle: an uncertain pair, a certain hit that is not tight, or a
+      tight one near ``tmin`` or ``tmax`` (each not of the excluded triangle).
+
+    A tight certain hit neither (certainly outside the window, or excluded) is dropped.
+    """
+    fmt = config.fmt
+    n = beats.size
+    if n == 0 or beats["empty"].any():
+        return np.zeros(n, bool), np.zeros(n, bool)
+    not_excl = (beats["tri_id"].astype(np.int64) != bundle.exclude) if bundle.exclude >= 0 \
+        else np.ones(n, bool)
+    outcome = beats["outcome"]
+    tight = beats["tight"].astype(bool)
+    passed = ((outcome == OUTCOME_UNCERTAIN) | ((outcome == OUTCOME_HIT) & ~tight)) & not_excl
+    cand = np.zeros(n, bool)
+    t = beats["t"].astype(np.int64)
+    det = beats["det"].astype(np.int64)
+    e_max = (1 << fmt.exp_bits) - 1
+    sign = fmt.width - 1
+    base = np.flatnonzero((outcome == OUTCOME_HIT) & tight & not_excl
+                          & (((t >> fmt.man_bits) & e_max) != e_max)
+                          & (((det >> fmt.man_bits) & e_max) != e_max)
+                          & (((det >> fmt.man_bits) & e_max) != 0))
+    if base.size == 0:
+        return cand, passed
+    t, det = t[base], det[base]
+    tmax = np.asarray(bundle.window_tmax(config), np.int64)[beats["ray_id"][base].astype(np.int64)]
+    one = np.int64(((1 << (fmt.exp_bits - 1)) - 1) << fmt.man_bits)
+    k_num = product_key(fmt, t, one, (t >> sign) ^ (det >> sign))
+    k_lo = product_key(fmt, np.full(base.size, bundle.tmin, np.int64), det, bundle.tmin >> sign)
+    k_hi = product_key(fmt, tmax, det, tmax >> sign)
+    tmax_inf = tmax == inf_pattern(fmt)
+    near_w = near(fmt, k_num, k_lo) | (~tmax_inf & near(fmt, k_hi, k_num))
+    ok = candidates(fmt, beats[base], bundle.tmin, bundle.window_tmax(config), bundle.exclude)
+    cand[base] = ok & ~near_w
+    passed[base] |= near_w
+    return cand, passed
+
+
+def _key_lt(a, b):
+    (sa, ma), (sb, mb) = a, b
+    return bool((sa and not sb) or (not sa and not sb and ma < mb) or (sa and sb and mb < ma))
+
+
+def _certified_nearest(config, beats, cand):
+    """The nearest-hit fold of a certified run's candidates in stream order: per ray the
+    index of its answer (-1: none), and which candidates were passed on because they were
+    near the ray's answer (:func:`~raplas_hdl.model.ordering.near`) when they came. A
+    candidate replaces the answer when its ``t'/det`` is smaller and not near."""
+    fmt = config.fmt
+    ray = beats["ray_id"].astype(np.int64)
+    best = np.full(config.n_rays, -1, np.int64)
+    passed = np.zeros(beats.size, bool)
+    idx = np.flatnonzero(cand)
+    if idx.size == 0:
+        return best, passed
+    counts = np.bincount(ray[idx], minlength=config.n_rays)
+    single = idx[counts[ray[idx]] == 1]
+    best[ray[single]] = single
+    multi = idx[counts[ray[idx]] > 1]          # rays with two or more: one beat at a time
+    if multi.size:
+        t = beats["t"].astype(np.int64).tolist()
+        det = beats["det"].astype(np.int64).tolist()
+        sign = fmt.width - 1
+        shift = near_shift(fmt)
+        for i, r in zip(multi.tolist(), ray[multi].tolist()):
+            k = int(best[r])
+            if k < 0:
+                best[r] = i
+                continue
+            sn, mn = _key(fmt, t[i], det[k], (t[i] >> sign) ^ (det[i] >> sign))
+            sc, mc = _key(fmt, t[k], det[i], (t[k] >> sign) ^ (det[k] >> sign))
+            if sn == sc and abs((mn >> shift) - (mc >> shift)) <= 1:     # near
+                passed[i] = True
+            elif _key_lt((sn, mn), (sc, mc)):
+                best[r] = i
+    return best, passed
+
+
+def _key(fmt, x: int, y: int, sign: int):
+    """:func:`~raplas_hdl.model.ordering.product_key` of one pair of patterns, in Python
+    integers (the fold's loop)."""
+    mb, eb = fmt.man_bits, fmt.exp_bits
+    ex, ey = (x >> mb) & ((1 << eb) - 1), (y >> mb) & ((1 << eb) - 1)
+    if ex == 0 or ey == 0:
+        return 0, 0
+    one = 1 << mb
+    p = ((x & (one - 1)) | one) * ((y & (one - 1)) | one)
+    top = (p >> (2 * mb + 1)) & 1
+    low = (1 << (2 * mb + 1)) - 1
+    sig = p & low if top else (p << 1) & low
+    return sign & 1, ((ex + ey + top) << (2 * mb + 1)) | sig
+
+
 def uncertain_pairs(config, beats, bundle, ok=None) -> np.ndarray:
     """Which beats of a certified run's unreduced stream leave the reduced unit as uncertain
-    pairs (bool array; all False in another mode): ``outcome`` 2, not the excluded triangle,
-    and in an any-hit bundle before their ray's first candidate (``ok``: :func:`candidates`,
-    computed when not given)."""
+    pairs (bool array; all False in another mode): those :func:`certified_classes` passes on
+    (in an any-hit bundle only before their ray's first candidate), and in a nearest-hit
+    bundle the candidates near their ray's answer (:func:`_certified_nearest`). ``ok`` is
+    ignored (kept for the callers of the earlier signature)."""
     out = np.zeros(beats.size, bool)
     if config.mode != "certified" or beats.size == 0 or beats["empty"].any():
         return out
-    out = beats["outcome"] == OUTCOME_UNCERTAIN
-    if bundle.exclude >= 0:
-        out &= beats["tri_id"].astype(np.int64) != bundle.exclude
+    cand, passed = certified_classes(config, beats, bundle)
+    ray = beats["ray_id"].astype(np.int64)
     if bundle.any_hit:
-        if ok is None:
-            ok = candidates(config.fmt, beats, bundle.tmin, bundle.window_tmax(config),
-                            bundle.exclude)
-        ray = beats["ray_id"].astype(np.int64)
-        first = first_answers(config.n_rays, ray, ok)[ray]
-        out &= (first < 0) | (np.arange(beats.size) < first)
-    return out
+        first = first_answers(config.n_rays, ray, cand)[ray]
+        return passed & ((first < 0) | (np.arange(beats.size) < first))
+    return passed | _certified_nearest(config, beats, cand)[1]
 
 
 def reduce_run(config, beats, bundle):
@@ -191,14 +295,25 @@ def reduce_run(config, beats, bundle):
     check_window(config, bundle)
     dtype = answer_dtype(config)
     certified = config.mode == "certified"
-    ok = candidates(fmt, beats, bundle.tmin, bundle.window_tmax(config), bundle.exclude)
     ray = beats["ray_id"].astype(np.int64)
-    if bundle.any_hit:
-        best = first_answers(config.n_rays, ray, ok)
+    if certified:
+        cand, passed = certified_classes(config, beats, bundle)
+        if bundle.any_hit:
+            best = first_answers(config.n_rays, ray, cand)
+            first = best[ray] if ray.size else ray
+            unc_mask = passed & ((first < 0) | (np.arange(beats.size) < first))
+        else:
+            best, near_fold = _certified_nearest(config, beats, cand)
+            unc_mask = passed | near_fold
     else:
-        best = first_answers(config.n_rays, ray, ok, _ratio(fmt, beats), beats["tri_id"])
+        ok = candidates(fmt, beats, bundle.tmin, bundle.window_tmax(config), bundle.exclude)
+        if bundle.any_hit:
+            best = first_answers(config.n_rays, ray, ok)
+        else:
+            best = first_answers(config.n_rays, ray, ok, _ratio(fmt, beats), beats["tri_id"])
+        unc_mask = np.zeros(beats.size, bool)
     rays = np.flatnonzero(best >= 0)
-    unc = beats[uncertain_pairs(config, beats, bundle, ok)]
+    unc = beats[unc_mask]
     out = np.zeros(unc.size + max(1, rays.size), dtype)
     keys = ("ray_id", "tri_id", "t", "u", "v", "det", "flags")
     if rays.size == 0:
@@ -223,8 +338,11 @@ def early_out_saving(config, beats, bundle) -> int:
     run)."""
     if not bundle.any_hit or beats.size == 0 or beats["empty"].any():
         return 0
-    ok = candidates(config.fmt, beats, bundle.tmin, bundle.window_tmax(config),
-                    bundle.exclude)
+    if config.mode == "certified":
+        ok = certified_classes(config, beats, bundle)[0]
+    else:
+        ok = candidates(config.fmt, beats, bundle.tmin, bundle.window_tmax(config),
+                        bundle.exclude)
     ray = beats["ray_id"].astype(np.int64)
     first = first_answers(config.n_rays, ray, ok)
     pos = np.arange(beats.size)

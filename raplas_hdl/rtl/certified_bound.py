@@ -301,6 +301,19 @@ class BoundOps:
         return Mux(big & carry, x.e2, Mux(big | carry, x.e1, x.e))
 
     # -- the outcome's comparisons -------------------------------------------------------
+    def tight(self, x, g, q: int):
+        """``|x| >= 2**q g`` (the model's ``_classify(x, g * 2**q)``: its ``ge | le``; a
+        denormal pattern is zero): ``x`` is known to a relative ``2**-q``
+        (:mod:`raplas_hdl.model.ordering`)."""
+        f = self.fmt
+        k = self.k
+        ex = self._exp(x)
+        man = x[:f.man_bits]
+        gman = Cat(Const(0, f.man_bits - k), g.f)
+        ge_ = g.e + q
+        mag_ge = g.z | (ex > ge_) | ((ex == ge_) & (man >= gman))
+        return Mux(self.is_zero(x), g.z, mag_ge)
+
     def classify(self, x, g):
         """``(ge, gt, le, lt)`` of the pattern ``x`` against the bound ``g`` (the model's
         ``_classify``; a denormal pattern is zero)."""

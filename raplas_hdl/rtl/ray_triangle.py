@@ -75,7 +75,8 @@ from ..fp.format import FLAG_OVERFLOW, FPFormat, check_format
 from ..model.modes import MODES, check_rtl_mode
 from ..model.conservative import MARGIN_NAMES, margin_constants
 from ..model.certified import certified_constants, check_certified_format
-from ..model.records import EVENT_COUNT_BITS, PAIR, RT_RESULT
+from ..model.ordering import tight_bits
+from ..model.records import EVENT_COUNT_BITS, PAIR, RT_RESULT, RT_RESULT_CERTIFIED
 from .certified_bound import RTL_VARIANTS, BoundOps
 from .fp_add import FPAdd, check_adder, default_add_stages, fp_add_latency
 from .fp_compare import is_nan, le as fp_le, lt as fp_lt, neg as fp_neg
@@ -110,12 +111,12 @@ def output_layout(fmt: FPFormat, ray_id_bits: int = 16, tri_id_bits: int = 16,
 
     ``flags`` is the OR of the event flags of the pair's operations; ``n_overflow``,
     ``n_underflow``, ``n_invalid`` count the operations that raised each event. With
-    ``outcome`` (the certified mode) a 2-bit ``outcome`` field (0 miss, 1 hit, 2 uncertain)
-    follows above the record's bits; ``hit`` is then ``outcome == 1``."""
-    rec = struct_layout(RT_RESULT, fmt, ray_id_bits=ray_id_bits, tri_id_bits=tri_id_bits)
-    if not outcome:
-        return rec
-    return data.StructLayout({**{name: fld.shape for name, fld in rec}, "outcome": 2})
+    ``outcome`` (the certified mode) the record
+    :data:`~raplas_hdl.model.records.RT_RESULT_CERTIFIED`: a 2-bit ``outcome`` field (0 miss,
+    1 hit, 2 uncertain) above the record's bits, ``hit`` then ``outcome == 1``, and above it
+    ``tight`` (:mod:`raplas_hdl.model.ordering`)."""
+    return struct_layout(RT_RESULT_CERTIFIED if outcome else RT_RESULT, fmt,
+                         ray_id_bits=ray_id_bits, tri_id_bits=tri_id_bits)
 
 
 class _Timed:
@@ -596,6 +597,7 @@ class RayTriangleUnit(wiring.Component):
         up_d, vp_d, s_d = self._at(m, up, dec), self._at(m, vp, dec), self._at(m, s, dec)
         hit = Signal()
         outcome = Signal(2)
+        tight = Signal()
         if self._mode == "certified":
             ops = self._bo
             emf = f.exp_max_field
@@ -610,10 +612,15 @@ class RayTriangleUnit(wiring.Component):
                     | (lt["det"] & Cat(*(le[k] for k in names)).all()))
             cmiss = ((le["det"] | Cat(*(lt[k] for k in names)).any())
                      & (ge["det"] | Cat(*(gt[k] for k in names)).any()))
+            # tight: t' and det each known to 2**-q (the reducer orders only those hits)
+            q = tight_bits(f)
+            tight_k = {k: reg(ops.tight(vals[k], self._bv(m, res[f"g_{k}"], dec), q),
+                              f"tight_{k}") for k in ("t", "det")}
             m.d.comb += [
                 outcome.eq(Mux(special | (flags & FLAG_OVERFLOW).any(), 2,
                                Mux(chit, 1, Mux(cmiss, 0, 2)))),
                 hit.eq(outcome == 1),
+                tight.eq(hit & tight_k["t"] & tight_k["det"]),
             ]
         elif self._mode == "paper":
             le, lt = (lambda a, b, n: reg(fp_le(m, a, b, f), n),
@@ -659,6 +666,6 @@ class RayTriangleUnit(wiring.Component):
             out.n_underflow.eq(counts[1]), out.n_invalid.eq(counts[2]), out_valid.eq(valid_d),
         ]
         if self._mode == "certified":
-            m.d.sync += out.outcome.eq(outcome)
+            m.d.sync += [out.outcome.eq(outcome), out.tight.eq(tight)]
         m.d.comb += [fifo.w_data.eq(out.as_value()), fifo.w_en.eq(out_valid)]
         return m

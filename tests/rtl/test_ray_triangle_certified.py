@@ -48,13 +48,17 @@ def cosim(simulator, fmt, count, seed):
     exp = unit.expected(cases)
     got, info = unit.simulate(cases, simulator, valid_density=0.8, stall_density=0.3,
                               seed=seed)
-    assert "outcome" in unit.compared
+    assert "outcome" in unit.compared and "tight" in unit.compared
     bad = compare(exp, got, unit.compared)
     assert len(bad) == 0, f"{len(bad)} of {n} pairs differ, first:\n" + "\n".join(
         unit.show(cases, exp, got, int(bad[0])))
     # the vectors reach all three outcomes, and the outcome bits are not the other
     # variant's (the comparison can fail)
     assert set(np.unique(exp["outcome"]).tolist()) == {0, 1, 2}
+    # and the certain hits are both tight and loose (model/ordering.py), no other pair tight
+    hits = exp["outcome"] == 1
+    assert exp["tight"][hits].any() and not exp["tight"][hits].all()
+    assert not exp["tight"][~hits].any()
     other = intersect(*(vec[k] for k in NAMES), fmt, mode="certified", bound_variant="lead3")
     assert (other["outcome"] != exp["outcome"]).any()
     return exp

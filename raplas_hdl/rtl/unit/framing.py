@@ -69,7 +69,7 @@ class ResultFraming(wiring.Component):
                      fresh.hit.eq(r.hit), fresh.t.eq(r.t), fresh.u.eq(r.u), fresh.v.eq(r.v),
                      fresh.det.eq(r.det), fresh.flags.eq(r.flags)]
         if cfg.mode == "certified":
-            m.d.comb += fresh.outcome.eq(r.outcome)
+            m.d.comb += [fresh.outcome.eq(r.outcome), fresh.tight.eq(r.tight)]
         marker = r.ray_id[ray_bits]
         events = Signal(EVENTS_LAYOUT)
         m.d.sync += self.events.eq(events)

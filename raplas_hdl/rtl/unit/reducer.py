@@ -48,15 +48,22 @@ jobs of blocked rays of the run with that number. Pairs a blocked ray would have
 later cannot change its answer (the first candidate of the stream), so the answers do not
 depend on when the bit arrives; only ``pairs_issued`` does.
 
-Certified mode (``config.mode == "certified"``, :data:`~raplas_hdl.model.records.ANSWER_CERTIFIED`):
-only a certain hit (``outcome`` 1) can be a candidate. An uncertain pair (``outcome`` 2) of
-another triangle than the excluded one is qualified as *passed on* in stage 2 and, in stage
-``r``, unless its ray is blocked (an any-hit bundle whose ray already has an answer), loaded
-into the output register as its own beat (``outcome`` 2, the fields of the pair, not
-``last``) instead of being folded; while the output register holds a beat not yet taken,
-a passed-on pair waits in stage ``r`` and the pipeline stalls (``en``). So a run's uncertain
-pairs leave in stream order before its answers (``outcome`` 1); a run without answers ends
-with the ``empty`` beat (``outcome`` 0) after them.
+Certified mode (``config.mode == "certified"``, :data:`~raplas_hdl.model.records.ANSWER_CERTIFIED`;
+:mod:`raplas_hdl.model.ordering`): only a *tight* certain hit (``outcome`` 1 and ``tight``) can
+be a candidate, and only when its ``t'/det`` is not *near* ``tmin`` or ``tmax``
+(:func:`key_near` on the window's keys, in stage ``b``). Passed on, as *uncertain*, in stage 2:
+an uncertain pair or a certain hit that is not tight, of another triangle than the excluded
+one, and a tight hit near the window. In a nearest-hit bundle a candidate near the ray's
+answer (``near``, four bits beside ``better``, the one of the last writer taken in stage
+``r``) is passed on in stage ``r`` instead of replacing the answer or being dropped. A beat
+passed on is, unless its ray is blocked (an any-hit bundle whose ray already has an answer),
+loaded in stage ``r`` into the output register as its own beat (``outcome`` 2, the fields of
+the pair, not ``last``) instead of being folded; while the output register holds a beat not
+yet taken, a passed-on pair waits in stage ``r`` and the pipeline stalls (``en``). So a run's
+passed-on pairs leave in stream order before its answers (``outcome`` 1); a run without
+answers ends with the ``empty`` beat (``outcome`` 0) after them. Every certain hit either
+leaves the unit or was dropped behind an answer certainly nearer in R (or is certainly
+outside the window), so R's nearest hit reaches the host.
 """
 
 from __future__ import annotations
@@ -68,6 +75,7 @@ from amaranth.lib.wiring import In, Out
 
 from ...model.config import UnitConfig
 from ...model.memory_image import REGIONS
+from ...model.ordering import near_shift
 from ...model.records import OUTCOME_HIT, OUTCOME_UNCERTAIN, answer_record
 from ...model.reduction import check_reduce_format
 from ..ram import SyncRAM
@@ -76,7 +84,7 @@ from .selector import lowest_set
 from .streams import result_layout
 
 __all__ = ["Reducer", "answer_layout", "product_raw", "key_of", "key_lt", "key_eq",
-           "lowest_set_tree", "RUN_FIFO_DEPTH", "SEQ_BITS"]
+           "key_near", "lowest_set_tree", "RUN_FIFO_DEPTH", "SEQ_BITS"]
 
 #: Runs accepted but not yet reduced that the run-bank FIFO holds (the top stalls ``cmd``
 #: when it is full).
@@ -133,6 +141,15 @@ def key_lt(a, b):
 
 def key_eq(a, b):
     return (a[0] == b[0]) & (a[1] == b[1])
+
+
+def key_near(a, b, fmt):
+    """Whether two :func:`key_of` keys are *near* (:func:`raplas_hdl.model.ordering.near`):
+    equal signs and magnitudes whose bits from ``near_shift(fmt)`` up differ by at most 1."""
+    (sa, ma), (sb, mb) = a, b
+    s = near_shift(fmt)
+    ha, hb = ma[s:], mb[s:]
+    return (sa == sb) & ((ha == hb) | (ha == hb + 1) | (hb == ha + 1))
 
 
 def lowest_set_tree(m: Module, mask, n: int, name: str):
@@ -256,7 +273,11 @@ class Reducer(wiring.Component):
             m.d.sync += [a.ray.eq(r.ray_id), a.hit.eq(r.hit), a.last.eq(r.last),
                          a.empty.eq(r.empty), a.bank.eq(runs.r_stream.payload)]
             if certified:
-                m.d.sync += a.uncertain.eq(r.outcome == OUTCOME_UNCERTAIN)
+                # only a tight certain hit can be folded; a certain hit that is not tight
+                # goes to the host like an uncertain pair (model/ordering.py)
+                m.d.sync += [a.hit.eq(r.hit & r.tight),
+                             a.uncertain.eq((r.outcome == OUTCOME_UNCERTAIN)
+                                            | ((r.outcome == OUTCOME_HIT) & ~r.tight))]
             m.d.sync += [a[k].eq(r[k]) for k in ans_fields]
 
         # -- 2. qualify: the bounds' products (tmax from its RAM's read register), then
@@ -306,10 +327,23 @@ class Reducer(wiring.Component):
         with m.If(en):
             m.d.sync += b.tmax_inf.eq((exp_of(a2.tmax) == e_max) & ~sign_of(a2.tmax))
         ok = Signal()
-        m.d.comb += ok.eq(b.hit & ~b.empty & (exp_of(b.t) != e_max)
-                          & (exp_of(b.det) != e_max) & (exp_of(b.det) != 0)
-                          & ~key_lt(k_num, k_lo) & (b.tmax_inf | ~key_lt(k_hi, k_num))
-                          & (excl[b.bank] != b.tri_id + 1))
+        if certified:
+            # a tight hit near tmin or tmax goes to the host: its side of the window is not
+            # certain (model/ordering.py)
+            base = Signal()
+            near_w = Signal()
+            m.d.comb += [base.eq(b.hit & ~b.empty & (exp_of(b.t) != e_max)
+                                 & (exp_of(b.det) != e_max) & (exp_of(b.det) != 0)
+                                 & (excl[b.bank] != b.tri_id + 1)),
+                         near_w.eq(key_near(k_num, k_lo, fmt)
+                                   | (~b.tmax_inf & key_near(k_hi, k_num, fmt))),
+                         ok.eq(base & ~key_lt(k_num, k_lo) & (b.tmax_inf | ~key_lt(k_hi, k_num))
+                               & ~near_w)]
+        else:
+            m.d.comb += ok.eq(b.hit & ~b.empty & (exp_of(b.t) != e_max)
+                              & (exp_of(b.det) != e_max) & (exp_of(b.det) != 0)
+                              & ~key_lt(k_num, k_lo) & (b.tmax_inf | ~key_lt(k_hi, k_num))
+                              & (excl[b.bank] != b.tri_id + 1))
         ans_ram = SyncRAM(ans.size, R, impl=self._ram, name="answer_mem")
         aw = ans_ram.write_port()
         ar = ans_ram.read_port()
@@ -335,13 +369,16 @@ class Reducer(wiring.Component):
                          p.cur.eq(Mux(hist[0].v & (hist[0].ray == b.ray), hist[0].w,
                                       Cat(*[read[k] for k in cmp_l.members])))]
             if certified:
-                # an uncertain pair of another triangle than the excluded one is passed on
-                m.d.sync += p.pass_.eq(b.uncertain & ~b.empty
-                                       & (excl[b.bank] != b.tri_id + 1))
+                # an uncertain pair of another triangle than the excluded one is passed on,
+                # and so is a tight hit near the window
+                m.d.sync += p.pass_.eq((b.uncertain & ~b.empty
+                                        & (excl[b.bank] != b.tri_id + 1))
+                                       | (base & near_w))
         q_v, q = stage(p_v, p, "q", tags)
-        r_v, r3 = stage(q_v, q, "r", {**tags, "better": 4})
+        r_v, r3 = stage(q_v, q, "r", {**tags, "better": 4,
+                                      **({"near": 4} if certified else {})})
         s_new = sign_of(p.t) ^ sign_of(p.det)
-        better = []
+        better, near = [], []
         for n, x in enumerate((p.cur, q, r3, hist[0].w)):
             k_new = raw_reg(p.t, x.det, s_new, f"k_new{n}")
             k_cur = raw_reg(x.t, p.det, sign_of(x.t) ^ sign_of(x.det), f"k_cur{n}")
@@ -349,22 +386,40 @@ class Reducer(wiring.Component):
             with m.If(en):
                 m.d.sync += lower.eq(p.tri_id < x.tri_id)
             better.append(key_lt(k_new, k_cur) | (key_eq(k_new, k_cur) & lower))
+            if certified:
+                near.append(key_near(k_new, k_cur, fmt))
         with m.If(en):
             m.d.sync += r3.better.eq(Cat(*better))
+            if certified:
+                m.d.sync += r3.near.eq(Cat(*near))
 
         valid = Signal(R)
         cur_any = Signal()
         new = Signal(ans)
         m.d.comb += new.eq(Cat(*[r3[k] for k in ans_fields]))
         has = valid.bit_select(r3.ray, 1)
+
+        def last_writer(bits):
+            """The bit of ``bits`` (one per answer compared in stage p) of the answer the
+            beat in r must beat: the last beat before it that wrote its ray's."""
+            return Mux(hist[0].v & (hist[0].ray == r3.ray), bits[1],
+                       Mux(hist[1].v & (hist[1].ray == r3.ray), bits[2],
+                           Mux(hist[2].v & (hist[2].ray == r3.ray), bits[3], bits[0])))
+
         wins = Signal()
-        m.d.comb += wins.eq(Mux(hist[0].v & (hist[0].ray == r3.ray), r3.better[1],
-                                Mux(hist[1].v & (hist[1].ray == r3.ray), r3.better[2],
-                                    Mux(hist[2].v & (hist[2].ray == r3.ray), r3.better[3],
-                                        r3.better[0]))))
+        m.d.comb += wins.eq(last_writer(r3.better))
         write = Signal()
-        m.d.comb += [write.eq(en & r_v & r3.ok & (~has | (~r3.any & wins))),
-                     aw.addr.eq(r3.ray), aw.data.eq(new), aw.en.eq(write)]
+        if certified:
+            # a candidate near the ray's answer goes to the host (model/ordering.py)
+            near_cur = Signal()
+            fold_pass = Signal()
+            m.d.comb += [near_cur.eq(last_writer(r3.near)),
+                         fold_pass.eq(r3.ok & has & ~r3.any & near_cur),
+                         write.eq(en & r_v & r3.ok & (~has | (~r3.any & wins & ~near_cur))),
+                         aw.addr.eq(r3.ray), aw.data.eq(new), aw.en.eq(write)]
+        else:
+            m.d.comb += [write.eq(en & r_v & r3.ok & (~has | (~r3.any & wins))),
+                         aw.addr.eq(r3.ray), aw.data.eq(new), aw.en.eq(write)]
         with m.If(en):
             m.d.sync += [hist[0].v.eq(write), hist[0].ray.eq(r3.ray),
                          hist[0].w.eq(Cat(*[r3[k] for k in cmp_l.members])),
@@ -387,7 +442,7 @@ class Reducer(wiring.Component):
             o_unc = Signal()
             u_word = Signal(ans)
             emit = Signal()
-            m.d.comb += [emit.eq(r_v & r3.pass_ & ~(r3.any & has)),
+            m.d.comb += [emit.eq(r_v & (r3.pass_ | fold_pass) & ~(r3.any & has)),
                          en.eq(~scanning & ~(emit & o_v))]
             with m.If(~scanning):
                 with m.If(o_v & self.o.ready):

@@ -11,27 +11,25 @@ from .vectors import LineKind, columns_of
 
 class RayTriangleCosim(UnitCosim):
     """``ray-triangle``: one untagged line per pair, inputs then the expected result (the
-    certified mode: the record's fields and ``outcome``, the 2 bits above them, compared
-    with the model's ``bound_variant="exp"``, the variant the RTL has)."""
+    certified mode: the record ``RT_RESULT_CERTIFIED``, with ``outcome`` and ``tight``,
+    compared with the model's ``bound_variant="exp"``, the variant the RTL has)."""
 
     name = "ray-triangle"
 
     def __init__(self, fmt, options, driver="batch"):
         super().__init__(fmt, options, driver)
         # lazy: the model loads numba; importing raplas_hdl.sim.cosim needs none
-        from raplas_hdl.model.records import PAIR, RT_RESULT
+        from raplas_hdl.model.records import PAIR, RT_RESULT, RT_RESULT_CERTIFIED
 
         self.mode = self.options.get("mode", "paper")
         self.header_params = {"mode": self.mode}
         ids = {"ray_id_bits": RT_ID_BITS, "tri_id_bits": RT_ID_BITS}
+        self.certified = self.mode == "certified"
         self.pair = PAIR.bind(fmt, **ids)
-        self.res = RT_RESULT.bind(fmt, **ids)
+        self.res = (RT_RESULT_CERTIFIED if self.certified else RT_RESULT).bind(fmt, **ids)
         ins = [(n, w) for n, (_, w) in self.pair.offsets().items()]
         outs = [(n, w) for n, (_, w) in self.res.offsets().items()
                 if n not in ("ray_id", "tri_id")]
-        self.certified = self.mode == "certified"
-        if self.certified:
-            outs.append(("outcome", 2))
         self.outputs = tuple(n for n, _ in outs)
         self.compared = ("ray_id", "tri_id") + self.outputs
         self.kinds = (LineKind(None, tuple(ins + outs)),)
@@ -64,12 +62,20 @@ class RayTriangleCosim(UnitCosim):
         from raplas_hdl.model.ray_triangle import intersect
 
         f = self._split(cases, self.pair)
-        ref = intersect(*(f[k].astype(np.uint32) for k in ("o", "d", "v0", "e1", "e2", "n")),
-                        self.fmt, mode=self.mode,
+        arrs = [np.ascontiguousarray(f[k], np.uint32) for k in ("o", "d", "v0", "e1", "e2", "n")]
+        ref = intersect(*arrs, self.fmt, mode=self.mode,
                         bound_variant="exp" if self.certified else None)
         out = {"ray_id": as_u64(cases["ray_id"]), "tri_id": as_u64(cases["tri_id"])}
         for k in ("hit", "t", "u", "v", "det", "flags") + ("outcome",) * self.certified:
             out[k] = as_u64(ref[k])
+        if self.certified:
+            from raplas_hdl.fp.kernels import rmode_code
+            from raplas_hdl.model.certified import certified_constants
+            from raplas_hdl.model.ordering import tight_flags
+
+            out["tight"] = as_u64(tight_flags(arrs, ref["outcome"], self.fmt,
+                                              certified_constants(self.fmt, 1.0, "exp"),
+                                              rmode_code(self.fmt)))
         for j, ev in enumerate(("overflow", "underflow", "invalid")):
             out[f"n_{ev}"] = as_u64(ref["event_counts"][:, j])
         return out
@@ -93,7 +99,7 @@ class RayTriangleCosim(UnitCosim):
     def simulate(self, cases, simulator, *, valid_density, stall_density, seed,
                  timeout_s=None):
         text, latency = unit_verilog(self.name, self.fmt, self.options, "ray_triangle")
-        out_bits = self.res.size + 2 * self.certified
+        out_bits = self.res.size
         spec = HarnessSpec(dut="ray_triangle", inputs=[("i__payload", self.pair.size)],
                            outputs=[("o__payload", out_bits)], i_valid="i__valid",
                            o_valid="o__valid", i_ready="i__ready", o_ready="o__ready")
@@ -104,14 +110,6 @@ class RayTriangleCosim(UnitCosim):
                           stall_density, seed, timeout_s=timeout_s)
         words = words64(out["o__payload"], out_bits)
         rec = self.res.unpack_words(words)
-        got = {}
-        for s in self.res.fields:
-            got[s.name] = rec[s.name]
-        if self.certified:              # the 2 bits above the record (maybe across a word)
-            lo, sh = divmod(self.res.size, 64)
-            both = words[:, lo] >> np.uint64(sh)
-            if sh == 63:
-                both |= (words[:, lo + 1] & np.uint64(1)) << np.uint64(1)
-            got["outcome"] = both & np.uint64(3)
+        got = {s.name: rec[s.name] for s in self.res.fields}
         info["latency"] = latency
         return got, info

@@ -127,7 +127,8 @@ def window_bundle(cfg: UnitConfig, **window) -> BundleMemory:
 
 def random_beats(rng, n: int, cfg: UnitConfig) -> np.ndarray:
     """Result beats with random and deliberately tied ratios t'/det (3/6 = 1/2, scaled by
-    powers of two), signs, zeros, infinities and NaNs, tri IDs with repeats."""
+    powers of two), some a few ulps off a tie, signs, zeros, infinities and NaNs, tri IDs
+    with repeats."""
     fmt = cfg.fmt
     b = np.zeros(n, RESULT_DTYPE)
     b["ray_id"] = rng.integers(0, cfg.n_rays, n)
@@ -144,6 +145,11 @@ def random_beats(rng, n: int, cfg: UnitConfig) -> np.ndarray:
     det = np.where(k, sgn * den * mult, det)
     bits_t = fpm.encode(t, fmt)
     bits_d = fpm.encode(det, fmt)
+    # near ties: a few ulps off a tie (the certified reduction passes such hits on)
+    off = (rng.random(n) < 0.15) & k
+    frac = bits_t & fmt.man_mask
+    bits_t = np.where(off & (frac > 8) & (frac < fmt.man_mask - 8),
+                      bits_t.astype(np.int64) + rng.integers(-3, 4, n), bits_t).astype(np.uint32)
     special = rng.random(n)
     inf = inf_pattern(fmt)
     bits_t = np.where(special < 0.02, inf, bits_t)
