@@ -46,7 +46,8 @@ from numba import njit
 from ..fp.format import FPFormat
 from .certified import _classify, pair_bounds
 
-__all__ = ["TIGHT_SLACK", "tight_bits", "near_shift", "tight_flags", "product_key", "near"]
+__all__ = ["TIGHT_SLACK", "tight_bits", "near_shift", "tight_flags", "product_key", "near",
+           "key_int", "near_int", "key_lt"]
 
 #: ``tight_bits(fmt) = man_bits - TIGHT_SLACK`` (at least 2): a tight hit's ``t'`` and ``det``
 #: are within ``2**TIGHT_SLACK`` ulps of R's, relative to their own magnitude.
@@ -123,3 +124,29 @@ def near(fmt: FPFormat, a, b):
     s = near_shift(fmt)
     ha, hb = np.asarray(ma) >> s, np.asarray(mb) >> s
     return (np.asarray(sa) == np.asarray(sb)) & (np.abs(ha - hb) <= 1)
+
+
+def key_int(fmt: FPFormat, x: int, y: int, sign: int) -> tuple:
+    """:func:`product_key` of one pair of patterns, in Python integers (the fold's loop)."""
+    mb, eb = fmt.man_bits, fmt.exp_bits
+    ex, ey = (x >> mb) & ((1 << eb) - 1), (y >> mb) & ((1 << eb) - 1)
+    if ex == 0 or ey == 0:
+        return 0, 0
+    one = 1 << mb
+    p = ((x & (one - 1)) | one) * ((y & (one - 1)) | one)
+    top = (p >> (2 * mb + 1)) & 1
+    low = (1 << (2 * mb + 1)) - 1
+    sig = p & low if top else (p << 1) & low
+    return sign & 1, ((ex + ey + top) << (2 * mb + 1)) | sig
+
+
+def near_int(fmt: FPFormat, a: tuple, b: tuple) -> bool:
+    """:func:`near` of two :func:`key_int` keys."""
+    s = near_shift(fmt)
+    return a[0] == b[0] and abs((a[1] >> s) - (b[1] >> s)) <= 1
+
+
+def key_lt(a: tuple, b: tuple) -> bool:
+    """``a < b`` for two :func:`key_int` keys (the order of the products' values)."""
+    (sa, ma), (sb, mb) = a, b
+    return bool((sa and not sb) or (not sa and not sb and ma < mb) or (sa and sb and mb < ma))

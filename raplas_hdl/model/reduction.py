@@ -51,7 +51,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..fp import model as fpm
-from .ordering import near, near_shift, product_key
+from .ordering import key_int, key_lt, near, near_int, product_key
 from .records import ANSWER, OUTCOME_HIT, OUTCOME_UNCERTAIN, answer_record
 
 __all__ = ["ANSWER_DTYPE", "answer_dtype", "uncertain_pairs", "certified_classes",
@@ -189,7 +189,8 @@ def certified_classes(config, beats, bundle):
     if base.size == 0:
         return cand, passed
     t, det = t[base], det[base]
-    tmax = np.asarray(bundle.window_tmax(config), np.int64)[beats["ray_id"][base].astype(np.int64)]
+    tmax = np.asarray(bundle.window_tmax(config), np.int64)
+    tmax = tmax[beats["ray_id"][base].astype(np.int64)]
     one = np.int64(((1 << (fmt.exp_bits - 1)) - 1) << fmt.man_bits)
     k_num = product_key(fmt, t, one, (t >> sign) ^ (det >> sign))
     k_lo = product_key(fmt, np.full(base.size, bundle.tmin, np.int64), det, bundle.tmin >> sign)
@@ -200,11 +201,6 @@ def certified_classes(config, beats, bundle):
     cand[base] = ok & ~near_w
     passed[base] |= near_w
     return cand, passed
-
-
-def _key_lt(a, b):
-    (sa, ma), (sb, mb) = a, b
-    return bool((sa and not sb) or (not sa and not sb and ma < mb) or (sa and sb and mb < ma))
 
 
 def _certified_nearest(config, beats, cand):
@@ -227,51 +223,40 @@ def _certified_nearest(config, beats, cand):
         t = beats["t"].astype(np.int64).tolist()
         det = beats["det"].astype(np.int64).tolist()
         sign = fmt.width - 1
-        shift = near_shift(fmt)
         for i, r in zip(multi.tolist(), ray[multi].tolist()):
             k = int(best[r])
             if k < 0:
                 best[r] = i
                 continue
-            sn, mn = _key(fmt, t[i], det[k], (t[i] >> sign) ^ (det[i] >> sign))
-            sc, mc = _key(fmt, t[k], det[i], (t[k] >> sign) ^ (det[k] >> sign))
-            if sn == sc and abs((mn >> shift) - (mc >> shift)) <= 1:     # near
+            k_new = key_int(fmt, t[i], det[k], (t[i] >> sign) ^ (det[i] >> sign))
+            k_cur = key_int(fmt, t[k], det[i], (t[k] >> sign) ^ (det[k] >> sign))
+            if near_int(fmt, k_new, k_cur):
                 passed[i] = True
-            elif _key_lt((sn, mn), (sc, mc)):
+            elif key_lt(k_new, k_cur):
                 best[r] = i
     return best, passed
 
 
-def _key(fmt, x: int, y: int, sign: int):
-    """:func:`~raplas_hdl.model.ordering.product_key` of one pair of patterns, in Python
-    integers (the fold's loop)."""
-    mb, eb = fmt.man_bits, fmt.exp_bits
-    ex, ey = (x >> mb) & ((1 << eb) - 1), (y >> mb) & ((1 << eb) - 1)
-    if ex == 0 or ey == 0:
-        return 0, 0
-    one = 1 << mb
-    p = ((x & (one - 1)) | one) * ((y & (one - 1)) | one)
-    top = (p >> (2 * mb + 1)) & 1
-    low = (1 << (2 * mb + 1)) - 1
-    sig = p & low if top else (p << 1) & low
-    return sign & 1, ((ex + ey + top) << (2 * mb + 1)) | sig
+def _certified_fold(config, beats, bundle):
+    """A certified run's answers (per ray the answer's index, -1: none) and which beats are
+    passed on to the host (module docstring)."""
+    cand, passed = certified_classes(config, beats, bundle)
+    if bundle.any_hit:
+        best = first_answers(config.n_rays, beats["ray_id"].astype(np.int64), cand)
+        first = best[beats["ray_id"].astype(np.int64)]
+        return best, passed & ((first < 0) | (np.arange(beats.size) < first))
+    best, near_fold = _certified_nearest(config, beats, cand)
+    return best, passed | near_fold
 
 
-def uncertain_pairs(config, beats, bundle, ok=None) -> np.ndarray:
+def uncertain_pairs(config, beats, bundle) -> np.ndarray:
     """Which beats of a certified run's unreduced stream leave the reduced unit as uncertain
     pairs (bool array; all False in another mode): those :func:`certified_classes` passes on
     (in an any-hit bundle only before their ray's first candidate), and in a nearest-hit
-    bundle the candidates near their ray's answer (:func:`_certified_nearest`). ``ok`` is
-    ignored (kept for the callers of the earlier signature)."""
-    out = np.zeros(beats.size, bool)
+    bundle the candidates near their ray's answer when they came."""
     if config.mode != "certified" or beats.size == 0 or beats["empty"].any():
-        return out
-    cand, passed = certified_classes(config, beats, bundle)
-    ray = beats["ray_id"].astype(np.int64)
-    if bundle.any_hit:
-        first = first_answers(config.n_rays, ray, cand)[ray]
-        return passed & ((first < 0) | (np.arange(beats.size) < first))
-    return passed | _certified_nearest(config, beats, cand)[1]
+        return np.zeros(beats.size, bool)
+    return _certified_fold(config, beats, bundle)[1]
 
 
 def reduce_run(config, beats, bundle):
@@ -297,14 +282,7 @@ def reduce_run(config, beats, bundle):
     certified = config.mode == "certified"
     ray = beats["ray_id"].astype(np.int64)
     if certified:
-        cand, passed = certified_classes(config, beats, bundle)
-        if bundle.any_hit:
-            best = first_answers(config.n_rays, ray, cand)
-            first = best[ray] if ray.size else ray
-            unc_mask = passed & ((first < 0) | (np.arange(beats.size) < first))
-        else:
-            best, near_fold = _certified_nearest(config, beats, cand)
-            unc_mask = passed | near_fold
+        best, unc_mask = _certified_fold(config, beats, bundle)
     else:
         ok = candidates(fmt, beats, bundle.tmin, bundle.window_tmax(config), bundle.exclude)
         if bundle.any_hit:

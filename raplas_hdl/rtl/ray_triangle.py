@@ -176,7 +176,9 @@ class RayTriangleUnit(wiring.Component):
         det as bit patterns), ``flags`` (OR of the event flags of the pair's operations) and
         ``n_overflow``, ``n_underflow``, ``n_invalid`` (how many of the pair's operations
         raised each event, :data:`EVENT_COUNT_BITS` bits each); certified mode: also
-        ``outcome`` (0 miss, 1 hit, 2 uncertain; ``hit = outcome == 1``).
+        ``outcome`` (0 miss, 1 hit, 2 uncertain; ``hit = outcome == 1``) and ``tight`` (a hit
+        whose t' and det are each at least ``2**tight_bits`` times their bounds:
+        :mod:`raplas_hdl.model.ordering`).
 
     Raises
     ------

@@ -17,7 +17,8 @@ from raplas_hdl.fp import FP16, FP24, FP32, FPFormat
 from raplas_hdl.fp import model as fpm
 from raplas_hdl.fp.kernels import rmode_code
 from raplas_hdl.model.certified import certified_constants, intersect_certified, pair_bounds
-from raplas_hdl.model.ordering import near, near_shift, product_key, tight_bits, tight_flags
+from raplas_hdl.model.ordering import (key_int, key_lt, near, near_int, near_shift, product_key,
+                                      tight_bits, tight_flags)
 
 FORMATS = [FP16, FP24, FP32, FPFormat(6, 8), FPFormat(5, 6)]
 
@@ -59,14 +60,18 @@ def test_keys_order_and_near_margin(fmt):
     kb = product_key(fmt, x2, y2, (x2 >> sg) ^ (y2 >> sg))
     close = near(fmt, ka, kb)
     assert 50 < close.sum() < n - 50
+    # the fold's scalar forms are the same functions
+    for i in range(0, n, 7):
+        a = key_int(fmt, int(x[i]), int(y[i]), int((x[i] >> sg) ^ (y[i] >> sg)))
+        b = key_int(fmt, int(x2[i]), int(y2[i]), int((x2[i] >> sg) ^ (y2[i] >> sg)))
+        assert a == (ka[0][i], ka[1][i]) and b == (kb[0][i], kb[1][i])
+        assert near_int(fmt, a, b) == close[i]
     xa, ya, xb, yb = (_exact(fmt, v) for v in (x, y, x2, y2))
     margin = _margin(fmt)
     for i in range(n):
         pa, pb = xa[i] * ya[i], xb[i] * yb[i]
         # the key orders as the product's value (sign and magnitude)
-        lt = (ka[0][i] and not kb[0][i]) or (not ka[0][i] and not kb[0][i]
-                                             and ka[1][i] < kb[1][i]) \
-            or (ka[0][i] and kb[0][i] and kb[1][i] < ka[1][i])
+        lt = key_lt((int(ka[0][i]), int(ka[1][i])), (int(kb[0][i]), int(kb[1][i])))
         assert lt == (pa < pb), i
         if not close[i] and pa != 0 and pb != 0 and (pa > 0) == (pb > 0):
             lo, hi = sorted((abs(pa), abs(pb)))
