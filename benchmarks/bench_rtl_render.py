@@ -119,7 +119,8 @@ def main(argv=None):
     ap.add_argument("--size", type=_size, default=(32, 32))
     ap.add_argument("--icarus-size", type=_size, default=(8, 8))
     ap.add_argument("--shadow", type=_size, default=(3, 3))
-    ap.add_argument("--mode", default="paper")
+    ap.add_argument("--mode", default="certified",
+                    help="render mode (default certified, the render's default; or paper)")
     ap.add_argument("--sims", default="verilator,icarus")
     ap.add_argument("--instances", type=int, default=None,
                     help="live simulations per unit configuration (default: the backend's)")

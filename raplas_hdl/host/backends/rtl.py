@@ -7,6 +7,7 @@ from __future__ import annotations
 import contextlib
 import importlib
 import os
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -28,9 +29,9 @@ class RtlBackend(UnitBackend):
     through live simulations of the unit (:class:`raplas_hdl.sim.drive.unit_harness.UnitSession`):
     ``instances`` per unit configuration a render needs (the primary and the shadow bundle
     sizes), started on first use with the scene loaded once each, then fed one round of
-    runs per :meth:`stream` call, the round's runs cut into one contiguous share per
-    instance (by their sphere counts) and simulated at once; the results are put back in
-    run order, and each run's stream and counters do not depend on the runs simulated
+    runs per :meth:`stream` call, the round's runs cut into :attr:`CHUNKS` contiguous shares
+    per instance (by their sphere counts), each simulated by the first instance free; the
+    results are put back in run order, and each run's stream and counters do not depend on the runs simulated
     before it, so they are those of one instance. The simulator builds are cached on disk
     across renders. A new scene (:meth:`load`) or :meth:`close` ends the sessions. With waveforms asked for
     (``WAVES=1``, ``render --waves``) the runs go through the per-cycle cocotb driver
@@ -49,6 +50,10 @@ class RtlBackend(UnitBackend):
     #: Live simulations per unit configuration by default: one per core, at most two (a
     #: render's passes are sequential, so two cover its rounds; the host needs the rest).
     DEFAULT_INSTANCES = max(1, min(2, os.cpu_count() or 1))
+    #: Shares of a round per instance (:meth:`run_runs`); the bunny 256x256 certified frame
+    #: took 144.5 s with one share per instance, 133.7 s with 4, 127.2 s with 8 and 129.5 s
+    #: with 16 (one run each, benchmarks/bench_rtl_render.py).
+    CHUNKS = 8
 
     def __init__(self, fmt: FPFormat = FP24, mode: str = "conservative", testers=None,
                  margin_scale: int = 1, sim: str = "icarus", reduce: bool = False,
@@ -135,10 +140,10 @@ class RtlBackend(UnitBackend):
         """The first live simulation of ``config`` (:meth:`sessions`)."""
         return self.sessions(config)[0]
 
-    def _shares(self, runs):
-        """``runs`` cut into at most :attr:`instances` contiguous shares of about equal
-        sphere counts (a run without a sphere list counts every sphere)."""
-        n = min(self.instances, len(runs))
+    def _shares(self, runs, parts: int | None = None):
+        """``runs`` cut into at most ``parts`` (default :attr:`instances`) contiguous shares
+        of about equal sphere counts (a run without a sphere list counts every sphere)."""
+        n = min(self.instances if parts is None else parts, len(runs))
         if n <= 1:
             return [list(runs)]
         weight = np.array([1 + (self.scene_memory.n_spheres if r[1] is None
@@ -156,9 +161,26 @@ class RtlBackend(UnitBackend):
             return run_runs(self.sim, config, self.scene_memory, runs)
         ss = self.sessions(config)
         runs = [as_run(r) for r in runs]
-        shares = self._shares(runs)
         t0 = time.perf_counter()
-        parts = self._map(lambda k: ss[k].run(shares[k]), list(range(len(shares))))
+        if len(ss) == 1:
+            parts = [ss[0].run(runs)]
+        else:
+            # CHUNKS shares per instance, each taken by the first instance free: a share
+            # that simulates longer than its sphere count said no longer holds the round
+            shares = self._shares(runs, len(ss) * self.CHUNKS)
+            parts = [None] * len(shares)
+            order = iter(range(len(shares)))
+            lock = threading.Lock()
+
+            def serve(k):
+                while True:
+                    with lock:
+                        i = next(order, None)
+                    if i is None:
+                        return
+                    parts[i] = ss[k].run(shares[i])
+
+            self._map(serve, list(range(min(len(ss), len(shares)))))
         st = self.session_stats[config]
         st.update(cycles=sum(s.cycles for s in ss), rounds=sum(s.rounds for s in ss))
         st["rounds_s"] += time.perf_counter() - t0
