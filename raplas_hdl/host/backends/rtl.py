@@ -31,10 +31,10 @@ class RtlBackend(UnitBackend):
     sizes), started on first use with the scene loaded once each, then fed one round of
     runs per :meth:`stream` call, the round's runs cut into :attr:`CHUNKS` contiguous shares
     per instance (by their sphere counts), each simulated by the first instance free; the
-    results are put back in run order, and each run's stream and counters do not depend on the runs simulated
-    before it, so they are those of one instance. The simulator builds are cached on disk
-    across renders. A new scene (:meth:`load`) or :meth:`close` ends the sessions. With waveforms asked for
-    (``WAVES=1``, ``render --waves``) the runs go through the per-cycle cocotb driver
+    results are put back in run order, and each run's stream and counters do not depend on
+    the runs simulated before it, so they are those of one instance. The simulator builds
+    are cached on disk across renders. A new scene (:meth:`load`) or :meth:`close` ends the
+    sessions. With waveforms asked for (``WAVES=1``, ``render --waves``) the runs go through the per-cycle cocotb driver
     (:func:`raplas_hdl.sim.drive.unit_driver.run_runs`, one simulation per round) instead.
 
     Raises
