@@ -34,8 +34,9 @@ class RtlBackend(UnitBackend):
     results are put back in run order, and each run's stream and counters do not depend on
     the runs simulated before it, so they are those of one instance. The simulator builds
     are cached on disk across renders. A new scene (:meth:`load`) or :meth:`close` ends the
-    sessions. With waveforms asked for (``WAVES=1``, ``render --waves``) the runs go through the per-cycle cocotb driver
-    (:func:`raplas_hdl.sim.drive.unit_driver.run_runs`, one simulation per round) instead.
+    sessions. With waveforms asked for (``WAVES=1``, ``render --waves``) the runs go
+    through the per-cycle cocotb driver (:func:`raplas_hdl.sim.drive.unit_driver.run_runs`,
+    one simulation per round) instead.
 
     Raises
     ------
