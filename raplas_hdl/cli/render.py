@@ -23,10 +23,10 @@ __all__ = [
     "settings_from_args",
 ]
 
-#: Limits of the render options (stated in --help, checked while parsing).
 #: The render mode without ``--mode``: the exact reference's nearest triangle and visibility
 #: on every ray (docs/certified-render.md); ``--mode paper`` is the paper's own behaviour.
 DEFAULT_MODE = "certified"
+#: Limits of the render options (stated in --help, checked while parsing).
 MAX_TRIS_PER_SPHERE = 4096
 MAX_FANOUT = 64
 MAX_BATCH = 4096

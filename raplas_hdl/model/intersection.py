@@ -31,8 +31,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..fp.kernels import rmode_code
-from .certified import certified_constants
 from .config import COUNTER_NAMES, UnitConfig
 from .memory_image import BundleMemory, Run, SceneMemory, as_run
 from .ordering import tight_flags
@@ -230,13 +228,9 @@ def run_runs(config: UnitConfig, scene: SceneMemory, runs) -> list:
                         margin_scale=config.margin_scale,
                         bound_variant=UNIT_BOUND_VARIANT if certified else None)
         if certified:
-            arrs = [np.ascontiguousarray(x, np.uint32) for x in
-                    (o, d, scene.v0[tri_all], scene.e1[tri_all], scene.e2[tri_all],
-                     scene.n[tri_all])]
-            res["tight"] = tight_flags(arrs, res["outcome"], config.fmt,
-                                       certified_constants(config.fmt, config.margin_scale,
-                                                           UNIT_BOUND_VARIANT),
-                                       rmode_code(config.fmt))
+            res["tight"] = tight_flags((o, d, scene.v0[tri_all], scene.e1[tri_all],
+                                        scene.e2[tri_all], scene.n[tri_all]), res["outcome"],
+                                       config.fmt, config.margin_scale, UNIT_BOUND_VARIANT)
     out, pos = [], 0
     dtype = result_dtype(config)
     for _, ray, tri, c in parts:

@@ -44,7 +44,8 @@ import numpy as np
 from numba import njit
 
 from ..fp.format import FPFormat
-from .certified import _classify, pair_bounds
+from ..fp.kernels import rmode_code
+from .certified import _classify, certified_constants, pair_bounds
 
 __all__ = ["TIGHT_SLACK", "tight_bits", "near_shift", "tight_flags", "product_key", "near",
            "key_int", "near_int", "key_lt"]
@@ -84,16 +85,20 @@ def _tight_lanes(o, d, v0, e1, e2, nn, idx, e, m, r, cc, q, out):
         out[i] = (t_ge or t_le) and (d_ge or d_le)
 
 
-def tight_flags(arrs, outcome, fmt: FPFormat, cc, rmode: int) -> np.ndarray:
+def tight_flags(arrs, outcome, fmt: FPFormat, scale: float = 1.0,
+                variant: str = "exp") -> np.ndarray:
     """The ``tight`` bit of every pair (bool): its certain hits (``outcome`` 1) whose
     ``t'`` and ``det`` pass the test above, from the unit's own bounds (:func:`pair_bounds`;
-    ``arrs`` the validated pair arrays ``(o, d, v0, e1, e2, n)``, ``cc`` the
-    :func:`~raplas_hdl.model.certified.certified_constants` of the unit's variant)."""
+    ``arrs`` the pair arrays ``(o, d, v0, e1, e2, n)``, patterns of shape (n, 3); ``scale``
+    and ``variant`` those of the outcome, :func:`~raplas_hdl.model.certified.certified_constants`;
+    ``exp`` is the RTL's)."""
     out = np.zeros(np.asarray(outcome).size, np.bool_)
     idx = np.flatnonzero(np.asarray(outcome) == 1).astype(np.int64)
     if idx.size:
+        arrs = [np.ascontiguousarray(a, np.uint32) for a in arrs]
         _tight_lanes(*arrs, idx, np.int64(fmt.exp_bits), np.int64(fmt.man_bits),
-                     np.int64(rmode), cc, np.float64(tight_bits(fmt)), out)
+                     np.int64(rmode_code(fmt)), certified_constants(fmt, scale, variant),
+                     np.float64(tight_bits(fmt)), out)
     return out
 
 

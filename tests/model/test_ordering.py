@@ -96,7 +96,7 @@ def test_tight_flags_follow_the_bounds():
                  fpm.encode(nn, fmt))]
         cc = certified_constants(fmt, 1.0, "exp")
         res = intersect_certified(arrs, fmt, 1.0, "exp")
-        tight = tight_flags(arrs, res["outcome"], fmt, cc, rmode_code(fmt))
+        tight = tight_flags(arrs, res["outcome"], fmt, 1.0, "exp")
         hits = res["outcome"] == 1
         assert hits.sum() > 100 and not tight[~hits].any()
         q = tight_bits(fmt)

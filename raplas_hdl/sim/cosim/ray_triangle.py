@@ -69,13 +69,9 @@ class RayTriangleCosim(UnitCosim):
         for k in ("hit", "t", "u", "v", "det", "flags") + ("outcome",) * self.certified:
             out[k] = as_u64(ref[k])
         if self.certified:
-            from raplas_hdl.fp.kernels import rmode_code
-            from raplas_hdl.model.certified import certified_constants
             from raplas_hdl.model.ordering import tight_flags
 
-            out["tight"] = as_u64(tight_flags(arrs, ref["outcome"], self.fmt,
-                                              certified_constants(self.fmt, 1.0, "exp"),
-                                              rmode_code(self.fmt)))
+            out["tight"] = as_u64(tight_flags(arrs, ref["outcome"], self.fmt, 1.0, "exp"))
         for j, ev in enumerate(("overflow", "underflow", "invalid")):
             out[f"n_{ev}"] = as_u64(ref["event_counts"][:, j])
         return out
