@@ -33,7 +33,7 @@ docs/results/render_bench.json`` updates the committed one.
 
 Usage::
 
-    python benchmarks/bench_render.py [--mesh FILE] [--size 256x256] [--shadow 3x3]
+    python benchmarks/bench_render.py [--mesh SCENE|FILE] [--size 256x256] [--shadow 3x3]
         [--backends float64,model] [--format FP24] [--mode certified] [--rtl-sim icarus]
         [--limit-pairs N] [--compare-modes paper,certified [--repeat 3]] [--out FILE.json]
 """
@@ -66,7 +66,6 @@ from raplas_hdl.host.output import (  # noqa: E402
     save_png,
 )
 from raplas_hdl.host.render import RenderSettings, render  # noqa: E402
-from raplas_hdl.host.meshes import MESHES  # noqa: E402
 from raplas_hdl.host.scenes import get_scene  # noqa: E402
 from raplas_hdl.model.modes import MODES  # noqa: E402
 
@@ -344,7 +343,8 @@ def _stage_lines(entry) -> list[str]:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--mesh", default=DEFAULT_MESH,
-                   help="a shipped mesh's name or a mesh file (default stanford-bunny)")
+                   help="a scene (cornell, ...), a shipped mesh's name or a mesh file "
+                        "(default stanford-bunny)")
     p.add_argument("--size", default="256x256")
     p.add_argument("--tile", default="8x8")
     p.add_argument("--shadow", default="3x3")
@@ -375,10 +375,10 @@ def main(argv=None) -> int:
     if args.repeat < 1:
         p.error("--repeat must be at least 1")
 
-    mesh = MESHES.get(args.mesh, args.mesh)
-    if not Path(mesh).exists():
-        print(f"bench_render: {args.mesh} is neither a shipped mesh ({', '.join(MESHES)}) nor "
-              "a file", file=sys.stderr)
+    try:    # before any work: a scene by name (cornell, ...), a shipped mesh or a file
+        scene = get_scene(args.mesh)
+    except (ValueError, OSError) as exc:
+        print(f"bench_render: {exc}", file=sys.stderr)
         return 2
     w, h = size(args.size)
     rows, cols = lattice(args.tile, "--tile")
@@ -386,7 +386,6 @@ def main(argv=None) -> int:
     fmt = parse_format(args.format)
     settings = RenderSettings(w, h, rows, cols, sr, sc, batch_spheres=args.batch,
                               threads=args.threads)
-    scene = get_scene(str(mesh))
     n_tiles = len(scene.camera.tiles(w, h, rows, cols))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import tempfile
 import time
@@ -60,6 +61,12 @@ def _same(a, b) -> bool:
     return True
 
 
+def _cpu() -> float:
+    """CPU seconds of this process and its finished children (the simulators)."""
+    t = os.times()
+    return t.user + t.system + t.children_user + t.children_system
+
+
 def bench(sim, scene_name, size, shadow, mode, model_cache, instances=None):
     scene = get_scene(scene_name)
     st = RenderSettings(*size, rows=8, cols=8, shadow_rows=shadow[0], shadow_cols=shadow[1],
@@ -73,12 +80,15 @@ def bench(sim, scene_name, size, shadow, mode, model_cache, instances=None):
         be.instances = instances
     with tempfile.TemporaryDirectory(prefix="raplas-bench-rtl-") as tmp:
         be.record_dir = tmp
-        t0 = time.perf_counter()
+        load0 = os.getloadavg()
+        t0, c0 = time.perf_counter(), _cpu()
         rtl = render(scene, be, st)
         wall = time.perf_counter() - t0
+        load1 = os.getloadavg()
         stats = {f"{c.rows}x{c.cols}": dict(v) for c, v in be.session_stats.items()}
         configs = {f"{c.rows}x{c.cols}": c for c in be.session_stats}
         be.close()
+        cpu = _cpu() - c0      # the simulators' CPU counts once they have exited
         # certified: the unit's certain hits are those of its bound variant (exp), the
         # model pass's of lead3 (docs/certified-render.md): every other counter must agree
         skip = ("hits",) if mode == "certified" else ()
@@ -102,7 +112,9 @@ def bench(sim, scene_name, size, shadow, mode, model_cache, instances=None):
     out = {
         "simulator": sim, "scene": scene_name, "size": list(size), "shadow": list(shadow),
         "mode": mode, "instances": be.instances,
-        "equal_to_model": equal, "render_s": wall, "sessions": stats, "replay": limit,
+        "equal_to_model": equal, "render_s": wall, "render_cpu_s": cpu,
+        "load_before": list(load0), "load_after": list(load1), "sessions": stats,
+        "replay": limit,
         "cycles": cycles, "rtl_s": rounds_s,
         "render_cycles_per_s": cycles / wall, "rtl_cycles_per_s": cycles / rounds_s,
         "limit_cycles": lim_cycles, "limit_s": lim_s, "limit_cycles_per_s": lim_cycles / lim_s,
@@ -135,7 +147,8 @@ def main(argv=None):
         (args.out / "rtl_render.json").write_text(json.dumps(results, indent=1))
         print(f"{sim:9s} {args.scene} {size[0]}x{size[1]} {args.mode} x{r['instances']}: "
               f"equal={r['equal_to_model']} "
-              f"render {r['render_s']:.1f} s, {r['cycles']:,} cycles, "
+              f"render {r['render_s']:.1f} s (CPU {r['render_cpu_s']:.1f} s, load "
+              f"{r['load_before'][0]:.2f}), {r['cycles']:,} cycles, "
               f"{r['render_cycles_per_s']:,.0f} cyc/s (render), "
               f"{r['rtl_cycles_per_s']:,.0f} cyc/s (RTL rounds), "
               f"limit {r['limit_cycles_per_s']:,.0f} cyc/s; ratio {r['ratio_render']:.2f} "

@@ -30,7 +30,7 @@ from .kernels import N_COUNTERS
 
 __all__ = ["Arithmetic", "BundleBatch", "EngineScene", "CullResult", "cull_pass",
            "trace_pass", "round_runs", "select_runs", "runs_of", "result_beats",
-           "COUNTER_NAMES"]
+           "stream_beats", "COUNTER_NAMES"]
 
 
 @dataclass
@@ -267,6 +267,13 @@ def result_beats(counters) -> int:
     issued pair, one (empty) for a run that issued none."""
     pairs = np.asarray(counters)[:, COUNTER_NAMES.index("pairs_issued")]
     return int(np.maximum(pairs, 1).sum())
+
+
+def stream_beats(results) -> int:
+    """Beats of the runs' result streams themselves (``RunResult`` each): the count
+    :func:`result_beats` gives from per-run counters, which an overlapped round of the unit
+    does not have."""
+    return sum(max(res.ray_id.size, 1) for res in results)
 
 
 def pass_arguments(scene: EngineScene, batch: BundleBatch, run_b, run_start, run_sph,

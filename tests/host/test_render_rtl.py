@@ -65,3 +65,56 @@ def test_rounds_are_shared_in_order_and_balanced():
 
     with pytest.raises(ValueError, match="instances"):
         RtlBackend(FP24, "paper", sim="icarus", instances=0)
+
+
+def test_stream_rounds_overlap_with_the_streams_and_totals_of_runs_one_at_a_time():
+    """The backend's stream rounds are overlapped (the next command while a run goes): the
+    same streams as runs one at a time and as the model, the same counter totals, fewer
+    clocks; the result beats counted from the streams are those of the model's per-run
+    counters; the round's beats decoded at once equal them decoded run by run."""
+    from raplas_hdl.engine.passes import COUNTER_NAMES, result_beats, stream_beats
+    from raplas_hdl.model.intersection import run_runs
+
+    scene = get_scene("soup", n=16)
+    st = RenderSettings(8, 8, rows=2, cols=2, shadow_rows=2, shadow_cols=2, tris_per_sphere=4,
+                        batch_spheres=4, chunk=4096, progress=False)
+    backend = make_backend("rtl", FP24, mode="paper", sim="verilator")
+    seen, run_runs_rtl = [], backend.run_runs
+
+    def spy(config, runs, overlap=False):
+        seen.append((config, list(runs), overlap))
+        return run_runs_rtl(config, runs, overlap=overlap)
+
+    backend.run_runs = spy
+    render(scene, backend, st)
+    config, runs, overlap = max(seen, key=lambda s: len(s[1]))
+    assert overlap and len(runs) >= 8 and all(o for _, _, o in seen)
+    sessions = backend.sessions(config)
+
+    def clocked(ovl):
+        c0 = sum(s.cycles for s in sessions)
+        out = run_runs_rtl(config, runs, overlap=ovl)
+        return out, sum(s.cycles for s in sessions) - c0
+
+    (apart, c_apart), (over, c_over) = clocked(False), clocked(True)
+    model = run_runs(config, backend.scene_memory, runs)
+    assert c_over < c_apart
+    for (s_a, _), (s_o, _), (s_m, _) in zip(apart, over, model):
+        np.testing.assert_array_equal(s_o, s_a)
+        np.testing.assert_array_equal(s_o, s_m)
+    for name in COUNTER_NAMES:
+        want = sum(c[name] for _, c in model)
+        assert sum(c[name] for _, c in over) == want == sum(c[name] for _, c in apart), name
+    assert [c["pairs_issued"] for _, c in apart] == [c["pairs_issued"] for _, c in model]
+    per_run = np.array([[c[n] for n in COUNTER_NAMES] for _, c in model])
+    assert stream_beats(backend._convert_all(over)) == result_beats(per_run)
+    # the round's beats decoded at once, with a run that has no sphere (one empty beat)
+    both = over + run_runs(config, backend.scene_memory, [(runs[0][0], np.zeros(0, np.int64))])
+    whole = backend._convert_all(both)
+    assert whole[-1].ray_id.size == 0 and any(r.hit.any() for r in whole)
+    for r, (s, c) in zip(whole, both):              # as run by run
+        one = backend._convert(s, c)
+        for f in ("ray_id", "tri_id", "hit", "t", "u", "v", "flags"):
+            np.testing.assert_array_equal(getattr(r, f), getattr(one, f))
+        assert r.counters == one.counters
+    backend.close()

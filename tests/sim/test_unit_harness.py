@@ -21,6 +21,7 @@ from raplas_hdl.sim.drive.unit_harness import (
     UnitSession,
     encode_ops,
     ops_bytes,
+    parse_beats,
     parse_hex,
     scene_images,
 )
@@ -108,21 +109,32 @@ def test_scene_images_are_the_write_port_words(scene_runs):
     assert tl[:c] == [int(x) for x in scene.tri_lists[0][:c]]
 
 
-def test_ops_and_hex_round_trip(scene_runs):
+def test_ops_and_beats_round_trip(scene_runs):
     scene, runs = scene_runs
     op, addr, data = encode_ops(CFG, scene, runs)
-    text = ops_bytes(op, addr, data)
-    lines = text.decode().splitlines()
-    assert len(lines) == op.size and all(len(x) == 19 for x in lines)
-    back = parse_hex(b"".join(x.replace(" ", "").encode() + b"\n" for x in lines), 17)
-    assert np.array_equal(back[:, 0] & np.uint64(0xFFFFFFFF), data)
-    assert np.array_equal(back[:, 0] >> np.uint64(32), addr)
-    assert np.array_equal(back[:, 1], op)
+    raw = ops_bytes(op, addr, data)
+    assert len(raw) == 12 * op.size          # three little-endian 32-bit words per op
+    back = np.frombuffer(raw, "<u4").reshape(-1, 3)
+    assert np.array_equal(back[:, 0], op)
+    assert np.array_equal(back[:, 1], addr)
+    assert np.array_equal(back[:, 2], data)
     lay = RESULT.bind(CFG)
     vals = np.random.default_rng(0).integers(0, 1 << 62, (50, lay.n_words)).astype(np.uint64)
     vals[:, -1] &= np.uint64((1 << (lay.size - 64 * (lay.n_words - 1))) - 1)
+    n32 = -(-lay.size // 32)
+    # as $fwrite "%u" writes them: 32-bit words, least significant first, little-endian
+    words = [[(sum(int(w) << (64 * j) for j, w in enumerate(v)) >> (32 * k)) & 0xFFFFFFFF
+              for k in range(n32)] for v in vals]
+    two = np.array(words, "<u4").tobytes()
+    assert np.array_equal(parse_beats(two, lay.size), vals)
+    # "%z": each word followed by its X/Z mask
+    four = np.stack([np.array(words, "<u4"), np.zeros((50, n32), "<u4")], axis=2)
+    assert np.array_equal(parse_beats(four.tobytes(), lay.size, four_state=True), vals)
+    four[7, 1, 1] = 4                          # an X in beat 7
+    with pytest.raises(HarnessError, match="beat 7 has X or Z"):
+        parse_beats(four.tobytes(), lay.size, four_state=True)
+    with pytest.raises(HarnessError, match="not made of"):
+        parse_beats(two[:-4], lay.size)
     digits = -(-lay.size // 4)
-    hexed = b"".join(f"{int(v[1]) << 64 | int(v[0]):0{digits}x}\n".encode() for v in vals)
-    assert np.array_equal(parse_hex(hexed, digits), vals)
     with pytest.raises(HarnessError, match="not hex"):
         parse_hex(b"x" * digits + b"\n", digits)

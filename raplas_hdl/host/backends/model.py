@@ -22,5 +22,6 @@ class ModelBackend(UnitBackend):
     name = "model"
     runs_compiled = True
 
-    def run_runs(self, config, runs):
+    def run_runs(self, config, runs, overlap: bool = False):
+        """The model's streams and counters, per run (``overlap`` changes neither)."""
         return run_runs(config, self.scene_memory, runs)

@@ -16,8 +16,15 @@ import numpy as np
 
 from ...fp.format import FP24, FPFormat
 from ...model.memory_image import as_run
+from ...model.records import COUNTERS
 from .base import BackendUnavailable
 from .unit import UnitBackend
+
+
+def _fill_counters(results):
+    """Zero counters for the runs of an overlapped round that have none of their own."""
+    return [(stream, counters if counters is not None else dict.fromkeys(COUNTERS.names, 0))
+            for stream, counters in results]
 
 
 class RtlBackend(UnitBackend):
@@ -32,7 +39,11 @@ class RtlBackend(UnitBackend):
     runs per :meth:`stream` call, the round's runs cut into :attr:`CHUNKS` contiguous shares
     per instance (by their sphere counts), each simulated by the first instance free; the
     results are put back in run order, and each run's stream and counters do not depend on
-    the runs simulated before it, so they are those of one instance. The simulator builds
+    the runs simulated before it, so they are those of one instance. A :meth:`stream` share
+    is an overlapped round (the unit takes the next command while a run goes, as the
+    hardware's host would: the bunny 256x256 certified frame's shadow pass takes 32.9 M
+    clocks, 40.4 M with a drain after every run); its counters are then the share's totals,
+    on its last run (:meth:`UnitBackend.run_runs`). The simulator builds
     are cached on disk across renders. A new scene (:meth:`load`) or :meth:`close` ends the
     sessions. With waveforms asked for (``WAVES=1``, ``render --waves``) the runs go
     through the per-cycle cocotb driver (:func:`raplas_hdl.sim.drive.unit_driver.run_runs`,
@@ -53,7 +64,8 @@ class RtlBackend(UnitBackend):
     DEFAULT_INSTANCES = max(1, min(2, os.cpu_count() or 1))
     #: Shares of a round per instance (:meth:`run_runs`); the bunny 256x256 certified frame
     #: took 144.5 s with one share per instance, 133.7 s with 4, 127.2 s with 8 and 129.5 s
-    #: with 16 (one run each, benchmarks/bench_rtl_render.py).
+    #: with 16 (one run each, benchmarks/bench_rtl_render.py, before the shares were
+    #: overlapped rounds).
     CHUNKS = 8
 
     def __init__(self, fmt: FPFormat = FP24, mode: str = "conservative", testers=None,
@@ -154,17 +166,22 @@ class RtlBackend(UnitBackend):
         edges = [0, *np.clip(cuts, 1, len(runs) - 1).tolist(), len(runs)]
         return [list(runs[a:b]) for a, b in zip(edges, edges[1:]) if b > a]
 
-    def run_runs(self, config, runs):
+    def run_runs(self, config, runs, overlap: bool = False):
+        """``(stream, counters)`` per run (:meth:`UnitBackend.run_runs`). With ``overlap``
+        each share of the round is one overlapped round of its simulation (the next command
+        while a run goes, no drain between runs): its counters, read once at its end, go on
+        its last run and zeros on the others; the streams are those of runs one at a time."""
         if os.environ.get("WAVES", "") not in ("", "0"):
             # waveforms (render --waves): the per-cycle cocotb driver, which records them
             from raplas_hdl.sim.drive.unit_driver import run_runs    # lazy: cocotb
 
-            return run_runs(self.sim, config, self.scene_memory, runs)
+            return _fill_counters(run_runs(self.sim, config, self.scene_memory, runs,
+                                           overlap=overlap))
         ss = self.sessions(config)
         runs = [as_run(r) for r in runs]
         t0 = time.perf_counter()
         if len(ss) == 1:
-            parts = [ss[0].run(runs)]
+            parts = [ss[0].run(runs, overlap=overlap)]
         else:
             # CHUNKS shares per instance, each taken by the first instance free: a share
             # that simulates longer than its sphere count said no longer holds the round
@@ -179,13 +196,13 @@ class RtlBackend(UnitBackend):
                         i = next(order, None)
                     if i is None:
                         return
-                    parts[i] = ss[k].run(shares[i])
+                    parts[i] = ss[k].run(shares[i], overlap=overlap)
 
             self._map(serve, list(range(min(len(ss), len(shares)))))
         st = self.session_stats[config]
         st.update(cycles=sum(s.cycles for s in ss), rounds=sum(s.rounds for s in ss))
         st["rounds_s"] += time.perf_counter() - t0
-        return [res for part in parts for res in part]
+        return _fill_counters([res for part in parts for res in part])
 
     def close(self):
         """End every live simulation (a later run starts a new one)."""

@@ -208,10 +208,44 @@ class UnitBackend(Backend):
         return RunResult(out["ray_id"].astype(np.int64), out["tri_id"].astype(np.int64), hit,
                          t, u, v, out["flags"].astype(np.uint8), counters, outcome)
 
-    def run_runs(self, config, runs):
+    def _convert_all(self, results) -> list[RunResult]:
+        """:meth:`_convert` of every ``(stream, counters)`` at once: the beats of all runs
+        decoded in one pass, then a view per run (a run without pairs sends one empty beat
+        and nothing else)."""
+        if not results:
+            return []
+        beats = np.concatenate([stream for stream, _ in results])
+        empty = beats["empty"].astype(bool)
+        sizes = np.array([stream.size for stream, _ in results], np.int64)
+        starts = np.cumsum(sizes) - sizes
+        first_empty = np.ones(sizes.size, bool)
+        first_empty[sizes > 0] = empty[starts[sizes > 0]]
+        kept = np.where(first_empty, 0, sizes)
+        if int(kept.sum()) != int((~empty).sum()):
+            raise ValueError("an empty result beat in a run that issued pairs")
+        whole = self._convert(beats[~empty], None)
+        ends = np.cumsum(kept).tolist()
+        out = []
+        for (stream, counters), n, hi in zip(results, kept.tolist(), ends):
+            if n == 0:
+                out.append(RunResult.empty(counters))
+                continue
+            cut = slice(hi - n, hi)
+            out.append(RunResult(whole.ray_id[cut], whole.tri_id[cut], whole.hit[cut],
+                                 whole.t[cut], whole.u[cut], whole.v[cut], whole.flags[cut],
+                                 counters, None if whole.outcome is None
+                                 else whole.outcome[cut]))
+        return out
+
+    def run_runs(self, config, runs, overlap: bool = False):
         """Runs ``(BundleMemory, sphere ids)`` of one unit configuration through the unit:
         ``(stream, counters)`` per run, as :func:`raplas_hdl.model.intersection.run_runs`
-        gives them."""
+        gives them. ``overlap``: the unit may take a run's command while the run before it
+        goes, as the hardware's host would; the streams are the same, but a run's counters
+        are then not observable on their own: a backend may give each group of overlapped
+        runs' totals on the group's last run and zeros on the others (the model's are per
+        run either way). :meth:`stream` overlaps, :meth:`answers` does not (it counts the
+        result beats of each run from its counters)."""
         raise NotImplementedError
 
     def answers(self, batch: BundleBatch, runs, tmin=0.0, tmax=None, exclude=None,
@@ -237,6 +271,6 @@ class UnitBackend(Backend):
             return []
         cfg = self.config(batch.rows, batch.cols)
         results = self.run_runs(cfg, [(self.memory(batch, b), np.asarray(ids, np.int64))
-                                       for b, ids in runs])
-        return [self._convert(stream, counters) for stream, counters in results]
+                                       for b, ids in runs], overlap=True)
+        return self._convert_all(results)
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...engine.passes import COUNTER_NAMES, result_beats, runs_of, trace_pass
+from ...engine.passes import COUNTER_NAMES, result_beats, runs_of, stream_beats, trace_pass
 from ...fp import model as fpm
 from ..shading import nearest_hits
 from .base import RenderMode, register_mode
@@ -40,8 +40,8 @@ class PaperMode(RenderMode):
         runs = runs_of(run_b, run_start, run_sph)
         counters = np.zeros((len(runs), len(COUNTER_NAMES)), np.int64)
         R = batch.n_rays
-        for k, ((b, _), res) in enumerate(zip(runs, backend.stream(batch, runs) if runs
-                                              else ())):
+        results = backend.stream(batch, runs) if runs else []
+        for k, ((b, _), res) in enumerate(zip(runs, results)):
             counters[k] = [res.counters.get(n, 0) for n in COUNTER_NAMES]
             hi = np.inf if tmax is None else np.asarray(tmax)[b]
             ex = None if exclude is None else int(np.asarray(exclude)[b])
@@ -49,7 +49,7 @@ class PaperMode(RenderMode):
             better = (tri >= 0) & ((t < best_t[b]) | ((t == best_t[b]) & (tri < best_tri[b])))
             best_t[b] = np.where(better, t, best_t[b])
             best_tri[b] = np.where(better, tri, best_tri[b])
-        backend.beats["result"] += result_beats(counters)
+        backend.beats["result"] += stream_beats(results)
         return counters
 
     def trace_answers(self, backend, batch, run_b, run_start, run_sph, best_t, best_tri,

@@ -23,7 +23,7 @@ import numpy as np
 from ...engine import compile_ahead
 from ...engine.certified import (CERT_COUNTERS, certified_pass, conservative_pairs,
                                  fold_outcomes)
-from ...engine.passes import COUNTER_NAMES, result_beats, runs_of
+from ...engine.passes import COUNTER_NAMES, result_beats, runs_of, stream_beats
 from ...model.certified import check_certified_format, exact_pairs
 from ..resolve import resolve_pending
 from .base import RenderMode, register_mode
@@ -74,14 +74,15 @@ class ResolvedMode(RenderMode):
         counters = np.zeros((len(runs), _N), np.int64)
         if runs:
             pairs = []
-            for k, ((b, _), res) in enumerate(zip(runs, backend.stream(batch, runs))):
+            results = backend.stream(batch, runs)
+            for k, ((b, _), res) in enumerate(zip(runs, results)):
                 counters[k] = [res.counters.get(n, 0) for n in COUNTER_NAMES]
                 out = np.where(res.hit, 2, 0) if res.outcome is None else res.outcome
                 pairs.append((b, res.ray_id, res.tri_id, out))
             resolve_outcomes(backend, batch, pairs, best_t, best_tri, tmin, tmax, exclude,
                              any_hit)
             backend.mode_stats["certified_hits"] += int(counters[:, _HITS].sum())
-        backend.beats["result"] += result_beats(counters)
+            backend.beats["result"] += stream_beats(results)
         return counters
 
     def trace_answers(self, backend, batch, run_b, run_start, run_sph, best_t, best_tri,

@@ -7,8 +7,9 @@ C++ main of :func:`raplas_hdl.sim.build.runner.build_plain_verilator`,
 or Icarus's ``vvp``) that stays alive for a whole session: Python sits only at round
 boundaries.
 
-The harness reads *ops* from a control pipe, one per line (``op addr data``, hex) and executes
-them at full rate (one write per clock):
+The harness reads *ops* from a control pipe, each three little-endian 32-bit words (``op addr
+data``, binary: ``$fscanf`` with ``%u``, no text to parse per clock) and executes them at full
+rate (one write per clock):
 
 ====  ==========================================================================================
 op    meaning
@@ -22,9 +23,12 @@ op    meaning
 5     quit
 ====  ==========================================================================================
 
-Every result beat goes to the beats file as fixed-width hex (the ``RESULT`` record;
-``ANSWER`` with ``UnitConfig.reduce``), decoded in bulk with
-:meth:`~raplas_hdl.model.records.Layout.unpack_words`. ``o.ready`` is driven by a seeded LFSR
+Every result beat goes to the beats file in binary (the ``RESULT`` record; ``ANSWER`` with
+``UnitConfig.reduce``): ``$fwrite`` with ``%u`` under Verilator (two-state: 32-bit words, least
+significant first, little-endian), with ``%z`` under Icarus (four-state: each word followed by
+its X/Z mask, which must be zero: an X from the unit is an error, not a silent 0); decoded in
+bulk with :meth:`~raplas_hdl.model.records.Layout.unpack_words`, no text formatted or parsed
+per beat (:func:`parse_beats`). ``o.ready`` is driven by a seeded LFSR
 (``+READY_THR=t``: probability times 65536 that it is high in a cycle). Every clock the
 harness checks that the pair FIFO never overflowed and stays within its depth; a breach
 (or a wait without progress for ``+MAX_STALL`` clocks) writes ``error ...`` to the status pipe
@@ -76,6 +80,7 @@ __all__ = [
     "encode_ops",
     "harness_verilog",
     "ops_bytes",
+    "parse_beats",
     "parse_hex",
     "replay",
     "scene_images",
@@ -90,9 +95,10 @@ class HarnessError(AssertionError):
 
 
 # -- Verilog ---------------------------------------------------------------------------------
-def harness_verilog(config: UnitConfig) -> str:
+def harness_verilog(config: UnitConfig, four_state: bool = False) -> str:
     """Verilog of module ``unit_harness`` (ports ``clk``, ``rst`` unused, ``done``, ``timeout``)
-    around ``intersection_unit`` of ``config`` (not included)."""
+    around ``intersection_unit`` of ``config`` (not included); ``four_state``: beats written
+    with ``%z`` (value and X/Z mask per word, for a four-state simulator) instead of ``%u``."""
     cw = CMD.bind(config).size
     rw = output_record(config).bind(config).size
     kw = COUNTERS.bind(config).size
@@ -125,6 +131,7 @@ module {TOPLEVEL} (input wire clk, input wire rst, output reg done, output reg t
   reg [63:0] cycles = 0, stall = 0, max_stall = 64'd100000000;
   reg [3:0] op = 0;
   reg [31:0] a = 0, d = 0;
+  reg [95:0] opw = 0;     // one op: op, addr, data (32-bit words, least significant first)
   reg [1:0] state = 0;   // 0 fetch, 1 command offered, 2 waiting for runs
   reg fetch = 0;
   initial begin
@@ -176,7 +183,7 @@ module {TOPLEVEL} (input wire clk, input wire rst, output reg done, output reg t
       if (fifo_level > {config.fifo_depth}) fail("pair FIFO level above its depth");
       if (fifo_level > max_level) max_level <= fifo_level;
       if (o_valid && o_ready) begin
-        $fwrite(fo, "%h\\n", o_payload);
+        $fwrite(fo, "{'%z' if four_state else '%u'}", o_payload);
         if (o_payload[{last}]) runs_done <= runs_done + 1;
       end
       wr_en <= 0;
@@ -192,8 +199,9 @@ module {TOPLEVEL} (input wire clk, input wire rst, output reg done, output reg t
         if (stall > max_stall) fail("no progress");
       end
       if (fetch) begin
-        rc = $fscanf(fi, "%h %h %h", op, a, d);
-        if (rc != 3) op = {OP_QUIT};
+        rc = $fscanf(fi, "%u", opw);
+        if (rc != 1) op = {OP_QUIT};
+        else begin op = opw[3:0]; a = opw[63:32]; d = opw[95:64]; end
         state = 0;
         case (op)
           {OP_WRITE}: begin wr_en <= 1; wr_addr <= a; wr_data <= d; end
@@ -242,7 +250,8 @@ def build_harness(simulator: str, config: UnitConfig, build_key: str | None = No
     no tracing, the plain C++ main). Icarus: ``iverilog -g2005``, run with ``vvp -n``. Both
     are built once per Verilog hash under ``build/sim/``.
     """
-    text = harness_verilog(config) + unit_verilog(config, multiplier, adder)
+    text = harness_verilog(config, four_state=simulator == "icarus") + unit_verilog(
+        config, multiplier, adder)
     key = build_key or f"unit-harness-{config.fmt.name}-{config.rows}x{config.cols}"
     if simulator == "verilator":
         return [str(build_plain_verilator(text, TOPLEVEL, key))]
@@ -274,22 +283,41 @@ def build_harness(simulator: str, config: UnitConfig, build_key: str | None = No
 
 
 # -- ops -------------------------------------------------------------------------------------
-def _hex_cols(values, digits: int) -> np.ndarray:
-    v = np.asarray(values, np.uint64).reshape(-1)
-    shifts = np.arange(4 * (digits - 1), -1, -4, dtype=np.uint64)
-    return HEX_DIGITS[((v[:, None] >> shifts) & np.uint64(15)).astype(np.uint8)]
-
-
 def ops_bytes(op, addr, data) -> bytes:
-    """Op lines (``o aaaaaaaa dddddddd``) of equal-length arrays, as bytes."""
-    op = np.asarray(op, np.uint64).reshape(-1)
-    n = op.size
-    if n == 0:
-        return b""
-    sp = np.full((n, 1), ord(" "), np.uint8)
-    nl = np.full((n, 1), ord("\n"), np.uint8)
-    return np.concatenate([_hex_cols(op, 1), sp, _hex_cols(addr, 8), sp, _hex_cols(data, 8),
-                           nl], axis=1).tobytes()
+    """Ops of equal-length arrays as the harness reads them: per op the 32-bit words ``op``,
+    ``addr``, ``data``, little-endian."""
+    cols = [np.asarray(x, np.uint64).reshape(-1) for x in (op, addr, data)]
+    return np.stack(cols, axis=1).astype("<u4").tobytes()
+
+
+def parse_beats(data: bytes, width: int, four_state: bool = False) -> np.ndarray:
+    """Beats of ``width`` bits as the harness writes them (``%u``: ``ceil(width / 32)``
+    little-endian 32-bit words per beat, least significant first; ``four_state``, ``%z``:
+    each word followed by its X/Z mask) -> ``(n, ceil(width / 64))`` uint64 words, low first.
+
+    Raises
+    ------
+    HarnessError
+        On a file that is not made of whole beats, or (``four_state``) on a beat with an X
+        or Z bit.
+    """
+    n32 = -(-width // 32)
+    per = n32 * (2 if four_state else 1)
+    raw = np.frombuffer(data, dtype="<u4")
+    if len(data) % (4 * per):
+        raise HarnessError(f"result file of {len(data)} bytes is not made of "
+                           f"{4 * per}-byte beats")
+    raw = raw.reshape(-1, per)
+    if four_state:
+        xz = raw[:, 1::2]
+        if np.any(xz):
+            bad = int(np.nonzero(xz.any(axis=1))[0][0])
+            raise HarnessError(f"result beat {bad} has X or Z bits (mask words "
+                               f"{[hex(int(x)) for x in xz[bad]]})")
+        raw = raw[:, 0::2]
+    out = np.zeros((raw.shape[0], 2 * (-(-n32 // 2))), "<u4")
+    out[:, :n32] = raw
+    return out.view("<u8").astype(np.uint64, copy=False)
 
 
 def parse_hex(data: bytes, digits: int) -> np.ndarray:
@@ -461,7 +489,7 @@ class UnitSession:
         ctl, st = self._dir / "ctl", self._dir / "status"
         os.mkfifo(ctl)
         os.mkfifo(st)
-        self._beats_path, self._ctr_path = self._dir / "beats.hex", self._dir / "counters.hex"
+        self._beats_path, self._ctr_path = self._dir / "beats.bin", self._dir / "counters.hex"
         self._beats_off = self._ctr_off = 0
         # both ends opened read-write here: neither open blocks, and the simulator sees EOF on
         # the control pipe when this process goes away
@@ -560,8 +588,8 @@ class UnitSession:
                                overlap=overlap))
         self._wait_round()
         self.runs_done += len(runs)
-        words = parse_hex(self._read_new(self._beats_path, "_beats_off"),
-                          -(-self._result.size // 4))
+        words = parse_beats(self._read_new(self._beats_path, "_beats_off"), self._result.size,
+                            four_state=self.simulator == "icarus")
         results = self._result.unpack_words(words)
         ctr_text = self._read_new(self._ctr_path, "_ctr_off").split()
         kd = -(-self._counters.size // 4)
