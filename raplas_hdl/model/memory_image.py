@@ -56,6 +56,7 @@ tuples.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -332,26 +333,47 @@ def scene_writes(config: UnitConfig, scene: SceneMemory):
     return np.concatenate([a1, a2, a3]), np.concatenate([d1, d2, d3]).astype(np.uint32)
 
 
+@functools.lru_cache(maxsize=64)
+def _bundle_addresses(n_planes: int, n_rays: int, ray_fields: int, bank: int):
+    """The addresses :func:`bundle_writes` writes, which depend on the lattice only:
+    ``(plane records, ray records, enable bits, window)``, each a read-only uint32 array."""
+    out = (_record_writes("plane", [np.zeros(n_planes)] * 4, bank)[0],
+           _record_writes("ray", [np.zeros(n_rays)] * ray_fields, bank)[0],
+           write_address("ray", np.arange(n_rays), 6, bank),
+           write_address("window", np.zeros(3, np.int64), np.arange(3), bank))
+    for a in out:
+        a.setflags(write=False)
+    return out
+
+
 def bundle_writes(config: UnitConfig, bundle: BundleMemory, bank: int = 0,
                   enable_only: bool = False):
     """Writes that load ``bundle`` into ``bank`` (only the enable bits if ``enable_only``).
     With ``config.reduce`` they also write the rays' ``tmax`` (RAY field 7) and the bank's
-    window (WINDOW region)."""
+    window (WINDOW region). The addresses come from a table per lattice and bank: a run
+    costs a few array copies (the rtl backend encodes every run of a render)."""
     bundle.check(config)
+    if bank not in (0, 1):
+        raise ValueError(f"bank must be 0 or 1, not {bank!r}")
     en = bundle.enable.astype(np.uint32)
+    n_p, n_r = bundle.plane_n.shape[0], bundle.ray_o.shape[0]
+    a_plane, a_ray, a_en, a_win = _bundle_addresses(n_p, n_r, 8 if config.reduce else 7, bank)
     if enable_only:
-        return write_address("ray", np.arange(config.n_rays), 6, bank), en
-    pf = [bundle.plane_n[:, k] for k in range(3)] + [bundle.plane_p]
-    a1, d1 = _record_writes("plane", pf, bank)
-    rf = [bundle.ray_o[:, k] for k in range(3)] + [bundle.ray_d[:, k] for k in range(3)] + [en]
-    if config.reduce:
-        rf.append(bundle.window_tmax(config))
-    a2, d2 = _record_writes("ray", rf, bank)
+        return a_en.copy(), en
+    pd = np.empty((n_p, 4), np.uint32)
+    pd[:, :3] = bundle.plane_n
+    pd[:, 3] = bundle.plane_p
+    rd = np.empty((n_r, 8 if config.reduce else 7), np.uint32)
+    rd[:, 0:3] = bundle.ray_o
+    rd[:, 3:6] = bundle.ray_d
+    rd[:, 6] = en
     if not config.reduce:
-        return np.concatenate([a1, a2]), np.concatenate([d1, d2]).astype(np.uint32)
-    a3 = write_address("window", np.zeros(3, np.int64), np.arange(3), bank)
+        return np.concatenate([a_plane, a_ray]), np.concatenate([pd.reshape(-1),
+                                                                 rd.reshape(-1)])
+    rd[:, 7] = bundle.window_tmax(config)
     d3 = np.array([bundle.tmin, bundle.exclude + 1, int(bundle.any_hit)], np.uint32)
-    return np.concatenate([a1, a2, a3]), np.concatenate([d1, d2, d3]).astype(np.uint32)
+    return (np.concatenate([a_plane, a_ray, a_win]),
+            np.concatenate([pd.reshape(-1), rd.reshape(-1), d3]))
 
 
 def run_list_writes(config: UnitConfig, sphere_ids, bank: int = 0):
@@ -361,5 +383,15 @@ def run_list_writes(config: UnitConfig, sphere_ids, bank: int = 0):
         raise ValueError(f"a run list holds at most max_spheres={config.max_spheres} IDs")
     if ids.size and (ids.min() < 0 or ids.max() >= config.max_spheres):
         raise ValueError("sphere ID outside Sphere Memory")
-    return write_address("rlist", np.arange(ids.size), 0, bank), ids.astype(np.uint32)
+    if bank not in (0, 1):
+        raise ValueError(f"bank must be 0 or 1, not {bank!r}")
+    return _rlist_addresses(config.max_spheres, bank)[:ids.size].copy(), ids.astype(np.uint32)
+
+
+@functools.lru_cache(maxsize=16)
+def _rlist_addresses(max_spheres: int, bank: int) -> np.ndarray:
+    """The run list's word addresses of ``bank`` (a table: :func:`run_list_writes`)."""
+    out = write_address("rlist", np.arange(max_spheres), 0, bank)
+    out.setflags(write=False)
+    return out
 
