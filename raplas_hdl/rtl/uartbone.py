@@ -128,6 +128,11 @@ class UARTBone(wiring.Component):
                 with m.Else():
                     m.d.sync += idle.eq(idle + 1)
 
+        def shift_in(reg):
+            """Take the byte into ``reg``'s low end (a word arrives most significant byte
+            first)."""
+            m.d.sync += [reg.eq(Cat(byte, reg[:24])), nbyte.eq(nbyte + 1), idle.eq(0)]
+
         def next_word():
             """After a word: the next one of the command, or the next command."""
             m.d.sync += left.eq(left - 1)
@@ -160,8 +165,7 @@ class UARTBone(wiring.Component):
                 m.d.comb += rx.o.ready.eq(1)
                 waiting()
                 with m.If(got):
-                    m.d.sync += [addr.eq(Cat(byte, addr[:24])), nbyte.eq(nbyte + 1),
-                                 idle.eq(0)]
+                    shift_in(addr)
                     with m.If(nbyte == 3):
                         m.d.sync += nbyte.eq(0)
                         with m.If(left == 0):
@@ -174,8 +178,7 @@ class UARTBone(wiring.Component):
                 m.d.comb += rx.o.ready.eq(1)
                 waiting()
                 with m.If(got):
-                    m.d.sync += [data.eq(Cat(byte, data[:24])), nbyte.eq(nbyte + 1),
-                                 idle.eq(0)]
+                    shift_in(data)
                     with m.If(nbyte == 3):
                         m.next = "access"
             with m.State("access"):
