@@ -270,7 +270,7 @@ def scene_from_args(args):
 
 def add_parser(subparsers):
     p = subparsers.add_parser(
-        "render", help="render a scene through the float64, model or rtl backend",
+        "render", help="render a scene through the float64, model, rtl or board backend",
         description="Render a procedural scene (cornell, spheres, terrain, soup), a mesh "
                     "file (OBJ, PLY, STL, glTF) or a scene file (TOML: camera, light, "
                     "materials, meshes with transforms; docs/scenes.md) with primary "
@@ -286,9 +286,16 @@ def add_parser(subparsers):
                         "(default cornell)")
     p.add_argument("--size", type=g.size_type("--size"), default=(128, 128), metavar="WxH",
                    help=f"image size, sides 1 to {g.MAX_IMAGE} (default 128x128)")
-    p.add_argument("--backend", type=g.choice("float64", "model", "rtl", what="backend"),
-                   default="model", metavar="{float64,model,rtl}",
-                   help="intersection backend (default model)")
+    p.add_argument("--backend", type=g.choice("float64", "model", "rtl", "board",
+                                               what="backend"),
+                   default="model", metavar="{float64,model,rtl,board}",
+                   help="intersection backend (default model; board: the unit on a board, "
+                        "or the simulated board of raplas-hdl board-sim, behind --port)")
+    p.add_argument("--port", default=None, metavar="PORT",
+                   help="the board's serial port, e.g. /dev/ttyUSB0 (--backend board only)")
+    p.add_argument("--baud", type=g.int_range(1200, 100_000_000), default=None,
+                   metavar="N", help="the serial line's baud rate (default 3000000; "
+                                     "--backend board only)")
     p.add_argument("--sim", type=g.choice("icarus", "verilator", what="simulator"),
                    default=None, metavar="{icarus,verilator}",
                    help="simulator of the rtl backend (default icarus; --backend rtl only)")
@@ -321,6 +328,11 @@ def check(args) -> None:
         g.reject(args, ("compare", "diff"), "to --backend float64 (it is the reference)")
     if args.backend != "rtl":
         g.reject(args, ("sim",), f"to --backend {args.backend} (only to rtl)")
+    if args.backend != "board":
+        g.reject(args, ("port", "baud"), f"to --backend {args.backend} (only to board)")
+    elif not args.port:
+        raise g.UsageError("--backend board needs --port (the board's serial port, or the "
+                           "name raplas-hdl board-sim prints)")
     if args.reduce and args.backend == "float64":
         raise g.UsageError("--reduce does not apply to --backend float64 (it has no unit; "
                            "use model or rtl)")
@@ -367,7 +379,7 @@ def run(args) -> int:
     fmt = args.fmt
     scene = scene.normalised(settings.bound)
     backend = make_backend(args.backend, fmt, mode=args.mode, sim=args.sim,
-                           reduce=args.reduce)
+                           reduce=args.reduce, port=args.port, baudrate=args.baud)
     with g.waves(args):
         result = render(scene, backend, settings)
     save_png(result.image, args.output)

@@ -43,7 +43,7 @@ CHOICE_OPTIONS = {
                "board-top")),
 }
 #: flags (given or not): option -> the units that take them.
-FLAG_OPTIONS = {"reduce": ("intersection-unit",)}
+FLAG_OPTIONS = {"reduce": ("intersection-unit", "board-top")}
 _HELP = {
     "stages": "pipeline stages",
     "rows": "bundle rows",

@@ -266,6 +266,7 @@ def _render(scene: Scene, backend: Backend, settings: RenderSettings):
     from tqdm import tqdm       # lazy: the progress bar loads only when a render runs
 
     s = settings
+    backend.check_settings(s)
     timer = _Timer()
     stats: dict = {"backend": backend.describe(), "scene": scene.name,
                    "triangles": scene.n_triangles, "size": f"{s.width}x{s.height}"}

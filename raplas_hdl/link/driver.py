@@ -11,7 +11,8 @@ A bus that cannot complete an access (Wishbone ``err``) raises an exception from
 It loads a scene and bundles through the memory window, starts runs, pops the result
 stream and reads the counters, and returns them in the form of
 :func:`raplas_hdl.model.intersection.run_bundle` (a
-:data:`~raplas_hdl.model.intersection.RESULT_DTYPE` array and a
+:data:`~raplas_hdl.model.intersection.RESULT_DTYPE` array, or the dtype of the build's
+output record in certified mode or with the on-chip reduction, and a
 counter dict, here with ``cycles`` too), so the two compare directly.
 
 No Amaranth, no cocotb.
@@ -44,7 +45,8 @@ def _config_from_params(p: dict) -> UnitConfig:
                       rows=p["rows"], cols=p["cols"], testers=p["testers"],
                       tris_per_sphere=p["tris_per_sphere"], max_triangles=p["max_triangles"],
                       max_spheres=p["max_spheres"], mode=p["mode"],
-                      margin_scale=p["margin_scale"], fifo_depth=p["fifo_depth"])
+                      margin_scale=p["margin_scale"], fifo_depth=p["fifo_depth"],
+                      lanes=p.get("lanes", 1), reduce=p.get("reduce", False))
 
 
 def _same_geometry(a: BundleMemory, b: BundleMemory) -> bool:
@@ -95,16 +97,28 @@ class BoardDriver:
         self.reads += 1
         return int(self.bus.read(REGISTERS[name])) & 0xFFFFFFFF
 
+    def read_regs(self, first: str, n: int) -> list[int]:
+        """``n`` registers from ``first`` up, in address order: one burst on a bus with
+        ``read_burst(addr, n)`` (:class:`~raplas_hdl.link.serial_bus.SerialBus`: one round
+        trip), else ``n`` reads."""
+        self.reads += n
+        burst = getattr(self.bus, "read_burst", None)
+        addr = REGISTERS[first]
+        words = burst(addr, n) if burst is not None else \
+            [self.bus.read(addr + k) for k in range(n)]
+        return [int(w) & 0xFFFFFFFF for w in words]
+
     def write_reg(self, name: str, value: int) -> None:
         self.writes += 1
         self.bus.write(REGISTERS[name], int(value) & 0xFFFFFFFF)
 
     def identify(self) -> dict:
         """``{"id", "version": (major, minor), "params"}`` as the board reports them."""
-        ident = self.read_reg("ID")
-        version = self.read_reg("VERSION")
-        words = {name: self.read_reg(name) for name in config_words(UnitConfig().params())}
-        return {"id": ident, "version": (version >> 16, version & 0xFFFF),
+        names = ("ID", "VERSION", *config_words(UnitConfig().params()))
+        words = dict(zip(names, self.read_regs("ID", len(names))))
+        assert [REGISTERS[n] for n in names] == list(range(len(names)))
+        version = words["VERSION"]
+        return {"id": words["ID"], "version": (version >> 16, version & 0xFFFF),
                 "params": config_from_words(words)}
 
     def check(self, config: UnitConfig, board: dict | None = None) -> None:
@@ -116,10 +130,13 @@ class BoardDriver:
         if board["version"][0] != MAP_VERSION[0]:
             raise BoardMismatch(f"register map version {board['version']} is not "
                                 f"{MAP_VERSION[0]}.x, which this driver speaks")
-        want = config.params()
-        got = board["params"]
-        diff = [f"{k}: board {got[k]!r}, expected {want[k]!r}" for k in want
-                if got.get(k) != (want[k] & 0xFFFFFFFF if k == "margin_scale" else want[k])]
+        # lanes and reduce appear only when not the default (1, False)
+        default = {"lanes": 1, "reduce": False}
+        want = {**default, **config.params()}
+        want["margin_scale"] &= 0xFFFFFFFF
+        got = {**default, **board["params"]}
+        diff = [f"{k}: board {got.get(k)!r}, expected {want[k]!r}" for k in want
+                if got.get(k) != want[k]]
         if diff:
             raise BoardMismatch("the board is another build: " + "; ".join(diff))
 
@@ -177,6 +194,9 @@ class BoardDriver:
     def _pop_words(self) -> tuple | None:
         """Pop one result beat: its six words (``RES_INFO`` and :data:`RESULT_REGS`), or
         None when none waits."""
+        if hasattr(self.bus, "read_burst"):     # the whole window in one round trip
+            words = tuple(self.read_regs("RES_INFO", 1 + len(RESULT_REGS)))
+            return words if words[0] & _VALID else None
         info = self.read_reg("RES_INFO")
         if not info & _VALID:
             return None
@@ -185,28 +205,53 @@ class BoardDriver:
     def pop(self) -> dict | None:
         """Pop one result beat (its fields) or return None when none waits."""
         words = self._pop_words()
-        return None if words is None else decode_result_words(*words)
+        return None if words is None else decode_result_words(*words, self.config)
+
+    def _pop_batch(self, k: int) -> list:
+        """Up to ``k`` beats' words, ``None`` for each read that found none waiting: on a bus
+        with ``read_bursts`` (the serial link) ``k`` reads of the result window in one round
+        trip, else one :meth:`_pop_words`."""
+        many = getattr(self.bus, "read_bursts", None)
+        if many is None:
+            return [self._pop_words()]
+        n = 1 + len(RESULT_REGS)
+        self.reads += k * n
+        out = []
+        for words in many([(REGISTERS["RES_INFO"], n, False)] * k):
+            words = tuple(int(w) & 0xFFFFFFFF for w in words)
+            out.append(words if words[0] & _VALID else None)
+        return out
 
     def collect(self) -> np.ndarray:
         """Pop beats up to the one marked ``last``; returns them as
-        :data:`~raplas_hdl.model.intersection.RESULT_DTYPE`."""
-        rows = []
+        :func:`~raplas_hdl.model.board_map.result_beats` gives them for the build.
+
+        On the serial link the result window is read several times per round trip, 4 at
+        first and twice as many (up to 64) after a batch that found a beat in each read: a
+        read after the run's last beat finds none and pops nothing (the next run starts
+        only after this one's beats are in)."""
+        rows, k, empty = [], 4, 0
         while True:
-            for _ in range(self.poll_limit):
-                words = self._pop_words()
-                if words is not None:
-                    break
-            else:
+            batch = self._pop_batch(k)
+            for words in batch:
+                if words is None:
+                    empty += 1
+                    continue
+                rows.append(words)
+                if words[0] >> RES_INFO_BITS["last"] & 1:
+                    return result_beats(*np.array(rows, np.uint64).T, self.config)
+            if empty >= self.poll_limit:
                 raise TimeoutError(f"no result beat after {self.poll_limit} reads "
                                    f"({len(rows)} beats so far; status {self.status()})")
-            rows.append(words)
-            if words[0] >> RES_INFO_BITS["last"] & 1:
-                break
-        return result_beats(*np.array(rows, np.uint64).T)
+            k = min(64, 2 * k) if None not in batch else 4
 
     def read_counters(self) -> dict:
         """``cycles`` and the counters of ``run_bundle``."""
-        return {name: self.read_reg(reg) for name, reg in COUNTER_REGS.items()}
+        regs = list(COUNTER_REGS.values())
+        words = self.read_regs(regs[0], len(regs))
+        assert [REGISTERS[r] for r in regs] == list(range(REGISTERS[regs[0]],
+                                                          REGISTERS[regs[0]] + len(regs)))
+        return dict(zip(COUNTER_REGS, words))
 
     def clear_counters(self) -> None:
         self.write_reg("CONTROL", 1 << CONTROL_BITS["clear_counters"])

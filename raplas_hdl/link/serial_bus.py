@@ -11,7 +11,7 @@ word, becomes a *fixed* burst; a run to consecutive addresses an *incr* burst; u
 words each) and go out when a read needs the line, on :meth:`flush`, or when a megabyte is
 waiting. Loading a scene is then a stream at the line's rate, not a round trip per word.
 :meth:`read_burst` reads consecutive registers (or one register again and again) in one
-round trip.
+round trip, and :meth:`read_bursts` several such reads (sent together, answered in order).
 
 **Checks.** UARTBone has no checksum and no error reply. :meth:`check` reads the bridge's
 ``LINK_ERRORS``, ``LINK_RX`` and ``LINK_CRC`` and compares the CRC with the one this side
@@ -61,8 +61,12 @@ class SerialBus:
         pseudo-terminal), or an open object with ``write(bytes)``, ``read(n)`` and
         ``reset_input_buffer()`` (``pyserial``'s).
     baudrate : int
+        The line's rate. A read waits ``timeout`` seconds more than the line needs to send
+        what is queued before its answer and the answer itself at this rate, so a slow line
+        (the simulated board's is about :data:`~raplas_hdl.sim.drive.serial_board_sim.
+        SIM_BAUD`) is not taken for a lost byte.
     timeout : float
-        Seconds to wait for a read's answer.
+        Seconds to wait for a read's answer beyond the line's time.
 
     Raises
     ------
@@ -76,6 +80,8 @@ class SerialBus:
 
     def __init__(self, port, baudrate: int = DEFAULT_BAUD, *, timeout: float = 2.0):
         self.timeout = float(timeout)
+        self.baudrate = int(baudrate)
+        self._unanswered = 0          # bytes sent since the last answer came in full
         if isinstance(port, str):
             try:
                 import serial    # lazy: only a board render needs pyserial
@@ -147,6 +153,7 @@ class SerialBus:
         if n is not None and n != len(data):
             raise LinkError(f"serial port {self.name}: wrote {n} of {len(data)} bytes")
         self.bytes_out += len(data)
+        self._unanswered += len(data)
 
     # -- reads --------------------------------------------------------------------------------
     def read(self, addr: int) -> int:
@@ -155,25 +162,43 @@ class SerialBus:
 
     def read_burst(self, addr: int, n: int, fixed: bool = False) -> list[int]:
         """Read ``n`` words at ``addr, addr+1, ...`` (``fixed``: ``n`` reads of ``addr``),
-        in one round trip per 255 words."""
-        out = []
-        for k in range(0, int(n), MAX_BURST):
-            m = min(MAX_BURST, int(n) - k)
-            a = int(addr) + (0 if fixed else k)
-            self.flush()
-            self._send(command_bytes(CMD_READ_FIXED if fixed else CMD_READ_INCR, a, m))
-            raw = self._receive(4 * m, a)
-            words = np.frombuffer(raw, dtype=">u4").astype(np.uint64)
-            self.round_trips += 1
-            self.words_read += m
+        in one round trip."""
+        n = int(n)
+        parts = [(int(addr) + (0 if fixed else k), min(MAX_BURST, n - k), fixed)
+                 for k in range(0, n, MAX_BURST)]
+        return [w for part in self.read_bursts(parts) for w in part]
+
+    def read_bursts(self, requests) -> list[list[int]]:
+        """Several reads in one round trip: ``requests`` are ``(addr, n, fixed)`` (``n`` up
+        to 255), sent one after another without waiting; returns each one's words. The
+        bridge answers them in order, so a read with a side effect (``RES_INFO``'s pop)
+        takes place in request order."""
+        requests = [(int(a), int(n), bool(f)) for a, n, f in requests]
+        if not requests:
+            return []
+        self.flush()
+        self._send(b"".join(command_bytes(CMD_READ_FIXED if f else CMD_READ_INCR, a, n)
+                            for a, n, f in requests))
+        total = sum(n for _, n, _ in requests)
+        words = np.frombuffer(self._receive(4 * total, requests[0][0]),
+                              dtype=">u4").astype(np.uint64)
+        self.round_trips += 1
+        self.words_read += total
+        out, k = [], 0
+        for a, n, _ in requests:
+            part = words[k:k + n]
+            k += n
             if not _is_link(a):
-                self._crc = crc_words(words, self._crc)
-            out += [int(w) for w in words]
+                self._crc = crc_words(part, self._crc)
+            out.append([int(w) for w in part])
         return out
 
     def _receive(self, n: int, addr: int) -> bytes:
         data = bytearray()
-        deadline = time.monotonic() + self.timeout
+        # the line's time for what is queued ahead of the answer and for the answer (10 bits
+        # a byte), then the timeout
+        line_s = 10.0 * (self._unanswered + n) / self.baudrate
+        deadline = time.monotonic() + line_s + self.timeout
         while len(data) < n:
             try:
                 chunk = self.port.read(n - len(data))
@@ -184,9 +209,10 @@ class SerialBus:
             elif time.monotonic() > deadline:
                 raise LinkError(
                     f"serial port {self.name}: {len(data)} of {n} bytes answered a read at "
-                    f"word address {addr:#x} within {self.timeout:g} s: a byte was lost, or "
-                    "no UARTBone bridge is listening")
+                    f"word address {addr:#x} within {line_s + self.timeout:.3g} s: a byte "
+                    "was lost, or no UARTBone bridge is listening")
         self.bytes_in += n
+        self._unanswered = 0
         return bytes(data)
 
     # -- the link's own registers ---------------------------------------------------------------
@@ -224,6 +250,7 @@ class SerialBus:
         dropped), discard what arrived, and start the checks afresh (:meth:`clear`)."""
         self._out.clear()
         self._burst = None
+        self._unanswered = 0
         time.sleep(wait_s)
         reset = getattr(self.port, "reset_input_buffer", None)
         if reset is not None:

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .records import COUNTERS, RESULT, Field, Record
+from .records import COUNTERS, RESULT, RESULT_CERTIFIED, Field, Record, output_record
 
 __all__ = ["Register", "REGISTER_MAP", "REGISTERS", "ADDR_BITS", "BOARD_ID", "MAP_VERSION",
            "STATUS_BITS", "CONTROL_BITS", "RES_INFO_BITS", "RESULT_REGS", "COUNTER_REGS",
@@ -54,11 +54,13 @@ ADDR_BITS = 8
 #: Value of the ``ID`` register: ASCII "RPLS".
 BOARD_ID = 0x52504C53
 #: Register-map version (major, minor), read as ``major << 16 | minor``. 1.1 added the
-#: ``keep_all`` bit of ``CMD_START``.
-MAP_VERSION = (1, 1)
+#: ``keep_all`` bit of ``CMD_START``; 1.2 the certified mode (``outcome`` and ``tight`` in
+#: ``RES_INFO``), the on-chip reduction (``reduce`` in ``CFG_FORMAT``: the result window then
+#: holds answers) and ``lanes`` in ``CFG_LATTICE``.
+MAP_VERSION = (1, 2)
 
 ROUNDING_CODES = {"rtz": 0, "rne": 1, "chop": 2}
-MODE_CODES = {"paper": 0, "conservative": 1}
+MODE_CODES = {"paper": 0, "conservative": 1, "certified": 2}
 
 #: Bits of ``STATUS``.
 STATUS_BITS = {"busy": 0, "result_valid": 1, "fifo_overflow": 2, "cmd_full": 3,
@@ -74,9 +76,13 @@ CMD_START_WORD = Record("cmd_start", [
     Field("indirect", 1, "the spheres come from the bank's run list"),
     Field("keep_all", 1, "cull nothing (the command's keep_all bit)"),
 ], "CMD_START register")
-#: ``RES_INFO``: the one-bit fields of a popped result beat (:data:`RESULT`'s).
+#: ``RES_INFO``: the narrow fields of a popped result beat (:data:`RESULT`'s, and the
+#: certified mode's ``outcome`` and ``tight``, 0 in the other modes; ``hit`` 0 and ``flags``
+#: the answer's with the on-chip reduction, whose beats are
+#: :data:`~raplas_hdl.model.records.ANSWER`'s).
 RES_INFO_WORD = Record("res_info", [Field("valid", 1, "a beat was popped")] + [
-    RESULT[name] for name in ("last", "empty", "hit", "flags")], "RES_INFO register")
+    RESULT[name] for name in ("last", "empty", "hit", "flags")] + [
+    RESULT_CERTIFIED[name] for name in ("outcome", "tight")], "RES_INFO register")
 #: ``RES_IDS``: the IDs of a popped result beat.
 RES_IDS_WORD = Record("res_ids", [RESULT["tri_id"].with_(width=20),
                                   RESULT["ray_id"].with_(width=12)], "RES_IDS register")
@@ -127,8 +133,10 @@ REGISTER_MAP: tuple[Register, ...] = (
     Register(0x01, "VERSION", "R", "31:0", "register-map version: major 31:16, minor 15:0"),
     Register(0x02, "CFG_FORMAT", "R", "24:0",
              "exp_bits 7:0, man_bits 15:8, rounding 17:16 (0 rtz, 1 rne, 2 chop), "
-             "mode 24 (0 paper, 1 conservative)"),
-    Register(0x03, "CFG_LATTICE", "R", "23:0", "rows 7:0, cols 15:8, testers 23:16"),
+             "mode 25:24 (0 paper, 1 conservative, 2 certified), reduce 26 (the result "
+             "window holds answers)"),
+    Register(0x03, "CFG_LATTICE", "R", "31:0",
+             "rows 7:0, cols 15:8, testers 23:16, lanes 31:24"),
     Register(0x04, "CFG_DEPTHS", "R", "31:0", "tris_per_sphere 15:0, fifo_depth 31:16"),
     Register(0x05, "CFG_MAX_TRIANGLES", "R", "31:0", "Triangle Memory depth"),
     Register(0x06, "CFG_MAX_SPHERES", "R", "31:0", "Sphere Memory depth"),
@@ -182,8 +190,10 @@ def config_words(params: dict) -> dict:
     return {
         "CFG_FORMAT": (params["exp_bits"] | params["man_bits"] << 8
                        | ROUNDING_CODES[params["rounding"]] << 16
-                       | MODE_CODES[params["mode"]] << 24),
-        "CFG_LATTICE": params["rows"] | params["cols"] << 8 | params["testers"] << 16,
+                       | MODE_CODES[params["mode"]] << 24
+                       | int(params.get("reduce", False)) << 26),
+        "CFG_LATTICE": (params["rows"] | params["cols"] << 8 | params["testers"] << 16
+                        | params.get("lanes", 1) << 24),
         "CFG_DEPTHS": params["tris_per_sphere"] | params["fifo_depth"] << 16,
         "CFG_MAX_TRIANGLES": params["max_triangles"],
         "CFG_MAX_SPHERES": params["max_spheres"],
@@ -192,15 +202,19 @@ def config_words(params: dict) -> dict:
 
 
 def config_from_words(words: dict) -> dict:
-    """Inverse of :func:`config_words`: the parameters a board reports."""
+    """Inverse of :func:`config_words`: the parameters a board reports (``lanes`` and
+    ``reduce`` only when not the default, as :meth:`UnitConfig.params` gives them)."""
     fmt, lat, dep = words["CFG_FORMAT"], words["CFG_LATTICE"], words["CFG_DEPTHS"]
     rounding = {v: k for k, v in ROUNDING_CODES.items()}.get((fmt >> 16) & 3, "?")
-    mode = {v: k for k, v in MODE_CODES.items()}.get((fmt >> 24) & 1, "?")
+    mode = {v: k for k, v in MODE_CODES.items()}.get((fmt >> 24) & 3, "?")
+    lanes, reduce = lat >> 24, bool(fmt >> 26 & 1)
     return {"exp_bits": fmt & 0xFF, "man_bits": (fmt >> 8) & 0xFF, "rounding": rounding,
             "rows": lat & 0xFF, "cols": (lat >> 8) & 0xFF, "testers": (lat >> 16) & 0xFF,
             "tris_per_sphere": dep & 0xFFFF, "max_triangles": words["CFG_MAX_TRIANGLES"],
             "max_spheres": words["CFG_MAX_SPHERES"], "mode": mode,
-            "margin_scale": words["CFG_MARGIN_SCALE"], "fifo_depth": dep >> 16}
+            "margin_scale": words["CFG_MARGIN_SCALE"], "fifo_depth": dep >> 16,
+            **({"lanes": lanes} if lanes != 1 else {}),
+            **({"reduce": True} if reduce else {})}
 
 
 # -- command and result words ---------------------------------------------------------------
@@ -221,24 +235,29 @@ def decode_cmd_start(word: int) -> tuple[int, int, int, int]:
     return tuple(int(w[name]) for name in CMD_START_WORD.names)
 
 
-def res_info_word(last, empty, hit, flags) -> int:
+def res_info_word(last, empty, hit, flags, outcome=0, tight=0) -> int:
     """``RES_INFO`` of a popped beat (``valid`` set)."""
     return _RES_INFO.pack({"valid": 1, "last": int(last), "empty": int(empty), "hit": int(hit),
-                           "flags": int(flags) & 7})
+                           "flags": int(flags) & 7, "outcome": int(outcome) & 3,
+                           "tight": int(tight) & 1})
 
 
 def res_ids_word(ray_id, tri_id) -> int:
     return _RES_IDS.pack({"ray_id": int(ray_id), "tri_id": int(tri_id)})
 
 
-def result_beats(info, ids, t, u, v, det) -> np.ndarray:
-    """Result beats (:data:`~raplas_hdl.model.intersection.RESULT_DTYPE`) from the six words
-    read per beat (arrays, one element per beat)."""
+def result_beats(info, ids, t, u, v, det, config=None) -> np.ndarray:
+    """Beats of the unit's output stream from the six words read per beat (arrays, one
+    element per beat): :data:`~raplas_hdl.model.intersection.RESULT_DTYPE`, or for
+    ``config`` the dtype of its stream (:func:`~raplas_hdl.model.records.output_record`:
+    with ``outcome`` and ``tight`` in certified mode, answers with ``reduce``)."""
     info = _RES_INFO.unpack_words(np.asarray(info, np.uint64).reshape(-1, 1))
     idw = _RES_IDS.unpack_words(np.asarray(ids, np.uint64).reshape(-1, 1))
-    out = np.zeros(len(info), RESULT.dtype())
-    for name in ("last", "empty", "hit", "flags"):
-        out[name] = info[name]
+    dtype = RESULT.dtype() if config is None else output_record(config).dtype()
+    out = np.zeros(len(info), dtype)
+    for name in ("last", "empty", "hit", "flags", "outcome", "tight"):
+        if name in dtype.names:
+            out[name] = info[name]
     for name in ("ray_id", "tri_id"):
         out[name] = idw[name]
     for name, word in (("t", t), ("u", u), ("v", v), ("det", det)):
@@ -246,9 +265,10 @@ def result_beats(info, ids, t, u, v, det) -> np.ndarray:
     return out
 
 
-def decode_result_words(info: int, ids: int, t: int, u: int, v: int, det: int) -> dict:
-    """Fields of one result beat (the names of ``RESULT_DTYPE``) from its six words."""
-    beat = result_beats([info], [ids], [t], [u], [v], [det])[0]
+def decode_result_words(info: int, ids: int, t: int, u: int, v: int, det: int,
+                        config=None) -> dict:
+    """Fields of one beat (as :func:`result_beats` names them) from its six words."""
+    beat = result_beats([info], [ids], [t], [u], [v], [det], config)[0]
     return {name: int(beat[name]) for name in beat.dtype.names}
 
 

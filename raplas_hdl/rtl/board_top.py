@@ -35,8 +35,9 @@ from amaranth.lib.wiring import In, Out
 from ..model.board_map import (ADDR_BITS, BOARD_ID, CMD_BANK_BIT, CMD_COUNT_BITS,
                                CMD_INDIRECT_BIT, CMD_KEEP_ALL_BIT, CONTROL_BITS,
                                COUNTER_REGS, MAP_VERSION, MODE_CODES, REGISTERS, RES_INFO_BITS,
-                               RES_RAY_SHIFT, STATUS_BITS, config_words)
+                               RES_INFO_WORD, RES_RAY_SHIFT, STATUS_BITS, config_words)
 from ..model.config import UnitConfig
+from ..model.records import output_record
 from .intersection import IntersectionUnit
 
 __all__ = ["BoardTop", "build_board_top", "CLOCK_PORT", "RESET_PORT"]
@@ -54,6 +55,10 @@ class BoardTop(wiring.Component):
         Build parameters of the unit; alternatively pass them as keywords.
     multiplier, adder : {"generic", "virtex4"}
         Significand multipliers and FP adders of the unit (see :class:`IntersectionUnit`).
+    own_domain : bool
+        Define the ``sync`` domain from ``clk`` and ``rst`` (default); False in a design that
+        defines it (:class:`~raplas_hdl.rtl.serial_board.SerialBoard`; ``clk`` and ``rst``
+        are then unused).
 
     Members
     -------
@@ -75,7 +80,7 @@ class BoardTop(wiring.Component):
     """
 
     def __init__(self, config: UnitConfig | None = None, *, multiplier: str = "generic",
-                 adder: str = "generic", **params):
+                 adder: str = "generic", own_domain: bool = True, **params):
         if config is None:
             config = UnitConfig(**params)
         elif params:
@@ -87,9 +92,10 @@ class BoardTop(wiring.Component):
                              f"{config.fmt.width} bits wide")
         if config.mode not in MODE_CODES:
             raise ValueError(f"the board top's register map has modes "
-                             f"{', '.join(MODE_CODES)}, not {config.mode!r} (its result "
-                             "words carry no certified outcome yet)")
+                             f"{', '.join(MODE_CODES)}, not {config.mode!r}")
         self._cfg = config
+        self._head_fields = {f.name for f in output_record(config).fields}
+        self._own_domain = bool(own_domain)
         self._multiplier = multiplier
         self._adder = adder
         super().__init__({
@@ -111,9 +117,11 @@ class BoardTop(wiring.Component):
     def elaborate(self, platform):
         cfg = self._cfg
         m = Module()
-        m.domains.sync = cd = ClockDomain("sync")
-        m.d.comb += cd.clk.eq(getattr(self, CLOCK_PORT))
-        m.submodules.reset_sync = ResetSynchronizer(getattr(self, RESET_PORT), domain="sync")
+        if self._own_domain:
+            m.domains.sync = cd = ClockDomain("sync")
+            m.d.comb += cd.clk.eq(getattr(self, CLOCK_PORT))
+            m.submodules.reset_sync = ResetSynchronizer(getattr(self, RESET_PORT),
+                                                        domain="sync")
         # (the keyword only when it is not the default: the unit took it later)
         extra = {k: v for k, v in (("multiplier", self._multiplier), ("adder", self._adder))
                  if v != "generic"}
@@ -158,9 +166,11 @@ class BoardTop(wiring.Component):
         info = Signal(32)
         ib = RES_INFO_BITS
         head = unit.o.payload
-        m.d.comb += [info[ib["valid"]].eq(1), info[ib["last"]].eq(head.last),
-                     info[ib["empty"]].eq(head.empty), info[ib["hit"]].eq(head.hit),
-                     info[ib["flags"]:ib["flags"] + 3].eq(head.flags)]
+        m.d.comb += info[ib["valid"]].eq(1)
+        # the fields the unit's output record has (answers: no hit; certified: outcome, tight)
+        for f in RES_INFO_WORD.fields[1:]:
+            if f.name in self._head_fields:
+                m.d.comb += info[ib[f.name]:ib[f.name] + f.width].eq(head[f.name])
         write = req & self.wb_we
         read = req & ~self.wb_we
         regs = REGISTERS

@@ -6,8 +6,9 @@ its ``CommUART`` speak to it unchanged. In front of :class:`~raplas_hdl.rtl.boar
 it makes the board's register map reachable from a host's serial port
 (:class:`raplas_hdl.link.serial_bus.SerialBus`).
 
-One access at a time: a write's word is complete, or a read's command is, then the bus
-cycle runs (``wb_cyc``/``wb_stb`` until ``wb_ack`` or ``wb_err``), then a read's word goes
+Received bytes wait in a FIFO of :data:`RX_FIFO_DEPTH` (a host may send several read
+commands at once and read the answers together). One access at a time: a write's word is
+complete, or a read's command is, then the bus cycle runs (``wb_cyc``/``wb_stb`` until ``wb_ack`` or ``wb_err``), then a read's word goes
 back, most significant byte first. Addresses at or above ``2**addr_bits`` outside the link
 block, and accesses the slave answers with ``wb_err``, count in ``LINK_ERRORS``; a read of
 either answers 0. Every completed access's data word feeds ``LINK_CRC``. A command left
@@ -19,13 +20,18 @@ from __future__ import annotations
 
 from amaranth.hdl import Cat, Module, Mux, Signal
 from amaranth.lib import wiring
+from amaranth.lib.fifo import SyncFIFOBuffered
 from amaranth.lib.wiring import In, Out
 
 from ..model.link_protocol import (COMMANDS, LINK_BASE, LINK_ID, LINK_REGS, LINK_SPAN,
                                    crc_step_matrix)
 from .uart import UARTRx, UARTTx, check_divisor
 
-__all__ = ["UARTBone", "DEFAULT_TIMEOUT"]
+__all__ = ["UARTBone", "DEFAULT_TIMEOUT", "RX_FIFO_DEPTH"]
+
+#: Bytes the receive FIFO holds: the commands a host sends together while the bridge
+#: answers the first (``SerialBus.read_bursts``: 64 reads of 6 bytes), in one block RAM.
+RX_FIFO_DEPTH = 512
 
 #: Clocks without a byte after which an incomplete command is dropped (84 ms at 50 MHz:
 #: longer than a USB serial adapter's latency timer).
@@ -88,6 +94,10 @@ class UARTBone(wiring.Component):
         m = Module()
         m.submodules.rx = rx = UARTRx(self.divisor)
         m.submodules.tx = tx = UARTTx(self.divisor)
+        # the bytes of commands that arrive while the bridge answers an earlier one
+        m.submodules.rx_fifo = rx_fifo = SyncFIFOBuffered(width=8, depth=RX_FIFO_DEPTH)
+        wiring.connect(m, rx.o, rx_fifo.w_stream)
+        cmd_in = rx_fifo.r_stream
         m.d.comb += [rx.rx.eq(self.rx), self.tx.eq(tx.tx), self.wb_sel.eq(0b1111)]
 
         write = Signal()
@@ -103,8 +113,8 @@ class UARTBone(wiring.Component):
         with m.If(rx.lost):
             m.d.sync += lost.eq(lost + 1)
 
-        byte = rx.o.payload
-        got = rx.o.valid & rx.o.ready
+        byte = cmd_in.payload
+        got = cmd_in.valid & cmd_in.ready
         local = (addr >= LINK_BASE) & (addr < LINK_BASE + LINK_SPAN)
         on_bus = addr < (1 << self.addr_bits)
         link_rd = Signal(32)
@@ -118,9 +128,10 @@ class UARTBone(wiring.Component):
             with m.Case(LINK_REGS["LINK_RX"]):
                 m.d.comb += link_rd.eq(lost)
 
-        def waiting():
-            """In a state that waits for a byte of a command: drop the command after
-            ``timeout`` clocks without one."""
+        def take_byte():
+            """In a state that waits for a byte of a command: take it, or drop the command
+            after ``timeout`` clocks without one."""
+            m.d.comb += cmd_in.ready.eq(1)
             with m.If(~got):
                 with m.If(idle == self.timeout):
                     m.d.sync += idle.eq(0)
@@ -141,33 +152,29 @@ class UARTBone(wiring.Component):
             with m.If(left == 1):
                 m.next = "cmd"
             with m.Elif(write):
-                m.d.sync += nbyte.eq(0)
                 m.next = "wdata"
             with m.Else():
                 m.next = "access"
 
         with m.FSM():
             with m.State("cmd"):
-                m.d.comb += rx.o.ready.eq(1)
+                m.d.comb += cmd_in.ready.eq(1)
                 with m.If(got):
                     with m.Switch(byte):
                         for code, (w, f) in COMMANDS.items():
                             with m.Case(code):
                                 m.d.sync += [write.eq(int(w)), fixed.eq(int(f)), idle.eq(0)]
                                 m.next = "len"
-            with m.State("len"):
-                m.d.comb += rx.o.ready.eq(1)
-                waiting()
+            with m.State("len"):    # a dropped command may have left nbyte mid-word
+                take_byte()
                 with m.If(got):
                     m.d.sync += [left.eq(byte), nbyte.eq(0), idle.eq(0)]
                     m.next = "addr"
-            with m.State("addr"):
-                m.d.comb += rx.o.ready.eq(1)
-                waiting()
+            with m.State("addr"):     # nbyte wraps to 0 with the fourth byte of a word
+                take_byte()
                 with m.If(got):
                     shift_in(addr)
                     with m.If(nbyte == 3):
-                        m.d.sync += nbyte.eq(0)
                         with m.If(left == 0):
                             m.next = "cmd"
                         with m.Elif(write):
@@ -175,8 +182,7 @@ class UARTBone(wiring.Component):
                         with m.Else():
                             m.next = "access"
             with m.State("wdata"):
-                m.d.comb += rx.o.ready.eq(1)
-                waiting()
+                take_byte()
                 with m.If(got):
                     shift_in(data)
                     with m.If(nbyte == 3):
@@ -193,7 +199,7 @@ class UARTBone(wiring.Component):
                                 m.d.sync += lost.eq(0)
                         next_word()
                     with m.Else():
-                        m.d.sync += [data.eq(link_rd), nbyte.eq(0)]
+                        m.d.sync += data.eq(link_rd)
                         m.next = "send"
                 with m.Elif(on_bus):
                     m.d.comb += [self.wb_cyc.eq(1), self.wb_stb.eq(1), self.wb_we.eq(write),
@@ -207,15 +213,14 @@ class UARTBone(wiring.Component):
                         with m.If(write):
                             next_word()
                         with m.Else():
-                            m.d.sync += [data.eq(Mux(self.wb_ack, self.wb_dat_r, 0)),
-                                         nbyte.eq(0)]
+                            m.d.sync += data.eq(Mux(self.wb_ack, self.wb_dat_r, 0))
                             m.next = "send"
                 with m.Else():
                     m.d.sync += errors.eq(errors + 1)
                     with m.If(write):
                         next_word()
                     with m.Else():
-                        m.d.sync += [data.eq(0), nbyte.eq(0)]
+                        m.d.sync += data.eq(0)
                         m.next = "send"
             with m.State("send"):            # the read word, most significant byte first
                 m.d.comb += [tx.i.valid.eq(1), tx.i.payload.eq(data[24:])]

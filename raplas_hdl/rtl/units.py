@@ -98,8 +98,9 @@ UNITS = {u.name: u for u in [
           "max_triangles": (int, 1024, "Triangle Memory depth"),
           "max_spheres": (int, 256, "Sphere Memory depth"),
           "fifo_depth": (int, 16, "pair FIFO depth"),
-          "mode": (str, "paper", "paper | conservative"), **TARGET_OPTION,
-          **ADDER_OPTION}),
+          "mode": (str, "paper", "paper | conservative | certified"),
+          "reduce": (bool, False, "on-chip reduction: the result window holds answers"),
+          **TARGET_OPTION, **ADDER_OPTION}),
 ]}
 
 

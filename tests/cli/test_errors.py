@@ -114,8 +114,6 @@ CASES = [
      ["--max-triangles", "1 to 65536"]),
     ("verilog-address-map", "verilog board-top --max-spheres 16384 --tris-per-sphere 4096 "
                             "-o {t}/x.v", ["address map"]),
-    ("verilog-board-certified", "verilog board-top --mode certified -o {t}/x.v",
-     ["register map has modes paper, conservative, not 'certified'"]),
     ("verilog-not-an-integer", "verilog fp-add --stages two -o {t}/x.v",
      ["--stages", "'two' is not an integer"]),
     ("missing-required-option", "verilog fp-add", ["required", "-o"]),
@@ -252,8 +250,6 @@ CASES = [
      ["--random of reducer is at most 100,000 runs"]),
     ("cosim-board-top-stall-density", "cosim board-top --sim icarus --stall-density 0.5",
      ["--stall-density does not apply to board-top"]),
-    ("cosim-board-top-certified", "cosim board-top --sim icarus --mode certified",
-     ["the board top's register map has modes paper, conservative"]),
     ("cosim-board-top-percycle", "cosim board-top --sim icarus --driver percycle",
      ["--driver percycle applies to fp-add and fp-mul only", "host's driver"]),
     # -- stress

@@ -9,42 +9,17 @@ a burst, and reads the link's CRC: the same value as ``zlib.crc32`` of the words
 a test dependency (``requirements.lock``), never a dependency of the package.
 """
 
-import socket
-import subprocess
-import sys
-import time
-
-import pytest
-
 from raplas_hdl.model.link_protocol import LINK_ID, LINK_REGS, crc_words
+from tests.support.litex_server import start_litex_server
 from tests.support.uartbone_bench import PtyBridge
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("localhost", 0))
-        return s.getsockname()[1]
 
 
 def test_litex_server_and_remote_client_read_and_write_through_the_bridge():
     from litex.tools.litex_client import RemoteClient
 
     bridge = PtyBridge()
-    port = _free_port()
-    server = subprocess.Popen(
-        [sys.executable, "-m", "litex.tools.litex_server", "--uart", "--uart-port",
-         bridge.name, "--uart-baudrate", "3000000", "--bind-port", str(port)],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    server, port = start_litex_server(bridge.name)
     try:
-        deadline = time.monotonic() + 60
-        while True:            # the server listens once it has opened the port
-            try:
-                socket.create_connection(("localhost", port), timeout=1).close()
-                break
-            except OSError:
-                if server.poll() is not None or time.monotonic() > deadline:
-                    pytest.fail(f"litex_server did not start: {server.stdout.read()}")
-                time.sleep(0.2)
         wb = RemoteClient(port=port)
         wb.open()
         try:

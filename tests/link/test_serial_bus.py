@@ -5,7 +5,7 @@ The bridge and a small Wishbone slave (``tests/support/uartbone_bench.py``) run 
 simulator, their serial lines on a pseudo-terminal driven bit by bit; ``SerialBus`` opens
 the terminal by name, as it opens a board's port. Checked: writes gather into bursts (a
 run at one address a fixed burst, consecutive addresses an incr one) and read back; one
-round trip per read burst; ``check`` passes on a clean link and names a bus error; a
+round trip per read burst, and per batch of reads sent together; ``check`` passes on a clean link and names a bus error; a
 byte changed on the wire (the bridge stores another value than the host sent) fails the
 CRC comparison; a lost byte makes the next read fail in one line (not a wrong word), and
 after ``resync`` the link works again; a read with nobody answering fails in one line
@@ -41,6 +41,10 @@ def test_bursts_round_trips_and_checks(bridge):
         assert bus.read(3) == 7
         assert bus.read_burst(3, 2, fixed=True) == [7, 7]
         assert bus.round_trips == trips + 3
+        # several reads sent together (the bridge queues their commands while it answers)
+        assert bus.read_bursts([(6, 4, False), (3, 1, False), (3, 2, True)] * 8) == \
+            [[100, 101, 102, 103], [7], [7, 7]] * 8
+        assert bus.round_trips == trips + 4
         bus.check()
         bus.read(WORDS)                     # beyond the slave: a bus error, named by check
         with pytest.raises(LinkError, match="1 access.*bus error"):

@@ -17,8 +17,10 @@
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from raplas_hdl.fp import FP24
@@ -48,21 +50,31 @@ def scene_runs():
     return scene_and_runs(CFG, 30, seed=7)
 
 
-@pytest.mark.parametrize("simulator", ["icarus", "verilator"])
-def test_board_cosim_matches_model(simulator, scene_runs):
+# the board's default build (certified, answers on the bus) and a certified build without
+# the reduction (each pair's outcome and tight bit in RES_INFO) besides the paper mode's
+@pytest.mark.parametrize("simulator, mode, reduce", [
+    ("icarus", "paper", False), ("verilator", "paper", False),
+    ("verilator", "certified", True),
+    pytest.param("icarus", "certified", False, marks=pytest.mark.full)],
+    ids=["icarus", "verilator", "verilator-certified-reduce", "icarus-certified"])
+def test_board_cosim_matches_model(simulator, mode, reduce, scene_runs):
     from raplas_hdl.sim.drive.board_sim import run_board
 
+    cfg = replace(CFG, mode=mode, reduce=reduce)
     scene, runs = scene_runs
     t0 = time.monotonic()
-    results, stats = run_board(simulator, CFG, scene, runs, seed=7, gap_density=0.3,
+    results, stats = run_board(simulator, cfg, scene, runs, seed=7, gap_density=0.3,
                                build_key="board-test")
-    ref = check_against_model(CFG, scene, runs, results)
-    assert_keep_all(CFG, scene, runs, ref)
+    ref = check_against_model(cfg, scene, runs, results)
+    assert_keep_all(cfg, scene, runs, ref)
     print(f"{simulator}: {time.monotonic() - t0:.1f} s, {stats}")
     assert sum(r[1]["pairs_issued"] for r in ref) > 50
     assert sum(r[1]["hits"] for r in ref) > 0
     assert sum(r[1]["pairs_skipped"] for r in ref) > 0
     assert any(r[0]["empty"][0] for r in ref)
+    if mode == "certified":
+        outcomes = np.concatenate([r[0]["outcome"] for r in ref])
+        assert 1 in outcomes.tolist()     # certain hits (answers, with the reduction)
 
 
 # -- constraints ----------------------------------------------------------------------------
@@ -168,8 +180,6 @@ class _ConfigBus:
 
 
 def test_board_driver_checks_the_build():
-    from dataclasses import replace
-
     from raplas_hdl.link.driver import BoardDriver, BoardMismatch
 
     drv = BoardDriver(_ConfigBus(CFG))

@@ -28,11 +28,13 @@ def scene_runs():
     return scene_and_runs(CFG, 200, seed=11)
 
 
-@pytest.mark.parametrize("overlap", [False, True], ids=["sequential", "overlap"])
 # Verilator builds the unit in about 35 s because only the top's ports are public
 # (see raplas_hdl/sim/build/runner.py, mark_ports_public); with every signal public it took
-# over 40 min.
-@pytest.mark.parametrize("simulator", ["icarus", "verilator"])
+# over 40 min. make test runs each simulator in one of the two ways, the full suite all four.
+@pytest.mark.parametrize("simulator, overlap", [
+    ("icarus", False), pytest.param("icarus", True, marks=pytest.mark.full),
+    pytest.param("verilator", False, marks=pytest.mark.full), ("verilator", True)],
+    ids=["icarus-sequential", "icarus-overlap", "verilator-sequential", "verilator-overlap"])
 def test_unit_cocotb_matches_model(simulator, overlap, scene_runs):
     scene, runs = scene_runs
     results = run_runs(simulator, CFG, scene, runs, seed=3 + overlap, ready_density=0.6,

@@ -1,4 +1,4 @@
-"""Intersection backends behind one interface: ``float64``, ``model`` and ``rtl``.
+"""Intersection backends behind one interface: ``float64``, ``model``, ``rtl`` and ``board``.
 
 The renderer talks to the accelerator only through :class:`Backend`, a pass at a time:
 
@@ -35,6 +35,10 @@ Backends:
 - ``rtl``: the same memories run through the Verilog of the unit under cocotb (Icarus or
   Verilator) with the driver's ``run_runs``; it raises :class:`BackendUnavailable` with what
   is missing when the simulator or the unit's driver is not there.
+- ``board``: the unit on a board (or the simulated board) behind a serial port, through its
+  register map (:class:`~raplas_hdl.link.driver.BoardDriver` over
+  :class:`~raplas_hdl.link.serial_bus.SerialBus`); the board's build fixes the format, mode,
+  lattice and memory depths, checked before any work.
 
 Nothing here imports Amaranth.
 """
@@ -43,6 +47,7 @@ from __future__ import annotations
 
 from ...fp.format import FP24, FPFormat
 from .base import COUNTERS, Backend, BackendUnavailable, RunResult
+from .board import BoardBackend
 from .float64 import Float64Backend
 from .model import ModelBackend
 from .rtl import RtlBackend
@@ -52,6 +57,7 @@ __all__ = [
     "BACKENDS",
     "Backend",
     "BackendUnavailable",
+    "BoardBackend",
     "COUNTERS",
     "Float64Backend",
     "ModelBackend",
@@ -61,14 +67,17 @@ __all__ = [
     "make_backend",
 ]
 
-BACKENDS = ("float64", "model", "rtl")
+BACKENDS = ("float64", "model", "rtl", "board")
 
 
 def make_backend(name: str, fmt: FPFormat = FP24, mode: str = "conservative",
-                 sim: str = "icarus", testers=None, reduce: bool = False) -> Backend:
-    """A backend by name (``float64``, ``model``, ``rtl``) in a render ``mode``
+                 sim: str = "icarus", testers=None, reduce: bool = False,
+                 port: str | None = None, baudrate: int | None = None) -> Backend:
+    """A backend by name (``float64``, ``model``, ``rtl``, ``board``) in a render ``mode``
     (:func:`raplas_hdl.host.modes.get_mode`; the float64 backend has only ``paper``'s);
-    ``reduce``: through the unit built with the on-chip reduction (model and rtl).
+    ``reduce``: through the unit built with the on-chip reduction (model and rtl; a board
+    is built with it or not, and ``reduce`` True asks for a board built with it);
+    ``port``, ``baudrate``: the board's serial port.
 
     Raises
     ------
@@ -86,4 +95,8 @@ def make_backend(name: str, fmt: FPFormat = FP24, mode: str = "conservative",
         return ModelBackend(fmt, mode, testers, reduce=reduce)
     if name == "rtl":
         return RtlBackend(fmt, mode, testers, sim=sim, reduce=reduce)
+    if name == "board":
+        if not port:
+            raise ValueError("the board backend needs the board's serial port (--port)")
+        return BoardBackend(port, fmt, mode, baudrate=baudrate, reduce=reduce or None)
     raise ValueError(f"unknown backend {name!r}: use one of {', '.join(BACKENDS)}")

@@ -188,6 +188,11 @@ class Backend:
     def describe(self) -> str:
         return self.name
 
+    def check_settings(self, settings) -> None:
+        """Raise ``ValueError`` (one line) when the render's settings ask for what this
+        backend cannot do; :func:`~raplas_hdl.host.render.render` calls it before any work.
+        Every setting is fine by default (a board is one build: :mod:`.board`)."""
+
     def report(self, stats: dict) -> None:
         """Add the render mode's figures and, with the on-chip reduction, the unit's output
         beats to a finished render's ``stats``."""

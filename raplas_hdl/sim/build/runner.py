@@ -483,16 +483,18 @@ def run_cocotb(simulator: str, verilog_text: str, toplevel: str, test_module: st
 
 
 def build_plain_verilator(verilog_text: str, toplevel: str, build_key: str,
-                          timeout_s: float | None = None) -> Path:
-    """Build ``verilog_text`` with Verilator and ``raplas_hdl/sim/build/verilator_main.cpp``
-    (no cocotb).
+                          timeout_s: float | None = None, main: str = "verilator_main.cpp"
+                          ) -> Path:
+    """Build ``verilog_text`` with Verilator and the C++ main ``raplas_hdl/sim/build/<main>``
+    (no cocotb; by default ``verilator_main.cpp``).
 
     Same Verilator options as the cocotb build (:func:`verilator_flags`, no tracing), the
-    per-cycle code compiled with ``-O2`` (:data:`PLAIN_MAKEFLAGS`). The top must have ``clk``, ``rst``, ``done`` and
-    ``timeout`` ports (the batch harness). Returns the executable; built once per hash.
+    per-cycle code compiled with ``-O2`` (:data:`PLAIN_MAKEFLAGS`). With the default main
+    the top must have ``clk``, ``rst``, ``done`` and ``timeout`` ports (the batch harness).
+    Returns the executable; built once per hash.
     """
     env = simulator_env("verilator")
-    main = Path(__file__).resolve().parent / "verilator_main.cpp"
+    main = Path(__file__).resolve().parent / main
     flags = verilator_flags(False) + list(PLAIN_MAKEFLAGS)
     digest = hashlib.sha256("\0".join([verilog_text, toplevel, "plain", *flags,
                                        main.read_text()]).encode()).hexdigest()[:8]

@@ -20,14 +20,15 @@ import numpy as np
 
 import raplas_hdl
 from raplas_hdl.locks import file_lock
-from raplas_hdl.model.intersection import RESULT_DTYPE
 from raplas_hdl.model.config import UnitConfig
 from raplas_hdl.model.memory_image import BundleMemory, Run, SceneMemory, as_run
+from raplas_hdl.model.records import output_record
 from raplas_hdl.rtl.emit import emit_verilog
 from raplas_hdl.sim.build.runner import BUILD_ROOT, ICARUS_ARGS, run_cocotb
 from raplas_hdl.sim.drive.unit_driver import unit_verilog_digest
 
-__all__ = ["board_verilog", "run_board", "encode_stimulus", "decode_stimulus", "TOPLEVEL"]
+__all__ = ["board_verilog", "board_digest", "cached_verilog", "run_board", "encode_stimulus",
+           "decode_stimulus", "TOPLEVEL"]
 
 TOPLEVEL = "board_top"
 _VERILOG_CACHE: dict = {}
@@ -38,44 +39,54 @@ _SCENE_FIELDS = ("v0", "e1", "e2", "n", "centres", "radii", "tri_lists", "tri_co
 _BUNDLE_FIELDS = ("plane_n", "plane_p", "ray_o", "ray_d", "enable")
 
 
-def _digest(config: UnitConfig, multiplier: str, adder: str) -> str:
+def board_digest(config: UnitConfig, multiplier: str = "generic",
+                 adder: str = "generic") -> str:
+    """The cache key of the board top's Verilog (the unit's and the register map's)."""
     h = hashlib.sha256(unit_verilog_digest(config, multiplier, adder).encode())
     h.update((Path(raplas_hdl.__file__).parent / "model" / "board_map.py").read_bytes())
     return h.hexdigest()[:16]
 
 
-def board_verilog(config: UnitConfig, multiplier: str = "generic",
-                  adder: str = "generic") -> str:
-    """The board top's Verilog for ``config`` (module ``board_top``), cached; ``multiplier``
-    and ``adder`` ``"virtex4"`` build the unit's DSP48 targets (Yosys's DSP48 simulation
-    model appended).
-
-    Cached in memory and on disk, keyed by the parameters and the RTL sources; a file lock
-    makes concurrent callers (pytest-xdist workers) wait for one emission.
-    """
-    key = (config, multiplier, adder)
+def cached_verilog(name: str, digest: str, emit) -> str:
+    """``emit()``'s Verilog text, cached in memory and under ``build/sim/verilog/`` as
+    ``<name>-<digest>.v``; a file lock makes concurrent callers (pytest-xdist workers) wait
+    for one emission."""
+    key = (name, digest)
     if key in _VERILOG_CACHE:
         return _VERILOG_CACHE[key]
-    path = BUILD_ROOT / "verilog" / f"{TOPLEVEL}-{_digest(config, multiplier, adder)}.v"
+    path = BUILD_ROOT / "verilog" / f"{name}-{digest}.v"
     with file_lock(path.with_suffix(".lock")):
         if path.exists():
             text = path.read_text()
         else:
-            # lazy (here and below): the RTL loads Amaranth, needed only when the cached
-            # Verilog is missing
-            from raplas_hdl.rtl.board_top import BoardTop
-
-            text, _ = emit_verilog(BoardTop(config, multiplier=multiplier, adder=adder),
-                                   TOPLEVEL, config.params())
-            if "virtex4" in (multiplier, adder):
-                from raplas_hdl.rtl.dsp48 import dsp48_sim_model
-
-                text += "\n" + dsp48_sim_model()
+            text = emit()
             tmp = path.with_suffix(f".{os.getpid()}.tmp")
             tmp.write_text(text)
             os.replace(tmp, path)
     _VERILOG_CACHE[key] = text
     return text
+
+
+def board_verilog(config: UnitConfig, multiplier: str = "generic",
+                  adder: str = "generic") -> str:
+    """The board top's Verilog for ``config`` (module ``board_top``), cached
+    (:func:`cached_verilog`, keyed by the parameters and the RTL sources); ``multiplier``
+    and ``adder`` ``"virtex4"`` build the unit's DSP48 targets (Yosys's DSP48 simulation
+    model appended)."""
+    def emit():
+        # lazy (here and below): the RTL loads Amaranth, needed only when the cached
+        # Verilog is missing
+        from raplas_hdl.rtl.board_top import BoardTop
+
+        text, _ = emit_verilog(BoardTop(config, multiplier=multiplier, adder=adder),
+                               TOPLEVEL, config.params())
+        if "virtex4" in (multiplier, adder):
+            from raplas_hdl.rtl.dsp48 import dsp48_sim_model
+
+            text += "\n" + dsp48_sim_model()
+        return text
+
+    return cached_verilog(TOPLEVEL, board_digest(config, multiplier, adder), emit)
 
 
 # -- stimulus ---------------------------------------------------------------------------------
@@ -159,7 +170,7 @@ def run_board(simulator: str, config: UnitConfig, scene: SceneMemory, runs, *,
                          else VERILATOR_ARGS,
                          public_all=False)
         out = dict(np.load(out_path, allow_pickle=False))
-    beats = out["beats"].astype(RESULT_DTYPE)
+    beats = out["beats"].astype(output_record(config).dtype())
     names = [str(n) for n in out["counter_names"]]
     results = []
     for k in range(len(runs)):

@@ -98,6 +98,13 @@ def test_lanes_match_model(simulator):
         assert sum(r[1]["pairs_issued"] for r in ref) > 200
         assert sum(r[1]["pairs_skipped"] for r in ref) > 0
         check_against_model(SMALL, scene, runs, s.run(runs, overlap=True), overlap=True)
+
+
+# The cycle counts come from the same RTL in both simulators: Icarus checks them in test-full
+@pytest.mark.parametrize("simulator", [pytest.param("icarus", marks=pytest.mark.full),
+                                       "verilator"])
+def test_lanes_cycles_equal_model(simulator):
+    scene, runs = scene_and_runs(SMALL, 120, seed=4)
     with UnitSession(simulator, SMALL, scene, ready_density=1.0, build_key="lanes-test") as s:
         res = s.run(runs)
         res_overlap = s.run(runs, overlap=True)
