@@ -100,28 +100,17 @@ def test_render_the_board_cannot_do_is_refused_before_any_work(board):
 
 
 def test_litex_tools_read_the_board_registers(board):
-    from litex.tools.litex_client import RemoteClient
+    from tests.support.litex_server import litex_client
 
-    from tests.support.litex_server import start_litex_server
-
-    server, port = start_litex_server(board.port)
-    try:
-        wb = RemoteClient(port=port)
-        wb.open()
-        try:
-            assert wb.read(4 * REGISTERS["ID"]) == BOARD_ID
-            assert wb.read(4 * REGISTERS["VERSION"]) == MAP_VERSION[0] << 16 | MAP_VERSION[1]
-            lattice = wb.read(4 * REGISTERS["CFG_LATTICE"])
-            assert (lattice & 0xFF, lattice >> 8 & 0xFF) == (CFG.rows, CFG.cols)
-            wb.write(4 * REGISTERS["CMD_FIRST"], 0x1234)
-            assert wb.read(4 * REGISTERS["CMD_FIRST"]) == 0x1234
-            first = REGISTERS[next(iter(COUNTER_REGS.values()))]
-            counters = wb.read(4 * first, length=len(COUNTER_REGS))
-        finally:
-            wb.close()
-    finally:
-        server.terminate()
-        server.wait(timeout=30)
+    with litex_client(board.port) as wb:
+        assert wb.read(4 * REGISTERS["ID"]) == BOARD_ID
+        assert wb.read(4 * REGISTERS["VERSION"]) == MAP_VERSION[0] << 16 | MAP_VERSION[1]
+        lattice = wb.read(4 * REGISTERS["CFG_LATTICE"])
+        assert (lattice & 0xFF, lattice >> 8 & 0xFF) == (CFG.rows, CFG.cols)
+        wb.write(4 * REGISTERS["CMD_FIRST"], 0x1234)
+        assert wb.read(4 * REGISTERS["CMD_FIRST"]) == 0x1234
+        first = REGISTERS[next(iter(COUNTER_REGS.values()))]
+        counters = wb.read(4 * first, length=len(COUNTER_REGS))
     # the same counters through the project's own driver
     from raplas_hdl.link.driver import BoardDriver
     from raplas_hdl.link.serial_bus import SerialBus

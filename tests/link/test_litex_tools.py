@@ -10,19 +10,14 @@ a test dependency (``requirements.lock``), never a dependency of the package.
 """
 
 from raplas_hdl.model.link_protocol import LINK_ID, LINK_REGS, crc_words
-from tests.support.litex_server import start_litex_server
+from tests.support.litex_server import litex_client
 from tests.support.uartbone_bench import PtyBridge
 
 
 def test_litex_server_and_remote_client_read_and_write_through_the_bridge():
-    from litex.tools.litex_client import RemoteClient
-
     bridge = PtyBridge()
-    server, port = start_litex_server(bridge.name)
     try:
-        wb = RemoteClient(port=port)
-        wb.open()
-        try:
+        with litex_client(bridge.name) as wb:
             assert wb.read(4 * LINK_REGS["LINK_ID"]) == LINK_ID
             wb.write(4 * 2, [0xCAFE_0001, 0xCAFE_0002, 0xCAFE_0003])
             assert wb.read(4 * 3) == 0xCAFE_0002
@@ -31,9 +26,5 @@ def test_litex_server_and_remote_client_read_and_write_through_the_bridge():
                     0xCAFE_0001, 0xCAFE_0002, 0xCAFE_0003]
             assert wb.read(4 * LINK_REGS["LINK_CRC"]) == crc_words(done)
             assert wb.read(4 * LINK_REGS["LINK_ERRORS"]) == 0
-        finally:
-            wb.close()
     finally:
-        server.terminate()
-        server.wait(timeout=30)
         bridge.close()

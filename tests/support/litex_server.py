@@ -1,6 +1,7 @@
 """LiteX's ``litex_server --uart`` on a serial port, for the tests that prove the link speaks
 LiteX's UARTBone protocol (LiteX is a test dependency, never the package's)."""
 
+import contextlib
 import socket
 import subprocess
 import sys
@@ -33,3 +34,22 @@ def start_litex_server(uart_port: str, timeout_s: float = 60.0):
                 server.kill()
                 pytest.fail(f"litex_server did not start: {server.stdout.read()}")
             time.sleep(0.2)
+
+
+@contextlib.contextmanager
+def litex_client(uart_port: str):
+    """LiteX's ``RemoteClient`` through a ``litex_server --uart`` on ``uart_port`` (byte
+    addresses, as LiteX counts them); both are closed on exit."""
+    from litex.tools.litex_client import RemoteClient
+
+    server, port = start_litex_server(uart_port)
+    try:
+        wb = RemoteClient(port=port)
+        wb.open()
+        try:
+            yield wb
+        finally:
+            wb.close()
+    finally:
+        server.terminate()
+        server.wait(timeout=30)
