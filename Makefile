@@ -4,7 +4,7 @@ VENV    ?= .venv
 VPY     := $(VENV)/bin/python
 STAMP   := $(VENV)/.installed
 JOBS    ?= 2
-PYTEST  := $(VPY) -m pytest -n $(JOBS) --dist loadgroup --durations=25
+PYTEST  := $(VPY) -m pytest -n $(JOBS) --durations=25
 
 .PHONY: all setup sysdeps demo verilog test test-full bench campaign synth constraints wheel lint clean distclean
 

@@ -111,6 +111,16 @@ COMMANDS = {
         "netlist-ecp5` / `netlist-xc4v` proves the synthesised netlist equal to the RTL.",
         ["raplas-hdl prove fp-add --format FP24/rne",
          "raplas-hdl prove fp-mul --format FP16 --method netlist-ecp5"]),
+    "board-sim": (
+        "Simulates the board design (the UARTBone bridge, the board top and its unit) under "
+        "Verilator with its UART pins driven bit by bit from a pseudo-terminal, and prints "
+        "the terminal's name: `render --backend board --port PORT` renders through it as "
+        "through a board's serial port, and LiteX's `litex_server --uart` reads its "
+        "registers ([board-top.md](board-top.md)). The default build is certified, 8x8, "
+        "with the on-chip reduction.",
+        ["raplas-hdl board-sim",
+         "raplas-hdl render --scene cornell --size 8x8 --shadow 8x8 --backend board "
+         "--port /dev/pts/3 --baud 10000 -o cornell.png"]),
 }
 
 HEAD = """# Command reference

@@ -1,7 +1,7 @@
 """The ``raplas-hdl`` command line.
 
-Each subcommand lives in its own module of this package with ``add_parser(subparsers)``,
-an optional ``check(args)`` and ``run(args) -> int``. The shared options and checks (the
+Each subcommand lives in its own module of this package (``board-sim`` in ``board_sim``)
+with ``add_parser(subparsers)``, an optional ``check(args)`` and ``run(args) -> int``. The shared options and checks (the
 format, output paths, size limits, ``--waves``, ``--debug``) are in :mod:`.grammar`.
 
 ``main`` parses, calls ``check`` (which validates every value, path and size and writes
@@ -25,14 +25,15 @@ from .grammar import Parser, UsageError, add_debug_option, one_line
 
 #: Subcommand modules, in the order ``--help`` lists them.
 SUBCOMMANDS = ("demo", "verilog", "cosim", "render", "bench", "stress", "synth",
-               "constraints", "fusesoc", "pnr", "prove", "board_sim")
+               "constraints", "fusesoc", "pnr", "prove", "board-sim")
 
 
 def _load(name):
+    module = f"{__name__}.{name.replace('-', '_')}"     # board-sim: cli/board_sim.py
     try:
-        return importlib.import_module(f"{__name__}.{name}")
+        return importlib.import_module(module)
     except ModuleNotFoundError as exc:
-        if exc.name == f"{__name__}.{name}":
+        if exc.name == module:
             return None
         raise
 

@@ -34,6 +34,12 @@ from ..model.memory_image import (BundleMemory, Run, SceneMemory, as_run, bundle
 __all__ = ["BoardDriver", "BoardMismatch"]
 
 _VALID = 1 << RES_INFO_BITS["valid"]
+#: The identification registers and the counters, each a run of consecutive addresses (read
+#: as one burst where the bus can).
+_IDENT = ("ID", "VERSION", *config_words(UnitConfig().params()))
+_COUNTERS = tuple(COUNTER_REGS.values())
+for _run in (_IDENT, _COUNTERS, ("RES_INFO", *RESULT_REGS)):
+    assert [REGISTERS[n] - REGISTERS[_run[0]] for n in _run] == list(range(len(_run)))
 
 
 class BoardMismatch(ValueError):
@@ -114,9 +120,7 @@ class BoardDriver:
 
     def identify(self) -> dict:
         """``{"id", "version": (major, minor), "params"}`` as the board reports them."""
-        names = ("ID", "VERSION", *config_words(UnitConfig().params()))
-        words = dict(zip(names, self.read_regs("ID", len(names))))
-        assert [REGISTERS[n] for n in names] == list(range(len(names)))
+        words = dict(zip(_IDENT, self.read_regs(_IDENT[0], len(_IDENT))))
         version = words["VERSION"]
         return {"id": words["ID"], "version": (version >> 16, version & 0xFFFF),
                 "params": config_from_words(words)}
@@ -247,11 +251,7 @@ class BoardDriver:
 
     def read_counters(self) -> dict:
         """``cycles`` and the counters of ``run_bundle``."""
-        regs = list(COUNTER_REGS.values())
-        words = self.read_regs(regs[0], len(regs))
-        assert [REGISTERS[r] for r in regs] == list(range(REGISTERS[regs[0]],
-                                                          REGISTERS[regs[0]] + len(regs)))
-        return dict(zip(COUNTER_REGS, words))
+        return dict(zip(COUNTER_REGS, self.read_regs(_COUNTERS[0], len(_COUNTERS))))
 
     def clear_counters(self) -> None:
         self.write_reg("CONTROL", 1 << CONTROL_BITS["clear_counters"])

@@ -1,6 +1,6 @@
 """``raplas-hdl cosim`` for every unit, under Icarus and Verilator, against the golden model.
 
-Each unit runs once per simulator through the CLI (module-scoped: one build per unit,
+Each unit runs once per simulator through the CLI (one test each: one build per unit,
 format and simulator, cached under ``build/sim``): random cases with zero mismatches, the
 cases written with ``--write-vectors`` and read back with ``--vectors`` (zero mismatches
 again, the same build), and the same file with one expected field changed: exit 1, one
@@ -70,36 +70,24 @@ def _corrupt(path, unit) -> tuple[str, str]:
     return bad, name
 
 
-@pytest.fixture(scope="module", params=[(u, s) for u in UNITS for s in SIMS],
-                ids=[f"{u}-{s}" for u in UNITS for s in SIMS])
-def unit_runs(request, tmp_path_factory):
-    unit, sim = request.param
+# One test per unit and simulator (not three on a module fixture): pytest-xdist would run
+# such a fixture once on each worker that draws one of its tests.
+@pytest.mark.parametrize("unit, sim", [(u, s) for u in UNITS for s in SIMS],
+                         ids=[f"{u}-{s}" for u in UNITS for s in SIMS])
+def test_cosim_random_written_and_changed_vectors(unit, sim, tmp_path):
     opts, n = OPTIONS_ICARUS.get(unit, UNITS[unit]) if sim == "icarus" else UNITS[unit]
-    d = tmp_path_factory.mktemp(f"{unit}-{sim}")
-    vec = d / "cases.vec"
+    vec = tmp_path / "cases.vec"
+    # random cases with zero mismatches
     first = cosim(unit, "--sim", sim, "--random", n, "--seed", 3, "--write-vectors", vec, *opts)
-    again = cosim(unit, "--sim", sim, "--vectors", vec, "--seed", 4, *opts)
-    path, name = _corrupt(vec, unit)
-    bad = (cosim(unit, "--sim", sim, "--vectors", path, *opts), name)
-    return unit, n, vec, first, again, bad
-
-
-def test_random_cases_match_the_model(unit_runs):
-    unit, n, _vec, first, _, _ = unit_runs
     _ok(*first, n)
     assert first[1].startswith(unit)
-
-
-def test_written_vectors_read_back_and_match(unit_runs):
-    unit, n, vec, _, again, _ = unit_runs
+    # the written cases read back: zero mismatches again
     head = vec.read_text().splitlines()[0]
     assert head.startswith(f"# {unit} "), head
-    _ok(*again, n)
-
-
-def test_one_changed_expected_field_is_one_mismatch_shown_field_by_field(unit_runs):
-    _unit, _, _, _, _, bad = unit_runs
-    (rc, out, err), name = bad
+    _ok(*cosim(unit, "--sim", sim, "--vectors", vec, "--seed", 4, *opts), n)
+    # one expected field changed: one mismatch, shown field by field
+    path, name = _corrupt(vec, unit)
+    rc, out, err = cosim(unit, "--sim", sim, "--vectors", path, *opts)
     assert rc == 1, out + err
     assert "mismatches: 1\n" in out, out
     marked = [ln for ln in out.splitlines() if ln.rstrip().endswith("<- differs")]

@@ -37,16 +37,17 @@ from raplas_hdl.model.board_map import BOARD_ID, COUNTER_REGS, MAP_VERSION, REGI
 from raplas_hdl.model.config import UnitConfig
 from raplas_hdl.sim.drive.serial_board_sim import SIM_BAUD, SimulatedBoard
 
-pytestmark = pytest.mark.xdist_group("simulated-board")    # one simulation for the module
-
 CFG = UnitConfig(fmt=FP24, **BOARD_DEFAULTS)
 EXACT = ("spheres", "plane_tests", "pairs_skipped")
 
 
-@pytest.fixture(scope="module")
-def board():
-    with SimulatedBoard(CFG) as b:
-        yield b
+def test_the_simulated_board_end_to_end(tmp_path, capsys):
+    """One test, so that one worker builds and starts the simulated board (pytest-xdist
+    would start a module fixture's on every worker that drew one of its tests)."""
+    with SimulatedBoard(CFG) as board:
+        render_through_the_simulated_board_equals_the_model(board, tmp_path, capsys)
+        render_the_board_cannot_do_is_refused_before_any_work(board)
+        litex_tools_read_the_board_registers(board)
 
 
 def _settings(**kw):
@@ -62,7 +63,7 @@ def _render_cli(tmp_path, name, *backend):
     return np.load(f"{out}.npz"), json.loads(Path(f"{out}.json").read_text())["stats"]
 
 
-def test_cli_render_through_the_simulated_board_equals_the_model(board, tmp_path, capsys):
+def render_through_the_simulated_board_equals_the_model(board, tmp_path, capsys):
     ids, stats = _render_cli(tmp_path, "board", "--backend", "board", "--port", board.port,
                              "--baud", str(SIM_BAUD))
     assert "board (" in capsys.readouterr().out
@@ -83,7 +84,7 @@ def test_cli_render_through_the_simulated_board_equals_the_model(board, tmp_path
     assert link["round_trips"] < link["words_read"]       # the result window in bursts
 
 
-def test_render_the_board_cannot_do_is_refused_before_any_work(board):
+def render_the_board_cannot_do_is_refused_before_any_work(board):
     be = make_backend("board", FP24, mode="certified", port=board.port, baudrate=SIM_BAUD)
     try:
         writes = be.bus.words_written
@@ -99,7 +100,7 @@ def test_render_the_board_cannot_do_is_refused_before_any_work(board):
         make_backend("board", FP24, mode="paper", port=board.port, baudrate=SIM_BAUD)
 
 
-def test_litex_tools_read_the_board_registers(board):
+def litex_tools_read_the_board_registers(board):
     from tests.support.litex_server import litex_client
 
     with litex_client(board.port) as wb:

@@ -50,9 +50,11 @@ def _early_out(runs, rng):
     return out
 
 
-# Icarus through the write port runs in the full suite (Verilator covers that path in make test)
+# Icarus runs in the full suite (make test: Verilator here, and Icarus sessions in
+# tests/host/test_render_reduce.py::test_rtl_reduce_render_icarus and the rtl renders)
 @pytest.mark.parametrize("simulator, backdoor", [
-    ("icarus", True), pytest.param("icarus", False, marks=pytest.mark.full),
+    pytest.param("icarus", True, marks=pytest.mark.full),
+    pytest.param("icarus", False, marks=pytest.mark.full),
     ("verilator", True), ("verilator", False)],
     ids=["icarus-backdoor", "icarus-write-port", "verilator-backdoor", "verilator-write-port"])
 def test_session_rounds_match_model(simulator, backdoor, scene_runs):

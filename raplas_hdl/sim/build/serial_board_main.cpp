@@ -10,7 +10,10 @@
 // going away closes it too). Every byte the host writes becomes one 8N1 frame on rx,
 // frames back to back; every frame on tx is decoded in the middle of its bits and written
 // back. Python is not in the clock loop: the terminal is read every 64 clocks while rx is
-// idle, and written as bytes complete.
+// idle, and written as bytes complete. After 2^20 clocks without a byte either way the host
+// is taken to be away: the simulation then waits on the terminal for up to 5 ms between
+// runs of 256 clocks (the board's state is kept; a byte resumes full speed at once), so an
+// idle simulated board costs next to no CPU.
 #include <cerrno>
 #include <cstdio>
 #include <cstdlib>
@@ -96,11 +99,16 @@ int main(int argc, char** argv) {
     long tx_left = 0;
     unsigned tx_byte = 0;
     std::string out_buf;
-    unsigned long long cycles = 0, bytes_in = 0, bytes_out = 0;
+    unsigned long long cycles = 0, bytes_in = 0, bytes_out = 0, quiet = 0;
+    const unsigned long long idle_after = 1ull << 20;
     struct pollfd stdin_poll = {0, POLLIN, 0};
+    struct pollfd master_poll = {master, POLLIN, 0};
 
     for (;;) {
         if (rx_bit < 0) {
+            if (in_pos == in_len && tx_phase < 0 && out_buf.empty() && quiet > idle_after &&
+                (cycles & 255) == 0)
+                poll(&master_poll, 1, 5);            // the host is away: wait for a byte
             if (in_pos == in_len && (cycles & 63) == 0) {
                 ssize_t n = read(master, in_buf, sizeof in_buf);
                 if (n > 0) { in_len = n; in_pos = 0; }
@@ -116,6 +124,8 @@ int main(int argc, char** argv) {
         top->clk = 1; top->eval();
         top->clk = 0; top->eval();
         ++cycles;
+        ++quiet;
+        if (rx_bit >= 0 || tx_phase >= 0) quiet = 0;
         if (rx_bit >= 0 && --rx_left == 0) {
             rx_left = divisor;
             if (++rx_bit > 9) rx_bit = -1;

@@ -389,6 +389,21 @@ BACKDOOR = (("TRI_INIT", "tri_mem", "tri"), ("SPH_INIT", "sph_mem", "sphere"),
             ("CNT_INIT", "cnt_mem", "sphere"), ("TL_INIT", "tlist_mem", "tlist"))
 
 
+#: The last scenes' memory images, ``[(config, scene, images)]`` (a render starts two
+#: sessions per unit configuration with one scene: the images are built once).
+_IMAGES: list = []
+
+
+def cached_scene_images(config: UnitConfig, scene: SceneMemory) -> dict:
+    """:func:`scene_images`, kept for the last two ``(config, scene)`` (the same objects)."""
+    for c, sc, images in _IMAGES:
+        if c == config and sc is scene:
+            return images
+    images = scene_images(config, scene)
+    _IMAGES[:] = [(config, scene, images), *_IMAGES[:1]]
+    return images
+
+
 def scene_images(config: UnitConfig, scene: SceneMemory) -> dict:
     """``$readmemh`` text of the scene memories, ``{plusarg: bytes}``: exactly the words the
     write port would store for :func:`~raplas_hdl.model.memory_image.scene_writes` (the
@@ -502,7 +517,7 @@ class UnitSession:
         self._log = open(self._log_path, "wb")  # noqa: SIM115 - session-long
         init = []
         if backdoor:
-            for name, text in scene_images(config, scene).items():
+            for name, text in cached_scene_images(config, scene).items():
                 path = self._dir / f"{name}.hex"
                 path.write_bytes(text)
                 if record:
