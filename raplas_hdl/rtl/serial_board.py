@@ -96,7 +96,8 @@ class SerialBoard(wiring.Component):
         m.d.sync += beat.eq(beat + 1)
         leds = {"heartbeat": beat[-1]}
         for name, active in (("rx", ~self.rx), ("tx", ~bridge.tx), ("bus", bridge.wb_cyc)):
-            hold = Signal(self.blink_bits + 1, name=f"{name}_hold")
+            # counts up to its top bit after the activity: dark from reset until activity
+            hold = Signal(self.blink_bits + 1, name=f"{name}_hold", init=1 << self.blink_bits)
             with m.If(active):
                 m.d.sync += hold.eq(0)
             with m.Elif(~hold[-1]):

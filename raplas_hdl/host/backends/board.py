@@ -100,8 +100,8 @@ class BoardBackend(UnitBackend):
 
     # -- the build against the render -----------------------------------------------------
     def check_settings(self, settings) -> None:
-        """Raise ``ValueError`` (one line) when a bundle lattice of ``settings`` is not the
-        board's, or its spheres may hold more triangles than the board's."""
+        """Raise ``ValueError`` (one line) when a bundle lattice of ``settings``, or its
+        triangles per sphere, is not the board's."""
         c = self.board_config
         lattices = {"--tile": (settings.rows, settings.cols),
                     "--shadow": (settings.shadow_rows, settings.shadow_cols),
@@ -112,9 +112,10 @@ class BoardBackend(UnitBackend):
                 off = "" if opt == "--tile" else f", or {opt} 0x0"
                 raise ValueError(f"the board's unit takes {c.rows}x{c.cols} bundles, not "
                                  f"{r}x{cc} ({opt}): use {opt} {c.rows}x{c.cols}{off}")
-        if settings.tris_per_sphere > c.tris_per_sphere:
+        if settings.tris_per_sphere != c.tris_per_sphere:
             raise ValueError(f"the board's unit holds {c.tris_per_sphere} triangles per "
-                             f"sphere, not {settings.tris_per_sphere} (--tris-per-sphere)")
+                             f"sphere, not {settings.tris_per_sphere}: use --tris-per-sphere "
+                             f"{c.tris_per_sphere}")
 
     def config(self, rows, cols):
         c = self.board_config
