@@ -16,6 +16,7 @@ from raplas_hdl.model.board_map import BOARD_ID, REGISTERS
 from raplas_hdl.model.config import UnitConfig
 from raplas_hdl.model.link_protocol import CMD_READ_INCR, command_bytes
 from raplas_hdl.rtl.serial_board import LEDS, SerialBoard
+from tests.support.uartbone_bench import read_frame
 
 DIVISOR = 4
 CFG = UnitConfig(fmt=FP16, rows=2, cols=3, tris_per_sphere=2, max_triangles=16, max_spheres=8,
@@ -34,15 +35,7 @@ def test_serial_board_reaches_the_register_map_and_drives_the_leds():
     async def listener(ctx):
         await ctx.delay(OUT_OF_RESET)
         while True:
-            while ctx.get(dut.tx):
-                await ctx.tick()
-            await ctx.tick().repeat(DIVISOR // 2)
-            value = 0
-            for k in range(8):
-                await ctx.tick().repeat(DIVISOR)
-                value |= ctx.get(dut.tx) << k
-            await ctx.tick().repeat(DIVISOR)
-            received.append(value)
+            received.append(await read_frame(ctx, dut.tx, DIVISOR))
 
     async def watch(ctx):
         await ctx.delay(OUT_OF_RESET)

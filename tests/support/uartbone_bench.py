@@ -77,6 +77,19 @@ class Bench(wiring.Component):
 
 
 
+async def read_frame(ctx, tx, divisor: int = DIVISOR) -> int:
+    """The next 8N1 byte on ``tx``: wait for a start bit, sample each bit in its middle."""
+    while ctx.get(tx):
+        await ctx.tick()
+    await ctx.tick().repeat(divisor // 2)
+    value = 0
+    for k in range(8):
+        await ctx.tick().repeat(divisor)
+        value |= ctx.get(tx) << k
+    await ctx.tick().repeat(divisor)
+    return value
+
+
 class PtyBridge:
     """A :class:`Bench` simulated in a thread, its serial lines on a pseudo-terminal: the
     bytes a host writes to :attr:`name` go onto ``rx`` frame by frame, bit by bit; the
@@ -118,15 +131,7 @@ class PtyBridge:
 
         async def tx_to_host(ctx):
             while True:
-                while ctx.get(dut.tx):
-                    await ctx.tick()
-                await ctx.tick().repeat(DIVISOR // 2)
-                value = 0
-                for k in range(8):
-                    await ctx.tick().repeat(DIVISOR)
-                    value |= ctx.get(dut.tx) << k
-                await ctx.tick().repeat(DIVISOR)
-                os.write(self.master, bytes([value]))
+                os.write(self.master, bytes([await read_frame(ctx, dut.tx)]))
 
         sim.add_testbench(host_to_rx)
         sim.add_testbench(tx_to_host, background=True)
