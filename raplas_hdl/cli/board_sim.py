@@ -10,6 +10,7 @@ host side opens it as it would a board's serial port:
 
 from __future__ import annotations
 
+import contextlib
 import time
 
 from . import grammar as g
@@ -66,17 +67,15 @@ def run(args) -> int:
           f"{cfg.rows}x{cfg.cols}, {cfg.max_triangles} triangles, {cfg.max_spheres} "
           "spheres); the first build takes minutes", flush=True)
     with SimulatedBoard(cfg, args.divisor or SIM_DIVISOR) as board:
+        lattice = f"{cfg.rows}x{cfg.cols}"
         print(f"simulated board on {board.port} (Ctrl-C stops it)\n"
               f"  raplas-hdl render --backend board --port {board.port} --baud {SIM_BAUD} "
-              f"--tile "
-              f"{cfg.rows}x{cfg.cols} --shadow {cfg.rows}x{cfg.cols} -o out.png", flush=True)
+              f"--tile {lattice} --shadow {lattice} -o out.png", flush=True)
         t0 = time.monotonic()
-        try:
+        with contextlib.suppress(KeyboardInterrupt):      # Ctrl-C: stop the board
             while board.alive and (args.seconds is None
                                    or time.monotonic() - t0 < args.seconds):
                 time.sleep(0.2)
-        except KeyboardInterrupt:
-            pass
         if not board.alive:
             raise RuntimeError("the simulated board stopped")
     return 0

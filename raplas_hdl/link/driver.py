@@ -196,11 +196,8 @@ class BoardDriver:
         self.write_reg("CMD_START", word)
 
     def _pop_words(self) -> tuple | None:
-        """Pop one result beat: its six words (``RES_INFO`` and :data:`RESULT_REGS`), or
-        None when none waits."""
-        if hasattr(self.bus, "read_burst"):     # the whole window in one round trip
-            words = tuple(self.read_regs("RES_INFO", 1 + len(RESULT_REGS)))
-            return words if words[0] & _VALID else None
+        """Pop one result beat register by register: its six words (``RES_INFO`` and
+        :data:`RESULT_REGS`), or None when none waits."""
         info = self.read_reg("RES_INFO")
         if not info & _VALID:
             return None
@@ -208,7 +205,7 @@ class BoardDriver:
 
     def pop(self) -> dict | None:
         """Pop one result beat (its fields) or return None when none waits."""
-        words = self._pop_words()
+        words = self._pop_batch(1)[0]
         return None if words is None else decode_result_words(*words, self.config)
 
     def _pop_batch(self, k: int) -> list:
