@@ -104,6 +104,17 @@ COMMANDS = {
         ["raplas-hdl pnr fp-add --speed 6 --seeds 3",
          "raplas-hdl pnr intersection-unit --speed 6 --seeds 3 -o build/pnr-iu",
          "raplas-hdl pnr fp-mul --bitstream -o build/board"]),
+    "bitstream": (
+        "Builds the board design for the ULX3S: a PLL from its 25 MHz oscillator to the "
+        "unit's clock, the UARTBone bridge on its FTDI serial port, the board top and its "
+        "whole unit (certified, 8x8, with the on-chip reduction), reset on FIRE 1, status on "
+        "LEDs 0-5; synthesis, place and route on the board's pins and a `.bit` and `.svf` "
+        "(about an hour; refused when the routed design misses the clock). Prints how to "
+        "load it (`openFPGALoader -b ulx3s DIR/board-top-ulx3s.bit`, not a dependency; "
+        "[board-top.md](board-top.md)).",
+        ["raplas-hdl bitstream --board ulx3s-85f -o build/bitstream",
+         "raplas-hdl render --scene cornell --size 64x64 --backend board --port /dev/ttyUSB0 "
+         "--baud 3000000 -o cornell.png"]),
     "prove": (
         "Proves the emitted Verilog equal to the arithmetic contract for every input, every "
         "output bit and flag (Yosys `write_smt2`, z3): `proved`, a counterexample or "

@@ -25,7 +25,7 @@ from .grammar import Parser, UsageError, add_debug_option, one_line
 
 #: Subcommand modules, in the order ``--help`` lists them.
 SUBCOMMANDS = ("demo", "verilog", "cosim", "render", "bench", "stress", "synth",
-               "constraints", "fusesoc", "pnr", "prove", "board-sim")
+               "constraints", "fusesoc", "pnr", "bitstream", "prove", "board-sim")
 
 
 def _load(name):

@@ -108,8 +108,8 @@ def check(args) -> None:
                                "--bitstream")
         if args.unit in OWN_CLOCK_UNITS:
             raise g.UsageError(f"--bitstream: {args.unit} has its own clock and reset ports "
-                               "(clk, rst); the serial wrapper clocks a unit and drives its "
-                               "ports from registers")
+                               "(clk, rst), which the serial wrapper cannot drive; its board "
+                               "bitstream is raplas-hdl bitstream --board ulx3s-85f")
         if args.freq is not None:
             raise g.UsageError("--freq does not apply with --bitstream: the clock is the "
                                "ULX3S's 25 MHz oscillator (its FREQUENCY in the .lpf)")

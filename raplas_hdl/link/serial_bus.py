@@ -30,13 +30,10 @@ import time
 import numpy as np
 
 from ..model.link_protocol import (CMD_READ_FIXED, CMD_READ_INCR, CMD_WRITE_FIXED,
-                                   CMD_WRITE_INCR, LINK_BASE, LINK_ID, LINK_REGS, LINK_SPAN,
-                                   MAX_BURST, command_bytes, crc_words)
+                                   CMD_WRITE_INCR, DEFAULT_BAUD, LINK_BASE, LINK_ID, LINK_REGS,
+                                   LINK_SPAN, MAX_BURST, command_bytes, crc_words)
 
 __all__ = ["SerialBus", "LinkError", "DEFAULT_BAUD"]
-
-#: The ULX3S's FTDI FT231X reaches 3 Mbaud.
-DEFAULT_BAUD = 3_000_000
 
 #: Pending write bytes that make :meth:`SerialBus.write` send them at once.
 FLUSH_BYTES = 1 << 20

@@ -42,7 +42,10 @@ import numpy as np
 
 __all__ = ["CMD_WRITE_INCR", "CMD_READ_INCR", "CMD_WRITE_FIXED", "CMD_READ_FIXED", "COMMANDS",
            "LINK_BASE", "LINK_ID", "LINK_REGS", "MAX_BURST", "CRC_POLY", "crc_words",
-           "crc_step_matrix", "command_bytes", "LINK_SPAN"]
+           "crc_step_matrix", "command_bytes", "LINK_SPAN", "DEFAULT_BAUD"]
+
+#: The line's rate where none is given: what the ULX3S's FTDI FT231X reaches.
+DEFAULT_BAUD = 3_000_000
 
 CMD_WRITE_INCR = 0x01
 CMD_READ_INCR = 0x02

@@ -33,7 +33,8 @@ from .fit import check_fit
 from .tools import ecppack_command
 from .unit import pnr_command, check_copies, design, flow_record, report_stem
 
-__all__ = ["bitstream_unit", "check_bitstream", "bitstream_summary", "PREAMBLE"]
+__all__ = ["bitstream_unit", "place_on_board", "check_bitstream", "bitstream_summary",
+           "PREAMBLE"]
 
 #: The ECP5 bitstream preamble (after the comment block ecppack writes first).
 PREAMBLE = b"\xff\xff\xbd\xb3"
@@ -100,27 +101,10 @@ def bitstream_unit(unit: str, fmt, options: dict, out_dir, *, device: str = "LFE
     clock_mhz = placed["frequency"][CLOCK_PORT]
     emit_s = time.monotonic() - t0
 
-    syn = synthesize_ecp5(text, top, base=base, use_cache=use_cache, timeout=timeout,
-                          progress=progress)
-    check_fit(syn.counts, device, what, io=len(ports))
-    tag = hashlib.sha256(lpf.encode()).hexdigest()[:8]
-    lpf_name = f"{BOARD.lower()}-{tag}.lpf"
-    (syn.work / lpf_name).write_text(lpf)
-
-    configs = {seed: f"{device}-s{speed}-seed{seed}-{tag}.config" for seed in seeds}
-
-    def all_placed(seed, r):
-        io = r.utilisation.get("TRELLIS_IO", {}).get("used")
-        if io != len(ports):
-            raise RuntimeError(f"{top}: nextpnr placed {io} I/O of the design's {len(ports)} "
-                               f"ports (seed {seed}; log {syn.work})")
-
-    flow = route_seeds(syn, device=device, speed=speed, freq=clock_mhz, seeds=seeds,
-                       use_cache=use_cache, timeout=timeout, progress=progress,
-                       out_of_context=False,
-                       extra=lambda seed: ["--lpf", lpf_name, "--textcfg", configs[seed]],
-                       cached=lambda seed: (syn.work / configs[seed]).exists(),
-                       check_run=all_placed, where=f", on the {BOARD}, every port placed")
+    syn, flow, stems, lpf_name = place_on_board(
+        text, top, ports, lpf, what, device=device, speed=speed, freq=clock_mhz, seeds=seeds,
+        use_cache=use_cache, timeout=timeout, progress=progress, base=base)
+    configs = {seed: f"{stem}.config" for seed, stem in stems.items()}
     clock = _clock_net(flow.fmax, CLOCK_PORT)
 
     med = flow.median_seed()
@@ -157,6 +141,38 @@ def bitstream_unit(unit: str, fmt, options: dict, out_dir, *, device: str = "LFE
     }
     rec["summary"] = bitstream_summary(rec)
     return rec
+
+
+def place_on_board(text: str, top: str, ports: list[dict], lpf: str, what: str, *,
+                   device: str, speed: int, freq: float, seeds: list, use_cache: bool,
+                   timeout: float, progress: Callable[[str], None] | None,
+                   base: Path | None, extra: tuple = ()) -> tuple:
+    """Synthesis of ``text`` (top ``top``), the fit check, and in-context place and route with
+    ``lpf`` for each seed, each run refused unless every one of ``ports`` is placed; ``extra``:
+    more nextpnr arguments. Returns ``(syn, flow, stems, lpf_name)``: ``stems[seed]`` names
+    that seed's ``.config`` (``<stem>.config``, in ``syn.work``) and what is packed from it."""
+    syn = synthesize_ecp5(text, top, base=base, use_cache=use_cache, timeout=timeout,
+                          progress=progress)
+    check_fit(syn.counts, device, what, io=len(ports))
+    tag = hashlib.sha256(lpf.encode()).hexdigest()[:8]
+    lpf_name = f"{BOARD.lower()}-{tag}.lpf"
+    (syn.work / lpf_name).write_text(lpf)
+    stems = {seed: f"{device}-s{speed}-seed{seed}-{tag}" for seed in seeds}
+
+    def all_placed(seed, r):
+        io = r.utilisation.get("TRELLIS_IO", {}).get("used")
+        if io != len(ports):
+            raise RuntimeError(f"{top}: nextpnr placed {io} I/O of the design's {len(ports)} "
+                               f"ports (seed {seed}; log {syn.work})")
+
+    flow = route_seeds(syn, device=device, speed=speed, freq=freq, seeds=seeds,
+                       use_cache=use_cache, timeout=timeout, progress=progress,
+                       out_of_context=False,
+                       extra=lambda seed: ["--lpf", lpf_name, "--textcfg",
+                                           f"{stems[seed]}.config", *extra],
+                       cached=lambda seed: (syn.work / f"{stems[seed]}.config").exists(),
+                       check_run=all_placed, where=f", on the {BOARD}, every port placed")
+    return syn, flow, stems, lpf_name
 
 
 def _clock_net(fmax: dict, port: str) -> str:

@@ -1,10 +1,14 @@
-"""The ULX3S's pins for the serial wrapper, and the ``.lpf`` that places every port.
+"""The ULX3S's pins for the serial wrapper and for the board design, and the ``.lpf`` that
+places every port.
 
 The pin sites and I/O standards come from amaranth-boards' ULX3S platform
-(``amaranth_boards.ulx3s.ULX3S_85F_Platform`` and its 25F and 45F siblings, the same board):
-the 25 MHz oscillator (resource ``clk25``), the FIRE 1 button (``button_fire`` 0) as reset,
-and four pins of the GPIO header (connector ``gpio`` 0, pins ``0+`` .. ``3+``: the board's
-``gp[0]`` .. ``gp[3]``). amaranth-boards gives the header pins no attributes; the header's
+(``amaranth_boards.ulx3s.ULX3S_85F_Platform`` and its 25F and 45F siblings, the same board).
+The serial wrapper (:data:`ULX3S_PINS`): the 25 MHz oscillator (resource ``clk25``), the
+FIRE 1 button (``button_fire`` 0) as reset, and four pins of the GPIO header (connector
+``gpio`` 0, pins ``0+`` .. ``3+``: the board's ``gp[0]`` .. ``gp[3]``). The board design
+(:data:`ULX3S_BOARD_PINS`, :class:`raplas_hdl.rtl.ulx3s_top.ULX3STop`): the oscillator, the
+button, the FTDI's serial lines (resource ``uart`` 0, subsignals ``rx`` and ``tx``) and
+LEDs 0-5 (resource ``led``). amaranth-boards gives the header pins no attributes; the header's
 banks are powered at 3.3 V on the ULX3S, so they are ``LVCMOS33``, inputs pulled down (an
 unconnected header idles with ``sclk`` and ``load`` low), the output at 4 mA.
 
@@ -18,13 +22,13 @@ from __future__ import annotations
 
 import re
 
-__all__ = ["BOARD", "ULX3S_PINS", "HEADER_ATTRS", "ulx3s_pins", "lpf_text", "lpf_ports",
-           "check_lpf"]
+__all__ = ["BOARD", "ULX3S_PINS", "ULX3S_BOARD_PINS", "HEADER_ATTRS", "ulx3s_pins", "lpf_text",
+           "lpf_ports", "check_lpf"]
 
 BOARD = "ULX3S"
 
 #: Wrapper port -> its place on the board: ``("resource", name, number)`` of the platform,
-#: or ``("connector", name, number, pin)``.
+#: ``("resource", name, number, subsignal)``, or ``("connector", name, number, pin)``.
 ULX3S_PINS = {
     "clk_25mhz": ("resource", "clk25", 0),
     "rst": ("resource", "button_fire", 0),
@@ -32,6 +36,16 @@ ULX3S_PINS = {
     "sdi": ("connector", "gpio", 0, "1+"),
     "load": ("connector", "gpio", 0, "2+"),
     "sdo": ("connector", "gpio", 0, "3+"),
+}
+
+#: The board design's ports (:class:`raplas_hdl.rtl.ulx3s_top.ULX3STop`) -> their places.
+ULX3S_BOARD_PINS = {
+    "clk_25mhz": ("resource", "clk25", 0),
+    "btn_fire": ("resource", "button_fire", 0),
+    "uart_rx": ("resource", "uart", 0, "rx"),
+    "uart_tx": ("resource", "uart", 0, "tx"),
+    **{f"led_{name}": ("resource", "led", k) for k, name in
+       enumerate(("heartbeat", "rx", "tx", "bus", "bus_error", "locked"))},
 }
 
 #: Attributes of the GPIO header pins (amaranth-boards gives none), by direction.
@@ -53,24 +67,31 @@ def _platform(device: str):
     return getattr(ulx3s, _PLATFORMS[device])()
 
 
-def ulx3s_pins(device: str = "LFE5U-85F", directions: dict | None = None) -> dict:
-    """``{port: {"site", "attrs", "from", "mhz"}}`` of :data:`ULX3S_PINS` on the ULX3S with
-    ``device``. ``directions`` (``{port: "input" | "output"}``) picks the header pins'
-    attributes (default: ``sdo`` out, the rest in)."""
+def ulx3s_pins(device: str = "LFE5U-85F", directions: dict | None = None,
+               places: dict | None = None) -> dict:
+    """``{port: {"site", "attrs", "from", "mhz"}}`` of ``places`` (default
+    :data:`ULX3S_PINS`) on the ULX3S with ``device``. ``directions``
+    (``{port: "input" | "output"}``) picks the header pins' attributes (default: ``sdo``
+    out, the rest in)."""
     plat = _platform(device)
     directions = directions or {}
     out = {}
-    for port, where in ULX3S_PINS.items():
+    for port, where in (ULX3S_PINS if places is None else places).items():
         if where[0] == "resource":
-            _, name, number = where
+            name, number, sub = where[1], where[2], where[3] if len(where) > 3 else None
             res = plat.resources[name, number]
-            pins = res.ios[0]
-            if len(pins.names) != 1 or getattr(pins, "invert", False):
-                raise ValueError(f"resource {name} {number} is not one plain pin")
             attrs = {k: str(v) for k, v in res.attrs.items()}
+            pins, what = res.ios[0], f"{name} {number}"
+            if sub is not None:
+                subs = {s.name: s for s in res.ios}
+                if sub not in subs:
+                    raise ValueError(f"resource {name} {number} has no subsignal {sub}")
+                attrs.update({k: str(v) for k, v in subs[sub].attrs.items()})
+                pins, what = subs[sub].ios[0], f"{name} {number} {sub}"
+            if len(getattr(pins, "names", ())) != 1 or getattr(pins, "invert", False):
+                raise ValueError(f"resource {what} is not one plain pin")
             mhz = res.clock.frequency / 1e6 if res.clock is not None else None
-            out[port] = {"site": pins.names[0], "attrs": attrs, "from": f"{name} {number}",
-                         "mhz": mhz}
+            out[port] = {"site": pins.names[0], "attrs": attrs, "from": what, "mhz": mhz}
         else:
             _, name, number, pin = where
             site = plat.connectors[name, number].mapping[pin]

@@ -180,9 +180,14 @@ def markdown(rec: dict) -> str:
     copies = rec.get("copies", 1)
     bit = rec.get("bitstream")
     what = f"`{rec['unit']}`" + (f", {copies} copies side by side," if copies > 1 else "")
-    if bit:
+    if bit and "pll" in bit:
+        what += f" (the board design: UARTBone bridge, board top, PLL) on the {bit['board']},"
+        context = (f"In context: every port placed by `{bit['lpf_name']}` (below), clock "
+                   f"{bit['clock']} from the PLL at {rec['freq_target']:g} MHz (the board's "
+                   f"25 MHz oscillator times {bit['pll']['clkfb_div']} over "
+                   f"{bit['pll']['clki_div']}), router {rec.get('router', 'router1')}")
+    elif bit:
         what += f" behind the serial wrapper on the {bit['board']},"
-    if bit:
         context = (f"In context: every port placed by `{bit['lpf_name']}` (below), clock "
                    f"{bit['clock']} constrained to {rec['freq_target']:g} MHz (the board's "
                    "oscillator)")
@@ -192,7 +197,8 @@ def markdown(rec: dict) -> str:
            f"speed {rec['speed']}", "",
            f"`{rec['command']}`", "",
            f"Format {rec['format']}, options {json.dumps(rec['options']) or '{}'}, latency "
-           f"{rec['latency']} cycles. {context}, seeds {', '.join(map(str, rec['seeds']))}.",
+           + (f"{rec['latency']} cycles" if rec["latency"] is not None else "n/a")
+           + f". {context}, seeds {', '.join(map(str, rec['seeds']))}.",
            "", "| clock | Fmax median | min | max |", "|---|--:|--:|--:|"]
     for clk, f in rec["fmax"].items():
         out.append(f"| {clk} | **{f['median']:.1f} MHz** | {f['min']:.1f} | {f['max']:.1f} |")
@@ -223,16 +229,22 @@ def markdown(rec: dict) -> str:
         for port, p in bit["pins"].items():
             out.append(f"| {port} | {p['site']} | {p['from']} | "
                        + " ".join(f"{k}={v}" for k, v in p["attrs"].items()) + " |")
-        w = bit["wrapper"]
-        out += ["", f"Serial words: {w['in_bits']} bits in, {w['out_bits']} bits out, bit 0 "
-                    "first (`raplas_hdl/rtl/serial_wrapper.py`).", "",
-                "| input field | bits | | output field | bits |", "|---|--:|---|---|--:|"]
-        ins, outs = w["in_fields"], w["out_fields"]
-        for i in range(max(len(ins), len(outs))):
-            a = ins[i] if i < len(ins) else None
-            b = outs[i] if i < len(outs) else None
-            out.append(f"| {a[0] if a else ''} | {_bits(a)} | | {b[0] if b else ''} | "
-                       f"{_bits(b)} |")
+        if "svf" in bit:
+            out += ["", f"SVF: `{bit['svf']}`, {bit['svf_bytes']:,} bytes. UART "
+                        f"{bit['baud']:,.0f} baud (divisor {bit['divisor']}; asked "
+                        f"{bit['baud_asked']:,}). Load: `openFPGALoader -b ulx3s "
+                        f"{Path(bit['path']).name}`."]
+        w = bit.get("wrapper")
+        if w is not None:
+            out += ["", f"Serial words: {w['in_bits']} bits in, {w['out_bits']} bits out, "
+                        "bit 0 first (`raplas_hdl/rtl/serial_wrapper.py`).", "",
+                    "| input field | bits | | output field | bits |", "|---|--:|---|---|--:|"]
+            ins, outs = w["in_fields"], w["out_fields"]
+            for i in range(max(len(ins), len(outs))):
+                a = ins[i] if i < len(ins) else None
+                b = outs[i] if i < len(outs) else None
+                out.append(f"| {a[0] if a else ''} | {_bits(a)} | | {b[0] if b else ''} | "
+                           f"{_bits(b)} |")
     sec = rec["seconds"]
     out += ["", f"Tool time: synthesis {sec['synthesis']:.1f} s"
                 f"{' (cached)' if sec.get('synthesis_cached') else ''}, place and route "

