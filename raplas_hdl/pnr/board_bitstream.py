@@ -49,7 +49,7 @@ OSCILLATOR_MHZ = 25.0
 
 #: The unit's clock when none is asked for (the PLL makes 39.2857 MHz, 25 x 11 / 7; 13
 #: clocks per bit, 3.02 Mbaud): the default build routed at 44.9 MHz with the PLL at 75
-#: (docs/board-top.md), and placements of it were estimated at 41.6-46.1 MHz; this is the
+#: (docs/board-top.md), and placements of it were estimated at 40.6-46.1 MHz; this is the
 #: fastest clock under 41.6 that the PLL makes and the UART takes at 3 Mbaud.
 DEFAULT_CLOCK_MHZ = 39.29
 
