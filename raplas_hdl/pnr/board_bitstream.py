@@ -185,8 +185,9 @@ def bitstream_board(config: UnitConfig, out_dir, *, board: str = "ulx3s-85f", sp
                                                "--svf", f"{stem}.svf"],
                           syn.work, f"{stem}.ecppack.log", timeout, None, f"{TOP}: ecppack")
     size = check_bitstream(bit_w)
-    if not svf_w.read_text(errors="replace").lstrip().startswith(("!", "//", "HDR", "TRST",
-                                                                   "STATE", "SIR")):
+    with open(svf_w, "rb") as f:        # ecppack's SVF opens with its header statements
+        head = f.read(64).lstrip()
+    if not head.startswith((b"!", b"//", b"HDR", b"TRST", b"STATE", b"SIR")):
         raise RuntimeError(f"{svf_w} is not an SVF file")
 
     out_dir = Path(out_dir)
