@@ -58,8 +58,9 @@ answer (``near``, four bits beside ``better``, the one of the last writer taken 
 ``r``) is passed on in stage ``r`` instead of replacing the answer or being dropped. A beat
 passed on is, unless its ray is blocked (an any-hit bundle whose ray already has an answer),
 loaded in stage ``r`` into the output register as its own beat (``outcome`` 2, the fields of
-the pair, not ``last``) instead of being folded; while the output register holds a beat not
-yet taken, a passed-on pair waits in stage ``r`` and the pipeline stalls (``en``). So a run's
+the pair, not ``last``) instead of being folded, or into a skid register behind it while the
+output register holds a beat not yet taken; while the skid register is full the pipeline
+stalls (``en``, a function of registers only), and a scan waits for it to drain. So a run's
 passed-on pairs leave in stream order before its answers (``outcome`` 1); a run without
 answers ends with the ``empty`` beat (``outcome`` 0) after them. Every certain hit either
 leaves the unit or was dropped behind an answer certainly nearer in R (or is certainly
@@ -438,18 +439,32 @@ class Reducer(wiring.Component):
         o_empty = Signal()
         o_ray = Signal(cfg.ray_id_bits)
         if certified:
-            # passed-on uncertain pairs leave from stage r through the output register
+            # passed-on uncertain pairs leave from stage r through the output register, or,
+            # when that holds a beat not taken, through a skid register behind it; the
+            # pipeline stops while the skid register is full, so ``en`` is two registers'
+            # function (a stop computed from this cycle's beat in r drove the enables of
+            # every stage through the valid bits' multiplexer: the board's critical path)
             o_unc = Signal()
             u_word = Signal(ans)
             emit = Signal()
+            sk_v = Signal()
+            sk_ray = Signal(cfg.ray_id_bits)
+            sk_word = Signal(ans)
+            o_free = Signal()
             m.d.comb += [emit.eq(r_v & (r3.pass_ | fold_pass) & ~(r3.any & has)),
-                         en.eq(~scanning & ~(emit & o_v))]
-            with m.If(~scanning):
-                with m.If(o_v & self.o.ready):
-                    m.d.sync += o_v.eq(0)
-                with m.If(en & emit):
+                         en.eq(~scanning & ~sk_v), o_free.eq(~o_v | self.o.ready)]
+            with m.If(o_v & self.o.ready):
+                m.d.sync += o_v.eq(0)
+            # the skid register drains into the output register (never while ``en``)
+            with m.If(sk_v & o_free):
+                m.d.sync += [sk_v.eq(0), o_v.eq(1), o_unc.eq(1), o_last.eq(0),
+                             o_empty.eq(0), o_ray.eq(sk_ray), u_word.eq(sk_word)]
+            with m.If(en & emit):
+                with m.If(o_free):
                     m.d.sync += [o_v.eq(1), o_unc.eq(1), o_last.eq(0), o_empty.eq(0),
                                  o_ray.eq(r3.ray), u_word.eq(new)]
+                with m.Else():
+                    m.d.sync += [sk_v.eq(1), sk_ray.eq(r3.ray), sk_word.eq(new)]
         # The ray to send is registered a cycle ahead (``s_*``, from the valid bits without
         # the one being sent), so the encoder tree ends in registers, not in the RAM's
         # address; the first cycle of a scan only primes them.
@@ -464,15 +479,12 @@ class Reducer(wiring.Component):
         m.d.comb += rest.eq(valid & ~sending)
         idx, only = lowest_set_tree(m, rest, R, "next")
         step = scanning & primed & (~o_v | self.o.ready)
+        if certified:
+            step = step & ~sk_v          # the run's passed-on pairs leave before its answers
         with m.If(scanning & (step | ~primed)):
             m.d.sync += [primed.eq(1), s_idx.eq(idx), s_only.eq(only), s_any.eq(rest != 0)]
         m.d.comb += [ar.addr.eq(Mux(scanning, s_idx, a2.ray)),
                      ar.en.eq(Mux(scanning, step & s_any, en))]
-        if certified:
-            # a passed-on pair still in the output register when the scan starts may be
-            # taken in its priming cycle (the only beat that can be there then)
-            with m.If(scanning & ~primed & o_v & self.o.ready):
-                m.d.sync += o_v.eq(0)
         with m.If(step):
             with m.If(o_v & o_last):
                 m.d.sync += [scanning.eq(0), primed.eq(0), o_v.eq(0), cur_any.eq(0),
