@@ -21,7 +21,8 @@ DEFAULT_DIR = "build/bitstream"
 
 
 def add_parser(subparsers):
-    from ..pnr.board_bitstream import BOARDS, DEFAULT_BAUD, DEFAULT_CLOCK_MHZ
+    from ..pnr.board_bitstream import (BOARD_SEED, BOARDS, DEFAULT_BAUD, DEFAULT_CLOCK_MHZ,
+                                       PNR_TARGET_MHZ)
 
     p = subparsers.add_parser(
         "bitstream", help="build the board design (bridge, board top, unit) into a bitstream "
@@ -46,14 +47,20 @@ def add_parser(subparsers):
     p.add_argument("--clock", type=g.float_range(3.125, 400.0), default=DEFAULT_CLOCK_MHZ,
                    metavar="MHZ", help="the unit's clock, made by the PLL from 25 MHz "
                                        f"(default {DEFAULT_CLOCK_MHZ:g})")
+    p.add_argument("--target", type=g.float_range(3.125, 400.0), default=None, metavar="MHZ",
+                   help="what place and route aim for on the unit's clock, at least --clock "
+                        f"(default {PNR_TARGET_MHZ:g}, or the clock when faster)")
     p.add_argument("--baud", type=g.int_range(9600, 12_000_000), default=DEFAULT_BAUD,
                    metavar="N", help=f"the serial line's rate (default {DEFAULT_BAUD:,}; "
                                      "render --backend board --baud must match)")
     p.add_argument("--speed", type=g.choice("6", "7", "8", what="speed grade"), default="6",
                    metavar="{6,7,8}", help="the device's speed grade (default 6, the "
                                            "ULX3S's)")
+    p.add_argument("--seed", type=g.int_range(1, 1000), default=BOARD_SEED, metavar="S",
+                   help=f"the first placer seed (default {BOARD_SEED})")
     p.add_argument("--seeds", type=g.int_range(1, 50), default=1, metavar="N",
-                   help="placer seeds 1..N; the median seed's routing is packed (default 1)")
+                   help="placer seeds S..S+N-1; the median seed's routing is packed "
+                        "(default 1)")
     p.add_argument("--allow-timing-fail", action="store_true",
                    help="write the bitstream even when the routed design misses the clock")
     p.add_argument("-o", "--output", default=DEFAULT_DIR, metavar="DIR",
@@ -70,9 +77,12 @@ def check(args) -> None:
     args.fmt = g.format_from_args(args)
     args.config = board_config(args)
     try:
-        board_clock(args.clock, args.baud)      # the PLL makes it, the UART takes it
+        pll, _, _ = board_clock(args.clock, args.baud)  # the PLL makes it, the UART takes it
     except ValueError as e:
         raise g.UsageError(str(e)) from None
+    if args.target is not None and args.target < pll.f_out:
+        raise g.UsageError(f"--target {args.target:g}: place and route must aim at least at "
+                           f"the clock, {pll.f_out:g} MHz")
     require_amaranth_boards("bitstream")
     args.speed = int(args.speed)
     args.out_dir = g.check_output_dir(args.output, "-o")
@@ -90,8 +100,9 @@ def run(args) -> int:
     command = ("raplas-hdl " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["bitstream"]
                else None)
     rec = bitstream_board(cfg, args.out_dir, board=args.board, speed=args.speed,
-                          clock_mhz=args.clock, baud=args.baud,
-                          seeds=range(1, args.seeds + 1), use_cache=not args.no_cache,
+                          clock_mhz=args.clock, baud=args.baud, target_mhz=args.target,
+                          seeds=range(args.seed, args.seed + args.seeds),
+                          use_cache=not args.no_cache,
                           allow_timing_fail=args.allow_timing_fail, progress=progress,
                           command=command)
     paths = write_pnr_report(rec, args.out_dir)

@@ -14,6 +14,10 @@ wrapper, in the netlist's work folder::
                         constrained from the oscillator's FREQUENCY through the PLL)
     yowasp-ecppack      D-sS-seedN-H.config D-sS-seedN-H.bit --svf D-sS-seedN-H.svf
 
+Place and route aim above the clock: the ``.lpf`` handed to nextpnr gives the oscillator
+the frequency that makes the PLL's output the *target* (``target_mhz``, by default the
+larger of the clock and :data:`PNR_TARGET_MHZ`), so the placer keeps a margin over the
+clock the board runs at (the ``.lpf`` written beside the bitstream gives the true 25 MHz).
 The median seed's configuration is packed. Its Fmax on the PLL's clock must reach the PLL's
 output: a build that does not is refused with one line giving both (``TimingError``), unless
 ``allow_timing_fail``. The ``.bit``, ``.svf`` and ``.lpf`` go to ``out_dir`` as
@@ -37,9 +41,9 @@ from .ecp5 import check_device, run_tool
 from .tools import ecppack_command
 from .unit import flow_record, report_stem
 
-__all__ = ["bitstream_board", "board_clock", "fastest_clock", "board_summary", "TimingError", "BOARDS",
-           "OSCILLATOR_MHZ", "DEFAULT_CLOCK_MHZ", "DEFAULT_BAUD", "MAX_BAUD_ERROR",
-           "BOARD_ROUTER"]
+__all__ = ["bitstream_board", "board_clock", "fastest_clock", "board_summary", "aim_lpf",
+           "TimingError", "BOARDS", "PNR_TARGET_MHZ", "BOARD_SEED", "OSCILLATOR_MHZ",
+           "DEFAULT_CLOCK_MHZ", "DEFAULT_BAUD", "MAX_BAUD_ERROR", "BOARD_ROUTER"]
 
 #: Boards ``bitstream`` builds for -> their device.
 BOARDS = {"ulx3s-85f": "LFE5U-85F", "ulx3s-45f": "LFE5U-45F", "ulx3s-25f": "LFE5U-25F"}
@@ -47,11 +51,22 @@ BOARDS = {"ulx3s-85f": "LFE5U-85F", "ulx3s-45f": "LFE5U-45F", "ulx3s-25f": "LFE5
 #: The ULX3S's oscillator.
 OSCILLATOR_MHZ = 25.0
 
-#: The unit's clock when none is asked for (the PLL makes 39.2857 MHz, 25 x 11 / 7; 13
-#: clocks per bit, 3.02 Mbaud): the default build routed at 44.9 MHz with the PLL at 75
-#: (docs/board-top.md), and placements of it were estimated at 40.6-46.1 MHz; this is the
-#: fastest clock under 41.6 that the PLL makes and the UART takes at 3 Mbaud.
-DEFAULT_CLOCK_MHZ = 39.29
+#: The unit's clock when none is asked for (the PLL makes 41.6667 MHz, 25 x 5 / 3; 14
+#: clocks per bit, 2.98 Mbaud): placements of the default build are estimated at 44.9-50
+#: MHz (docs/board-top.md); this is the fastest clock under 45 that the PLL makes and the
+#: UART takes at 3 Mbaud within 1 %.
+DEFAULT_CLOCK_MHZ = 41.67
+
+#: What place and route aim for on the PLL's clock when the clock asked for is slower: a
+#: margin over the clock (placements of the default build reached 45-50 MHz in the
+#: estimate aiming at 60 and 75, 41-46 aiming at 39-45), and the target at which its
+#: router2 has converged once (docs/board-top.md).
+PNR_TARGET_MHZ = 75.0
+
+#: The first placer seed of a build when none is asked for (``--seed``): nextpnr is
+#: deterministic for a seed and a version (requirements.lock pins it), and whether router2
+#: converges on the default build depends on the seed (docs/board-top.md).
+BOARD_SEED = 1
 
 #: The largest relative error of the UART's rate that a build accepts (8N1 tolerates about
 #: 4 % between the two ends together).
@@ -115,7 +130,8 @@ def board_summary(rec: dict) -> str:
             f"{rec['options'].get('cols')} {rec['options'].get('mode')}"
             f"{' reduce' if rec['options'].get('reduce') else ''}) on the {bit['board']} "
             f"({rec['device']} speed {rec['speed']}): PLL {pll['f_out_mhz']:g} MHz, placed "
-            f"and routed at {f['median']:.1f} MHz (min {f['min']:.1f}, max {f['max']:.1f}, "
+            f"and routed aiming at {rec['freq_target']:g} MHz: {f['median']:.1f} MHz (min "
+            f"{f['min']:.1f}, max {f['max']:.1f}, "
             f"{f['seeds']} seed{'s' if f['seeds'] != 1 else ''}); UART {bit['baud']:,.0f} "
             f"baud (divisor {bit['divisor']}); LUT4 {comb['used']:,} of "
             f"{comb['available']:,} ({rec['lut4_fraction']:.1%}), FF "
@@ -125,12 +141,15 @@ def board_summary(rec: dict) -> str:
 
 def bitstream_board(config: UnitConfig, out_dir, *, board: str = "ulx3s-85f", speed: int = 6,
                     clock_mhz: float = DEFAULT_CLOCK_MHZ, baud: int = DEFAULT_BAUD,
-                    seeds: Iterable[int] = (1,), use_cache: bool = True,
+                    target_mhz: float | None = None,
+                    seeds: Iterable[int] = (BOARD_SEED,), use_cache: bool = True,
                     allow_timing_fail: bool = False,
                     progress: Callable[[str], None] | None = None, command: str | None = None,
                     base: Path | None = None, timeout: float = 14400.0) -> dict:
     """Build, place, route and pack the board design of ``config`` for ``board``; the
-    ``.bit``, ``.svf`` and ``.lpf`` go to ``out_dir``. Returns the record
+    ``.bit``, ``.svf`` and ``.lpf`` go to ``out_dir``; place and route aim for
+    ``target_mhz`` (None: the larger of the clock and :data:`PNR_TARGET_MHZ`; the module
+    docstring). Returns the record
     (:func:`.unit.flow_record`'s, ``out_of_context`` false, with a ``bitstream`` entry).
 
     ``ValueError`` for a board, clock or baud rate it cannot build, or a design that cannot
@@ -144,6 +163,10 @@ def bitstream_board(config: UnitConfig, out_dir, *, board: str = "ulx3s-85f", sp
     device = BOARDS[board]
     check_device(device, speed)
     pll, divisor, actual_baud = board_clock(clock_mhz, baud)
+    target = max(pll.f_out, PNR_TARGET_MHZ) if target_mhz is None else float(target_mhz)
+    if target < pll.f_out:
+        raise ValueError(f"place and route must aim at least at the PLL's {pll.f_out:g} MHz, "
+                         f"not {target:g}")
     t0 = time.monotonic()
     seeds = list(seeds)
     what = f"the board top ({config.rows}x{config.cols} {config.mode}) on the {BOARD}"
@@ -159,10 +182,11 @@ def bitstream_board(config: UnitConfig, out_dir, *, board: str = "ulx3s-85f", sp
                       places=ULX3S_BOARD_PINS)
     lpf = lpf_text(ports, pins, f"{TOP}: {what} ({device}, {config.fmt.name})")
     check_lpf(lpf, ports, CLOCK_PORT)
+    lpf_pnr = aim_lpf(lpf, target / pll.f_out)
     emit_s = time.monotonic() - t0
 
     syn, flow, stems, lpf_name = place_on_board(
-        text, TOP, ports, lpf, what, device=device, speed=speed, freq=pll.f_out, seeds=seeds,
+        text, TOP, ports, lpf_pnr, what, device=device, speed=speed, freq=target, seeds=seeds,
         use_cache=use_cache, timeout=timeout, progress=progress, base=base,
         extra=("--router", BOARD_ROUTER))
     clock = _pll_clock(flow.fmax)
@@ -195,7 +219,7 @@ def bitstream_board(config: UnitConfig, out_dir, *, board: str = "ulx3s-85f", sp
     options = {k: v for k, v in config.params().items()
                if k not in ("exp_bits", "man_bits", "rounding")}
     rec = flow_record("board-top", TOP, config.fmt, options, None, flow, emit_s=emit_s,
-                      device=device, speed=speed, freq=pll.f_out, seeds=seeds,
+                      device=device, speed=speed, freq=target, seeds=seeds,
                       out_of_context=False,
                       command=command or f"raplas-hdl bitstream --board {board}")
     stem_out = report_stem({**rec, "bitstream": {"board": BOARD}})
@@ -213,11 +237,24 @@ def bitstream_board(config: UnitConfig, out_dir, *, board: str = "ulx3s-85f", sp
         "ecppack_seconds": round(pack_s, 2), "cached": pack_s == 0.0,
         "lpf": str(paths["lpf"]), "lpf_name": lpf_name, "port": CLOCK_PORT, "clock": clock,
         "pll": pll.to_dict(), "divisor": divisor, "baud": round(actual_baud, 1),
-        "baud_asked": baud, "timing_met": reached >= pll.f_out,
+        "baud_asked": baud, "timing_met": reached >= pll.f_out, "target_mhz": round(target, 6),
         "pins": {p["name"]: pins[p["name"]] for p in ports},
     }
     rec["summary"] = board_summary(rec)
     return rec
+
+
+def aim_lpf(lpf: str, factor: float) -> str:
+    """``lpf`` with the oscillator's ``FREQUENCY`` times ``factor``: what nextpnr gets, so
+    that the PLL's output it derives is the target (module docstring)."""
+    line = f'FREQUENCY PORT "{CLOCK_PORT}" {OSCILLATOR_MHZ:g} MHZ;'
+    if lpf.count(line) != 1:
+        raise RuntimeError(f"the .lpf does not give {CLOCK_PORT} one FREQUENCY of "
+                           f"{OSCILLATOR_MHZ:g} MHZ")
+    if factor == 1.0:
+        return lpf
+    return lpf.replace(line, f'FREQUENCY PORT "{CLOCK_PORT}" {OSCILLATOR_MHZ * factor:.6f} '
+                             "MHZ;")
 
 
 def _pll_clock(fmax: dict) -> str:

@@ -183,9 +183,10 @@ def markdown(rec: dict) -> str:
     if bit and "pll" in bit:
         what += f" (the board design: UARTBone bridge, board top, PLL) on the {bit['board']},"
         context = (f"In context: every port placed by `{bit['lpf_name']}` (below), clock "
-                   f"{bit['clock']} from the PLL at {rec['freq_target']:g} MHz (the board's "
-                   f"25 MHz oscillator times {bit['pll']['clkfb_div']} over "
-                   f"{bit['pll']['clki_div']}), router {rec.get('router', 'router1')}")
+                   f"{bit['clock']} from the PLL at {bit['pll']['f_out_mhz']:g} MHz (the "
+                   f"board's 25 MHz oscillator times {bit['pll']['clkfb_div']} over "
+                   f"{bit['pll']['clki_div']}; place and route aimed at "
+                   f"{rec['freq_target']:g} MHz), router {rec.get('router', 'router1')}")
     elif bit:
         what += f" behind the serial wrapper on the {bit['board']},"
         context = (f"In context: every port placed by `{bit['lpf_name']}` (below), clock "

@@ -17,7 +17,8 @@ from raplas_hdl.cli import main
 from raplas_hdl.model.config import UnitConfig
 from raplas_hdl.pnr.bitstream import PREAMBLE, check_bitstream
 from raplas_hdl.pnr.board import ULX3S_BOARD_PINS, check_lpf, lpf_text, ulx3s_pins
-from raplas_hdl.pnr.board_bitstream import (CLOCK_PORT, DEFAULT_CLOCK_MHZ, MAX_BAUD_ERROR,
+from raplas_hdl.pnr.board_bitstream import (BOARD_SEED, CLOCK_PORT, DEFAULT_CLOCK_MHZ,
+                                            MAX_BAUD_ERROR, PNR_TARGET_MHZ, aim_lpf,
                                             board_clock, fastest_clock)
 from raplas_hdl.rtl.ecp5_pll import OUT_MHZ, PFD_MHZ, VCO_MHZ, pll_settings
 
@@ -52,7 +53,9 @@ def test_pll_stays_in_range_and_comes_near():
 def test_uart_divisor_is_the_nearest_and_a_far_rate_is_refused():
     pll, divisor, baud = board_clock(75.0, 3_000_000)
     assert (pll.f_out, divisor, baud) == (75.0, 25, 3_000_000)
-    pll, divisor, baud = board_clock(DEFAULT_CLOCK_MHZ, 3_000_000)      # 25 x 11 / 7
+    pll, divisor, baud = board_clock(DEFAULT_CLOCK_MHZ, 3_000_000)      # 25 x 5 / 3
+    assert (pll.clki_div, pll.clkfb_div, divisor, round(baud)) == (3, 5, 14, 2_976_190)
+    pll, divisor, baud = board_clock(39.29, 3_000_000)      # 25 x 11 / 7
     assert (pll.clki_div, pll.clkfb_div, divisor, round(baud)) == (7, 11, 13, 3_021_978)
     pll, divisor, baud = board_clock(50.0, 3_000_000)     # 16.7 clocks per bit
     assert divisor == 17 and abs(baud / 3e6 - 1) < MAX_BAUD_ERROR
@@ -107,6 +110,14 @@ def test_every_port_is_on_its_ulx3s_pin_and_the_pll_is_in_the_verilog(board_veri
         assert param in text, param
     with pytest.raises(ValueError, match="has no pin on the ULX3S"):
         lpf_text(ports + [{"name": "extra", "direction": "input", "width": 1}], pins, "t")
+    # what nextpnr gets when it aims at 75 MHz with the PLL at 41.7: the oscillator at 45 MHz,
+    # every pin as before
+    aimed = check_lpf(aim_lpf(lpf, 75.0 / 41.666667), ports, CLOCK_PORT)
+    assert aimed["locate"] == SITES and aimed["iobuf"] == got["iobuf"]
+    assert aimed["frequency"] == {CLOCK_PORT: pytest.approx(45.0, abs=1e-5)}
+    assert aim_lpf(lpf, 1.0) == lpf
+    with pytest.raises(RuntimeError, match="does not give clk_25mhz one FREQUENCY"):
+        aim_lpf(lpf.replace("25 MHZ", "12 MHZ"), 2.0)
 
 
 @pytest.mark.parametrize("args,message", [
@@ -116,6 +127,9 @@ def test_every_port_is_on_its_ulx3s_pin_and_the_pll_is_in_the_verilog(board_veri
     (["--board", "ulx3s-85f", "--clock", "500"], "--clock"),
     (["--board", "ulx3s-85f", "--rows", "65"], "rows"),
     (["--board", "ulx3s-85f", "--baud", "300"], "--baud"),
+    (["--board", "ulx3s-85f", "--seed", "0"], "--seed"),
+    (["--board", "ulx3s-85f", "--target", "30"], "--target 30: place and route must aim at "
+                                                 "least at the clock, 41.6667 MHz"),
     (["--board", "ulx3s-85f", "--mode", "certified", "--format", "e10m13"], "certified"),
 ])
 def test_bad_input_is_one_line_before_any_work(args, message, capsys, tmp_path):
@@ -149,5 +163,10 @@ def test_default_board_bitstream(tmp_path, capsys):
     assert (opts["rows"], opts["cols"], opts["mode"], opts["reduce"]) == (8, 8, "certified",
                                                                          True)
     pll, divisor, _ = board_clock(DEFAULT_CLOCK_MHZ, 3_000_000)
-    assert b["pll"]["f_out_mhz"] == round(pll.f_out, 6) and b["divisor"] == divisor == 13
+    assert b["pll"]["f_out_mhz"] == round(pll.f_out, 6) and b["divisor"] == divisor == 14
+    assert b["target_mhz"] == rec["freq_target"] == PNR_TARGET_MHZ
+    assert b["seed"] == BOARD_SEED
     assert b["timing_met"] and rec["fmax"][b["clock"]]["median"] >= pll.f_out
+    lpf = (out / "board-top-ulx3s.lpf").read_text()    # the user's: the true oscillator
+    assert check_lpf(lpf, [{"name": k} for k in SITES], CLOCK_PORT)["frequency"] == {
+        CLOCK_PORT: 25.0}
