@@ -8,8 +8,9 @@ drives :class:`~raplas_hdl.rtl.board_top.BoardTop` (the register map of
 :class:`~raplas_hdl.link.serial_bus.SerialBus` under
 :class:`~raplas_hdl.link.driver.BoardDriver`, or with LiteX's ``litex_server --uart``.
 
-Ports: ``clk``; ``rst`` (active high, asynchronous: a button; synchronised inside);
-``rx``, ``tx`` (8N1, idle high, ``divisor`` clocks per bit); ``leds`` (status, below).
+Ports: ``clk``; ``rst`` (active high, asynchronous: a button; synchronised inside, then
+through ``reset_buffer`` when one is given: the FPGA's global buffer on a board); ``rx``,
+``tx`` (8N1, idle high, ``divisor`` clocks per bit); ``leds`` (status, below).
 
 LEDs (each a plain output; a board maps them to its LEDs):
 
@@ -57,6 +58,10 @@ class SerialBoard(wiring.Component):
         LED timing (module docstring); a simulation shortens nothing here.
     multiplier, adder : {"generic", "virtex4"}
         The unit's arithmetic targets.
+    reset_buffer : callable or None
+        Makes the component (``i`` in, ``o`` out) the synchronised reset passes through
+        on its way to the design's flip-flops, e.g.
+        :class:`~raplas_hdl.rtl.ecp5_global.ECP5GlobalBuffer`; None: straight.
 
     Members
     -------
@@ -67,8 +72,9 @@ class SerialBoard(wiring.Component):
 
     def __init__(self, config: UnitConfig, divisor: int, *, timeout: int = DEFAULT_TIMEOUT,
                  heartbeat_bits: int = 24, blink_bits: int = 20,
-                 multiplier: str = "generic", adder: str = "generic"):
+                 multiplier: str = "generic", adder: str = "generic", reset_buffer=None):
         check_divisor(divisor)
+        self.reset_buffer = reset_buffer
         self.board = BoardTop(config, multiplier=multiplier, adder=adder, own_domain=False)
         self.divisor, self.timeout = divisor, timeout
         self.heartbeat_bits, self.blink_bits = int(heartbeat_bits), int(blink_bits)
@@ -83,7 +89,14 @@ class SerialBoard(wiring.Component):
         m = Module()
         m.domains.sync = cd = ClockDomain("sync")
         m.d.comb += cd.clk.eq(self.clk)
-        m.submodules.reset_sync = ResetSynchronizer(self.rst, domain="sync")
+        if self.reset_buffer is None:
+            m.submodules.reset_sync = ResetSynchronizer(self.rst, domain="sync")
+        else:       # synchronised in a domain of its own, then buffered into sync's reset
+            m.domains.reset_sync = rcd = ClockDomain("reset_sync", local=True)
+            m.d.comb += rcd.clk.eq(self.clk)
+            m.submodules.reset_sync = ResetSynchronizer(self.rst, domain="reset_sync")
+            m.submodules.reset_buffer = buf = self.reset_buffer()
+            m.d.comb += [buf.i.eq(rcd.rst), cd.rst.eq(buf.o)]
         m.submodules.bridge = bridge = UARTBone(self.divisor, ADDR_BITS, timeout=self.timeout)
         m.submodules.board = board = self.board
         m.d.comb += [bridge.rx.eq(self.rx), self.tx.eq(bridge.tx)]

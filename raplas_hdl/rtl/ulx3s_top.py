@@ -7,7 +7,8 @@ is one pin (:data:`raplas_hdl.pnr.board.ULX3S_BOARD_PINS` names them):
 
 - ``clk_25mhz``: the oscillator, into the PLL;
 - ``btn_fire``: the FIRE 1 button, high while pressed: reset, with the PLL unlocked
-  (:class:`SerialBoard` synchronises it);
+  (:class:`SerialBoard` synchronises it, and it reaches the flip-flops through an
+  :class:`~raplas_hdl.rtl.ecp5_global.ECP5GlobalBuffer`, on the global network);
 - ``uart_rx``, ``uart_tx``: the FTDI's serial lines (8N1, ``divisor`` clocks per bit);
 - ``led_<name>`` for each of :data:`raplas_hdl.rtl.serial_board.LEDS` and ``led_locked``
   (the PLL locked), LEDs 0 to 5 of the board.
@@ -20,6 +21,7 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from ..model.config import UnitConfig
+from .ecp5_global import ECP5GlobalBuffer
 from .ecp5_pll import ECP5PLL, PLLSettings
 from .serial_board import LEDS, SerialBoard
 from .uartbone import DEFAULT_TIMEOUT
@@ -48,7 +50,8 @@ class ULX3STop(wiring.Component):
     def __init__(self, config: UnitConfig, pll: PLLSettings, divisor: int, *,
                  timeout: int = DEFAULT_TIMEOUT):
         self.pll = pll
-        self.board = SerialBoard(config, divisor, timeout=timeout)
+        self.board = SerialBoard(config, divisor, timeout=timeout,
+                                 reset_buffer=lambda: ECP5GlobalBuffer())
         ports = {"clk_25mhz": In(1), "btn_fire": In(1), "uart_rx": In(1, init=1),
                  "uart_tx": Out(1, init=1)}
         ports.update({f"led_{name}": Out(1) for name in BOARD_LEDS})

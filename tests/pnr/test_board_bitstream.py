@@ -104,6 +104,7 @@ def test_every_port_is_on_its_ulx3s_pin_and_the_pll_is_in_the_verilog(board_veri
     assert all("IO_TYPE=LVCMOS33" in a for a in got["iobuf"].values())
     assert "PULLMODE=DOWN" in got["iobuf"]["btn_fire"]      # released: no reset
     assert text.count("EHXPLLL #(") == 1
+    assert text.count("DCCA dcca (") == 1          # the reset onto a global
     for param in (".CLKI_DIV(32'd2)", ".CLKFB_DIV(32'd5)", ".CLKOP_DIV(32'd10)",
                   '.FEEDBK_PATH("CLKOP")', '(* FREQUENCY_PIN_CLKOP = "62.5" *)',
                   '(* FREQUENCY_PIN_CLKI = "25" *)'):
@@ -159,6 +160,7 @@ def test_default_board_bitstream(tmp_path, capsys):
     assert {k: v["site"] for k, v in b["pins"].items()} == SITES
     assert rec["utilisation"]["TRELLIS_IO"]["used"] == len(SITES)
     assert rec["utilisation"]["EHXPLLL"]["used"] == 1
+    assert rec["utilisation"]["DCCA"]["used"] == 2          # the PLL's clock and the reset
     opts = rec["options"]
     assert (opts["rows"], opts["cols"], opts["mode"], opts["reduce"]) == (8, 8, "certified",
                                                                          True)

@@ -1,7 +1,8 @@
 # amaranth: UnusedElaboratable=no
 """The ULX3S board design (:class:`raplas_hdl.rtl.ulx3s_top.ULX3STop`) in the Amaranth
 simulator, its PLL replaced by a stand-in (the EHXPLLL primitive has no simulation model
-here): the oscillator passes through, and ``locked`` rises after a few of its cycles.
+here): the oscillator passes through, and ``locked`` rises after a few of its cycles; the
+reset's global buffer (``DCCA``, likewise) by a wire.
 
 Checked, through the board's own ports as the board wires them: nothing answers and
 ``led_locked`` is dark until the PLL locks; then a UARTBone read of ``ID`` on ``uart_rx``
@@ -54,10 +55,23 @@ class PLLStandIn(wiring.Component):
         return m
 
 
+class GlobalBufferStandIn(wiring.Component):
+    """:class:`raplas_hdl.rtl.ecp5_global.ECP5GlobalBuffer`'s ports: ``o`` is ``i``."""
+
+    i: In(1)
+    o: Out(1)
+
+    def elaborate(self, platform):
+        m = Module()
+        m.d.comb += self.o.eq(self.i)
+        return m
+
+
 def simulate(monkeypatch, pll, host):
     """Run ``host(ctx, dut, received)`` against the board design with ``pll`` standing in
     for its PLL: the oscillator runs, and the bytes on ``uart_tx`` go to ``received``."""
     monkeypatch.setattr(ulx3s_top, "ECP5PLL", pll)
+    monkeypatch.setattr(ulx3s_top, "ECP5GlobalBuffer", GlobalBufferStandIn)
     dut = ulx3s_top.ULX3STop(CFG, pll_settings(25.0, 62.5), DIVISOR, timeout=2000)
     sim = Simulator(dut)
     received = []
