@@ -72,7 +72,7 @@ def add_parser(subparsers):
 
 
 def check(args) -> None:
-    from ..pnr.board_bitstream import board_clock
+    from ..pnr.board_bitstream import board_clock, pnr_target
 
     args.fmt = g.format_from_args(args)
     args.config = board_config(args)
@@ -80,9 +80,10 @@ def check(args) -> None:
         pll, _, _ = board_clock(args.clock, args.baud)  # the PLL makes it, the UART takes it
     except ValueError as e:
         raise g.UsageError(str(e)) from None
-    if args.target is not None and args.target < pll.f_out:
-        raise g.UsageError(f"--target {args.target:g}: place and route must aim at least at "
-                           f"the clock, {pll.f_out:g} MHz")
+    try:
+        pnr_target(pll, args.target)
+    except ValueError as e:
+        raise g.UsageError(f"--target {args.target:g}: {e}") from None
     require_amaranth_boards("bitstream")
     args.speed = int(args.speed)
     args.out_dir = g.check_output_dir(args.output, "-o")

@@ -42,7 +42,7 @@ from .tools import ecppack_command
 from .unit import flow_record, report_stem
 
 __all__ = ["bitstream_board", "board_clock", "fastest_clock", "board_summary", "aim_lpf",
-           "TimingError", "BOARDS", "PNR_TARGET_MHZ", "BOARD_SEED", "OSCILLATOR_MHZ",
+           "pnr_target", "TimingError", "BOARDS", "PNR_TARGET_MHZ", "BOARD_SEED", "OSCILLATOR_MHZ",
            "DEFAULT_CLOCK_MHZ", "DEFAULT_BAUD", "MAX_BAUD_ERROR", "BOARD_ROUTER"]
 
 #: Boards ``bitstream`` builds for -> their device.
@@ -163,10 +163,7 @@ def bitstream_board(config: UnitConfig, out_dir, *, board: str = "ulx3s-85f", sp
     device = BOARDS[board]
     check_device(device, speed)
     pll, divisor, actual_baud = board_clock(clock_mhz, baud)
-    target = max(pll.f_out, PNR_TARGET_MHZ) if target_mhz is None else float(target_mhz)
-    if target < pll.f_out:
-        raise ValueError(f"place and route must aim at least at the PLL's {pll.f_out:g} MHz, "
-                         f"not {target:g}")
+    target = pnr_target(pll, target_mhz)
     t0 = time.monotonic()
     seeds = list(seeds)
     what = f"the board top ({config.rows}x{config.cols} {config.mode}) on the {BOARD}"
@@ -242,6 +239,16 @@ def bitstream_board(config: UnitConfig, out_dir, *, board: str = "ulx3s-85f", sp
     }
     rec["summary"] = board_summary(rec)
     return rec
+
+
+def pnr_target(pll, target_mhz: float | None) -> float:
+    """What place and route aim for with ``pll``: ``target_mhz``, or with None the larger of
+    the PLL's output and :data:`PNR_TARGET_MHZ`; ``ValueError`` under the PLL's output."""
+    if target_mhz is None:
+        return max(pll.f_out, PNR_TARGET_MHZ)
+    if target_mhz < pll.f_out:
+        raise ValueError(f"place and route must aim at least at the clock, {pll.f_out:g} MHz")
+    return float(target_mhz)
 
 
 def aim_lpf(lpf: str, factor: float) -> str:

@@ -51,7 +51,7 @@ class ULX3STop(wiring.Component):
                  timeout: int = DEFAULT_TIMEOUT):
         self.pll = pll
         self.board = SerialBoard(config, divisor, timeout=timeout,
-                                 reset_buffer=lambda: ECP5GlobalBuffer())
+                                 reset_buffer=ECP5GlobalBuffer)
         ports = {"clk_25mhz": In(1), "btn_fire": In(1), "uart_rx": In(1, init=1),
                  "uart_tx": Out(1, init=1)}
         ports.update({f"led_{name}": Out(1) for name in BOARD_LEDS})
