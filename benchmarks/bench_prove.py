@@ -12,8 +12,9 @@ default stages), and every unit's synthesised netlists (``netlist-ecp5``, ``netl
 ``synth_ecp5`` with the DSP register packing, ``synth_xilinx -family xc4v``) against its RTL
 at every format and rounding, and the ``virtex4`` target of both units (DSP48 through Yosys's
 model of it) at every format and rounding it takes (significands of at most 17 bits),
-and the ray-triangle unit by composition (paper mode, FP16 and FP24: its wiring around
-its operations as uninterpreted functions; :mod:`raplas_hdl.formal.composition`).
+and the ray-triangle unit by composition (paper and conservative mode, FP16 and FP24: its
+wiring around its operations as uninterpreted functions;
+:mod:`raplas_hdl.formal.composition`).
 One solver call at a time, each bounded by
 ``--timeout``. Each record notes the 1-minute load average before and after it (the
 machine is shared).
@@ -46,7 +47,8 @@ if str(ROOT) not in sys.path:
 
 from raplas_hdl.fp import PRESETS, ROUNDINGS, parse_format  # noqa: E402
 from raplas_hdl.formal import default_stages, prove  # noqa: E402
-from raplas_hdl.formal.prove import NETLIST_METHODS, ONE_STAGE, UNITS  # noqa: E402
+from raplas_hdl.formal.prove import (  # noqa: E402
+    NETLIST_METHODS, ONE_STAGE, UNITS, composition_method)
 from raplas_hdl.formal.streams import STAGES, check_stage  # noqa: E402
 from raplas_hdl.rtl.fp_add import ADD_STEPS  # noqa: E402
 from raplas_hdl.rtl.fp_mul import MUL_STEPS  # noqa: E402
@@ -63,8 +65,8 @@ def _default(unit, name, rounding):
 
 
 def plan(formats):
-    """``(unit, format name, rounding, stages, method, target)`` in run order, cheap ones
-    first."""
+    """``(unit, format name, rounding, stages, method, target, mode)`` in run order, cheap
+    ones first (``mode``: the ray-triangle unit's)."""
     jobs = []
     for name in formats:
         for unit in ("fp-mul", "fp-add"):
@@ -81,8 +83,9 @@ def plan(formats):
                          for rnd in ROUNDINGS]
             jobs += [(unit, name, "rtz", 1, method) for unit in ONE_STAGE]
         if name in ("FP16", "FP24"):
-            # the ray-triangle unit's wiring around its operations (paper mode)
-            jobs.append(("ray-triangle", name, "rtz", 0, None))
+            # the ray-triangle unit's wiring around its operations
+            jobs += [("ray-triangle", name, "rtz", 0, None, "generic", mode)
+                     for mode in ("paper", "conservative")]
         if PRESETS[name].man_bits <= 16:
             for unit in ("fp-mul", "fp-add"):
                 jobs += [(unit, name, rnd, _default(unit, name, rnd), None, "virtex4")
@@ -92,7 +95,8 @@ def plan(formats):
             if n != _default(unit, "FP24", "rtz"):
                 jobs.append((unit, "FP24", "rtz", n, None))
     jobs.append(("fp-mul", "FP24", "rtz", 1, "direct"))
-    jobs = [j if len(j) == 6 else (*j, "generic") for j in jobs]
+    jobs = [j if len(j) == 7 else (*j, "paper") if len(j) == 6 else (*j, "generic", "paper")
+            for j in jobs]
     # the slow ones last
     return sorted(jobs, key=lambda j: (j[1] == "FP32", j[4] == "direct"))
 
@@ -169,17 +173,19 @@ def main(argv=None) -> int:
                    help="check only these stream stages (no FP proof)")
     args = p.parse_args(argv)
     rows = {key(r): r for r in load()}
-    for unit, name, rnd, stages, method, target in ([] if args.stages else
-                                                     plan(args.formats)):
+    for unit, name, rnd, stages, method, target, mode in ([] if args.stages else
+                                                           plan(args.formats)):
         if args.units and unit not in args.units:
             continue
         fmt = PRESETS[name].with_rounding(rnd)
-        k = (unit, name, rnd, stages, method or UNITS[unit][1], target)
+        label = method or UNITS[unit][1]
+        k = (unit, name, rnd, stages,
+             composition_method(mode) if label == "composition" else label, target)
         if args.only_missing and k in rows:
             continue
         before = os.getloadavg()[0]
         res = prove(unit, fmt, stages, method=method, timeout=args.timeout, cwd=ROOT,
-                    target=target)
+                    target=target, mode=mode)
         rec = {**res.as_dict(), "load": [round(before, 2), round(os.getloadavg()[0], 2)]}
         rows[key(rec)] = rec
         print(f"{unit:12} {target:7} {name:5} {rnd:4} s{stages} {k[4]:6} {res.result:14} "

@@ -43,7 +43,8 @@ def add_parser(subparsers):
                     "files go to build/formal/ under the current directory. --target "
                     "virtex4 proves the DSP48 forms of fp-add (direct) and fp-mul (cut) "
                     "with Yosys's DSP48 model. ray-triangle (--method composition) proves "
-                    "the paper-mode unit's wiring: with every operation an uninterpreted "
+                    "the unit's wiring (--mode paper or conservative, whose margins and "
+                    "widened decision are stated too): with every operation an uninterpreted "
                     "function, its output register holds the contract's formula (t, u, v, "
                     "det, hit, IDs, flags and event counts); with the operations proved "
                     "apart, that is the unit.")
@@ -72,6 +73,12 @@ def add_parser(subparsers):
                    default="generic", metavar="{generic,virtex4}",
                    help="unit target: virtex4 (fp-add, fp-mul) instantiates DSP48, proved "
                         "with Yosys's simulation model of it (default generic)")
+    p.add_argument("--mode", type=g.choice("paper", "conservative", "certified",
+                                           what="mode"),
+                   default="paper", metavar="{paper,conservative}",
+                   help="ray-triangle only: the unit's mode (default paper; conservative "
+                        "needs a format with at least 8 fraction bits; certified is not "
+                        "stated yet)")
     p.add_argument("--json", default=None, metavar="FILE.json",
                    help="also write the result record as JSON")
     return p
@@ -91,6 +98,14 @@ def check(args) -> None:
         if args.method is not None and args.method not in allowed:
             raise g.UsageError(f"--target {args.target} of {args.unit} is proved by --method "
                                f"{' or '.join(allowed)}, not {args.method}")
+    if args.mode != "paper" and args.unit != "ray-triangle":
+        raise g.UsageError(f"{args.unit} has no --mode (only ray-triangle)")
+    if args.mode == "certified":
+        raise g.UsageError("ray-triangle --mode certified: its bound datapath is not stated "
+                           "by the composition proof yet (paper or conservative)")
+    if args.mode == "conservative" and args.fmt.man_bits < 8:
+        raise g.UsageError(f"--mode conservative needs at least 8 fraction bits, not "
+                           f"{args.fmt.man_bits} ({args.fmt})")
     if args.unit == "ray-triangle":
         if args.stages is not None:
             raise g.UsageError("ray-triangle takes no --stages (its operations are the FP "
@@ -131,9 +146,9 @@ def run(args) -> int:
     from ..formal.prove import describe, prove
 
     res = prove(args.unit, args.fmt, args.stages, method=args.method, timeout=args.timeout,
-                target=args.target)
+                target=args.target, mode=args.mode)
     plural = "" if res.stages == 1 else "s"
-    head = (f"{args.unit} {args.fmt}, paper mode" if args.unit == "ray-triangle" else
+    head = (f"{args.unit} {args.fmt}, {args.mode} mode" if args.unit == "ray-triangle" else
             f"{args.unit} {args.fmt}, {res.stages} stage{plural}, {res.target}")
     if res.result == "proved":
         print(f"{head}: proved in {res.seconds:.1f} s by {res.method}")

@@ -31,9 +31,12 @@ Unsatisfiable means proved for *every* interpretation of the functions, so in pa
 for the proved units: the unit equals the contract's formula on the contract's operations.
 The output FIFO behind the register is a stream stage (proved apart, :mod:`.streams`).
 
-Modes: ``paper`` (the default); ``conservative`` adds ``w = det - s`` and the margins of
-:mod:`raplas_hdl.model.conservative`, and ``certified`` a bound datapath: neither is
-stated here yet.
+Modes: ``paper`` (the default) and ``conservative``, which adds the 34th operation
+``w = det - s`` and the widened decision of :mod:`raplas_hdl.model.conservative`: its five
+margins are exponent arithmetic on the inputs' fields (:func:`margins_z3`, the model's
+:func:`~raplas_hdl.model.conservative.margin_k` as bit vectors, checked against it on
+random fields by the tests), and a NaN among ``det, t', u', v', w`` or an overflow flag of
+any operation gives a hit. The certified mode's bound datapath is not stated here yet.
 """
 
 from __future__ import annotations
@@ -49,7 +52,8 @@ from amaranth.hdl import Module, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
-from ..fp.format import FPFormat, check_format
+from ..fp.format import FLAG_OVERFLOW, FPFormat, check_format
+from ..model.conservative import MARGIN_NAMES, margin_constants
 from ..rtl.ray_triangle import RayTriangleUnit, input_layout, output_layout
 from ..synth.yosys import yosys_command
 from .miter import ports
@@ -57,7 +61,8 @@ from .netlist import WORK_DIR
 from .reference import reference
 from .solve import SOLVER, solve
 
-__all__ = ["StandIn", "ComposedUnit", "composition_goal", "prove_composition", "TOP"]
+__all__ = ["StandIn", "ComposedUnit", "composition_goal", "prove_composition", "TOP",
+           "MODES", "margins_z3"]
 
 #: Keeps a stand-in's operands and results under their names through Yosys's clean-up.
 _KEEP = {"keep": 1}
@@ -68,6 +73,9 @@ ACKERMANN_LIMIT = 100_000
 
 #: Module name of the emitted unit.
 TOP = "rt_composed"
+
+#: The modes whose datapath the composition states.
+MODES = ("paper", "conservative")
 
 
 class StandIn(wiring.Component):
@@ -145,12 +153,43 @@ def _smt2(text: str, workdir) -> str:
     return (workdir / "top.smt2").read_text()
 
 
-def _contract(fmt, pay, fns):
-    """The contract's paper-mode formula over the functions ``fns`` (kind -> (o, flags)):
+def margins_z3(fmt: FPFormat, consts, fields: dict) -> dict:
+    """The conservative mode's five margins (``W``-bit patterns, positive) as z3 terms:
+    :func:`~raplas_hdl.model.conservative.margin_k` written as bit vectors. ``fields`` maps
+    each input vector (``o, d, v0, e1, e2, n``) to the largest biased exponent field of its
+    components (an ``E``-bit term); ``consts`` is the
+    :class:`~raplas_hdl.model.conservative.MarginConstants` of the unit."""
+    E, M = fmt.exp_bits, fmt.man_bits
+    iw = E + 8                                   # room for sums of three signed exponents
+
+    def num(v):
+        return z3.BitVecVal(v, iw)
+
+    def smax(a, b):
+        return z3.If(a > b, a, b)                # signed: z3's > on bit vectors is signed
+
+    ell = {k: z3.ZeroExt(iw - E, f) - num(fmt.bias - 1) for k, f in fields.items()}
+    lvo = smax(ell["v0"], ell["o"])
+    y = {"det": ell["n"] + ell["d"], "t": ell["n"] + lvo,
+         "u": ell["d"] + lvo + ell["e2"], "v": ell["d"] + lvo + ell["e1"],
+         "w": ell["d"] + smax(ell["n"], smax(ell["e1"], ell["e2"]) + lvo)}
+    emf = fmt.exp_max_field
+    out = {}
+    for name in MARGIN_NAMES:
+        field = num(consts.k_field[name]) + smax(y[name], num(consts.floor[name]))
+        kept = z3.Extract(E - 1, 0, smax(field, num(1)))
+        finite = z3.Concat(z3.BitVecVal(0, 1), kept, z3.BitVecVal(consts.k_frac[name], M))
+        out[name] = z3.If(field >= num(emf), z3.BitVecVal(fmt.inf, fmt.width), finite)
+    return out
+
+
+def _contract(fmt, pay, fns, mode="paper", consts=None):
+    """The contract's formula in ``mode`` over the functions ``fns`` (kind -> (o, flags)):
     ``(values, flag terms of every operation, hit)``. The operations are listed in the
     order the unit builds them (a dot product's three products, then its two sums; the six
-    products of ``Q``, then its three differences): the order of a list of independent
-    operations, not of the formula, which the event counts' proof matches them by."""
+    products of ``Q``, then its three differences; ``w`` last): the order of a list of
+    independent operations, not of the formula, which the event counts' proof matches them
+    by. ``consts``: the conservative mode's margin constants."""
     flags = []
 
     def op(kind, a, b):
@@ -179,9 +218,35 @@ def _contract(fmt, pay, fns):
     def lt(a, b):
         return reference(fmt, "lt", a, b)[0] == 1
 
-    hit = z3.Or(z3.And(lt(zero, det), le(zero, up), le(zero, vp), le(s, det), le(zero, tp)),
-                z3.And(lt(det, zero), le(up, zero), le(vp, zero), le(det, s), le(tp, zero)))
-    return {"det": det, "t": tp, "u": up, "v": vp}, flags, hit
+    values = {"det": det, "t": tp, "u": up, "v": vp}
+    if mode == "paper":
+        hit = z3.Or(z3.And(lt(zero, det), le(zero, up), le(zero, vp), le(s, det), le(zero, tp)),
+                    z3.And(lt(det, zero), le(up, zero), le(vp, zero), le(det, s), le(tp, zero)))
+        return values, flags, hit
+    w = op("sub", det, s)
+    E, M = fmt.exp_bits, fmt.man_bits
+
+    def field(x):
+        return z3.Extract(M + E - 1, M, x)
+
+    def nan(x):
+        return z3.And(field(x) == fmt.exp_max_field, z3.Extract(M - 1, 0, x) != 0)
+
+    def maxfield(vec):
+        a = z3.If(z3.UGT(field(vec[0]), field(vec[1])), field(vec[0]), field(vec[1]))
+        return z3.If(z3.UGT(a, field(vec[2])), a, field(vec[2]))
+
+    mg = margins_z3(fmt, consts, {k: maxfield(pay[k]) for k in ("o", "d", "v0", "e1", "e2",
+                                                                 "n")})
+    sign = z3.BitVecVal(fmt.sign_bit, fmt.width)
+    bit = FLAG_OVERFLOW.bit_length() - 1
+    overflow = z3.Or(*(z3.Extract(bit, bit, g) == 1 for g in flags))
+    bad = z3.Or(nan(det), nan(tp), nan(up), nan(vp), nan(w), overflow)
+    pos = z3.And(le(mg["u"] ^ sign, up), le(mg["v"] ^ sign, vp), le(mg["w"] ^ sign, w),
+                 le(mg["t"] ^ sign, tp))
+    neg = z3.And(le(up, mg["u"]), le(vp, mg["v"]), le(w, mg["w"]), le(tp, mg["t"]))
+    hit = z3.Or(bad, z3.And(le(mg["det"] ^ sign, det), pos), z3.And(le(det, mg["det"]), neg))
+    return values, flags, hit
 
 
 def composition_goal(fmt: FPFormat, *, mode: str = "paper", cwd=None,
@@ -191,8 +256,10 @@ def composition_goal(fmt: FPFormat, *, mode: str = "paper", cwd=None,
     that differs from the contract's formula; ``claims`` names its parts. ``unit_class``:
     a :class:`ComposedUnit` or a subclass (the tests' deliberately wrong units)."""
     fmt = check_format(fmt)
-    if mode != "paper":
-        raise ValueError(f"the composition proof states the paper mode only, not {mode!r}")
+    if mode not in MODES:
+        raise ValueError(f"the composition proof states the {' and '.join(MODES)} modes, "
+                         f"not {mode!r}")
+    consts = margin_constants(fmt) if mode == "conservative" else None   # man_bits >= 8
 
     workdir = (Path(cwd or ".") / WORK_DIR
                / f"composition-{fmt.name}-{mode}-{unit_class.__name__}")
@@ -253,7 +320,7 @@ def composition_goal(fmt: FPFormat, *, mode: str = "paper", cwd=None,
         sub_l = lay[vec].shape
         pay[vec] = [z3.Extract(base + sub_l[c].offset + w - 1, base + sub_l[c].offset, payload)
                     for c in ("x", "y", "z")]
-    values, op_flags, hit = _contract(fmt, pay, fns)
+    values, op_flags, hit = _contract(fmt, pay, fns, mode, consts)
     olay = output_layout(fmt, unit._ray_id_bits, unit._tri_id_bits)
     claims = {k: field(olay, out, k) == v for k, v in values.items()}
     claims["hit"] = (field(olay, out, "hit") == 1) == hit
@@ -295,7 +362,8 @@ def prove_composition(fmt: FPFormat, *, mode: str = "paper", timeout: float = 60
     Raises
     ------
     ValueError
-        For a mode other than ``paper``.
+        For a mode not in :data:`MODES`, or a format the mode does not take (the
+        conservative mode needs 8 fraction bits).
     """
     t0 = time.monotonic()
     goal, claims, unit, n = composition_goal(fmt, mode=mode, cwd=cwd, unit_class=unit_class)

@@ -191,7 +191,7 @@ def _confirm(u, op, values, timeout):
 
 def prove(unit: str, fmt: FPFormat, stages: int | None = None, *, method: str | None = None,
           timeout: float = 300, cwd: Path | str = ".", mutate=None,
-          target: str = "generic") -> ProofResult:
+          target: str = "generic", mode: str = "paper") -> ProofResult:
     """Prove ``unit`` (``fp-add``, ``fp-mul``, ``fp-le``, ``fp-lt`` or ``fp-neg``) against
     the contract.
 
@@ -215,6 +215,8 @@ def prove(unit: str, fmt: FPFormat, stages: int | None = None, *, method: str | 
     target : str
         ``generic`` or ``virtex4`` (``fp-add`` and ``fp-mul``, methods
         :data:`TARGET_METHODS`).
+    mode : str
+        ``ray-triangle`` only: the unit's mode (:data:`.composition.MODES`).
 
     Raises
     ------
@@ -234,8 +236,10 @@ def prove(unit: str, fmt: FPFormat, stages: int | None = None, *, method: str | 
     stages = default_stages(unit, fmt) if stages is None else stages
     op = UNITS[unit][0]
     t0 = time.monotonic()
+    if mode != "paper" and unit != "ray-triangle":
+        raise ValueError(f"{unit} has no mode (only ray-triangle), not {mode!r}")
     if method == "composition":
-        return _prove_composition(fmt, timeout, cwd, t0)
+        return _prove_composition(fmt, mode, timeout, cwd, t0)
     if method == "sby":
         result, seconds, detail = run_sby(unit, fmt, stages, timeout=timeout, cwd=cwd,
                                           mutate=mutate)
@@ -304,18 +308,24 @@ def prove(unit: str, fmt: FPFormat, stages: int | None = None, *, method: str | 
                        counterexample=cex, reason=reason)
 
 
-def _prove_composition(fmt, timeout, cwd, t0) -> ProofResult:
-    """The ray-triangle unit's wiring, its operations uninterpreted functions
+def composition_method(mode: str) -> str:
+    """The method's name in a record (``composition``; ``composition (conservative)``), so
+    that the two modes' rows of a table differ."""
+    return "composition" if mode == "paper" else f"composition ({mode})"
+
+
+def _prove_composition(fmt, mode, timeout, cwd, t0) -> ProofResult:
+    """The ray-triangle unit's wiring in ``mode``, its operations uninterpreted functions
     (:mod:`.composition`); a counterexample names the claims that fail."""
-    res = prove_composition(fmt, timeout=timeout, cwd=cwd)
+    res = prove_composition(fmt, mode=mode, timeout=timeout, cwd=cwd)
     cex = {f"fails.{k}": 1 for k in res.get("differs", ())} or None
     return ProofResult(
         unit="ray-triangle", format=format_label(fmt), rounding=fmt.rounding, stages=0,
         target="generic", result=res["result"], solver=res["solver"],
         seconds=round(time.monotonic() - t0, 3),
-        method=f"composition: {res['ops']} operations as uninterpreted functions, "
-               f"{res['cycles']} cycles unrolled",
-        steps=[{"proves": "composition: output register == contract formula (paper mode)",
+        method=(f"{composition_method(mode)}: {res['ops']} operations as uninterpreted "
+                f"functions, {res['cycles']} cycles unrolled"),
+        steps=[{"proves": f"composition: output register == contract formula ({mode} mode)",
                 "result": res["result"], "seconds": res["solver_seconds"]}],
         counterexample=cex, reason=res.get("reason", ""))
 

@@ -60,13 +60,15 @@ DEFAULT_CLOCK_MHZ = 41.67
 #: What place and route aim for on the PLL's clock when the clock asked for is slower: a
 #: margin over the clock (placements of the default build reached 45-50 MHz in the
 #: estimate aiming at 60 and 75, 41-46 aiming at 39-45), and the target at which its
-#: router2 has converged once (docs/board-top.md).
+#: router2 has converged (twice; docs/board-top.md).
 PNR_TARGET_MHZ = 75.0
 
 #: The first placer seed of a build when none is asked for (``--seed``): nextpnr is
 #: deterministic for a seed and a version (requirements.lock pins it), and whether router2
-#: converges on the default build depends on the seed (docs/board-top.md).
-BOARD_SEED = 1
+#: converges on the default build depends on the seed: on seed 3 it does (84 iterations,
+#: 50.9 MHz routed); on seeds 1, 2, 4 and 6 of this or the previous netlist it stalled at
+#: 1,000-6,000 overused wires (docs/board-top.md).
+BOARD_SEED = 3
 
 #: The largest relative error of the UART's rate that a build accepts (8N1 tolerates about
 #: 4 % between the two ends together).

@@ -22,9 +22,10 @@ from dataclasses import asdict, dataclass, field
 __all__ = ["RouteResult", "CriticalPath", "parse_report", "synth_counts", "summarise_seeds",
            "signal_name", "UTILISATION_KEYS"]
 
-#: nextpnr's utilisation entries the JSON keeps (used and available).
+#: nextpnr's utilisation entries the JSON keeps (used and available; ``DCCA``: the nets
+#: on the global network).
 UTILISATION_KEYS = ("TRELLIS_COMB", "TRELLIS_FF", "TRELLIS_RAMW", "MULT18X18D", "ALU54B",
-                    "DP16KD", "TRELLIS_IO", "EHXPLLL")
+                    "DP16KD", "TRELLIS_IO", "EHXPLLL", "DCCA")
 
 #: Yosys's ``synth_ecp5`` cell types -> the resource columns of a report.
 _SYNTH_COLUMNS = {"LUT4": "lut4", "CCU2C": "carry", "TRELLIS_FF": "ff",

@@ -1,22 +1,31 @@
 """The ray-triangle unit proved by composition (``raplas_hdl.formal.composition``).
 
 The stand-in build keeps the real unit's schedule; a unit wired wrong (operands of an
-operation swapped, an operation's flags left out of the counts) gives a counterexample that
-names the claims that fail; the paper-mode unit is proved (full: about 10 minutes at
-FP16).
+operation swapped, an operation's flags left out of the counts, two conservative margins
+swapped) gives a counterexample that names the claims that fail; the paper-mode and the
+conservative unit are proved (full: about 10 minutes each at FP16). The conservative
+margins' bit-vector form equals the golden model's on random exponent fields (make test).
 """
 
 from __future__ import annotations
 
-import pytest
+import random
 
-from raplas_hdl.formal.composition import ComposedUnit, StandIn, prove_composition
-from raplas_hdl.fp import FP16
+import pytest
+import z3
+
+from raplas_hdl.formal.composition import (ComposedUnit, StandIn, margins_z3,
+                                           prove_composition)
+from raplas_hdl.fp import FP16, FP24
 from raplas_hdl.fp.format import parse_format
+from raplas_hdl.model.conservative import (MARGIN_NAMES, margin_constants, margin_k,
+                                           margin_table)
 from raplas_hdl.rtl.ray_triangle import RayTriangleUnit
 
 #: The smallest format the comparisons' reference takes, with room for the decision.
 SMALL = parse_format("e4m3")
+#: The smallest the conservative mode takes (8 fraction bits).
+SMALL_CONSERVATIVE = parse_format("e4m8")
 TIMEOUT = 900
 
 
@@ -85,6 +94,58 @@ def test_the_paper_unit_is_proved(work):
     assert res["ops"] == 33
 
 
-def test_only_the_paper_mode_is_stated():
-    with pytest.raises(ValueError, match="paper mode only"):
+class MarginsSwapped(ComposedUnit):
+    """The conservative decision widens u' by v's margin and v' by u's."""
+
+    def _margin_fields(self, m, p):
+        mg = super()._margin_fields(m, p)
+        mg["u"], mg["v"] = mg["v"], mg["u"]
+        return mg
+
+
+# e4m8: 2 minutes for the counterexample, 16 for the proof (load 3); FP16 about 10 minutes
+@pytest.mark.full
+def test_a_conservative_unit_with_its_margins_swapped_gives_a_counterexample(work):
+    res = prove_composition(SMALL_CONSERVATIVE, mode="conservative", timeout=TIMEOUT,
+                            cwd=work, unit_class=MarginsSwapped)
+    assert res["result"] == "counterexample", res
+    assert res["differs"] == ["hit"], res
+
+
+@pytest.mark.full
+def test_the_conservative_unit_is_proved_at_a_small_format(work):
+    res = prove_composition(SMALL_CONSERVATIVE, mode="conservative", timeout=TIMEOUT,
+                            cwd=work)
+    assert res["result"] == "proved", res
+    assert res["ops"] == 34
+
+
+@pytest.mark.full
+def test_the_conservative_unit_is_proved(work):
+    res = prove_composition(FP16, mode="conservative", timeout=TIMEOUT, cwd=work)
+    assert res["result"] == "proved", res
+
+
+@pytest.mark.parametrize("fmt", [SMALL_CONSERVATIVE, FP16, FP24], ids=str)
+def test_the_margins_bit_vector_form_is_the_models(fmt):
+    consts = margin_constants(fmt)
+    table = margin_table(consts)
+    names = ("o", "d", "v0", "e1", "e2", "n")
+    var = {k: z3.BitVec(k, fmt.exp_bits) for k in names}
+    terms = margins_z3(fmt, consts, var)
+    rng = random.Random(23)
+    emf = fmt.exp_max_field
+    for _ in range(300):
+        # the ends of the field's range (zero, the largest finite, all ones) often
+        f = {k: rng.choice([0, 1, emf - 1, emf, rng.randrange(emf + 1)]) for k in names}
+        want = margin_k(*(f[k] for k in names), table, fmt.exp_bits, fmt.man_bits)
+        sub = [(var[k], z3.BitVecVal(f[k], fmt.exp_bits)) for k in names]
+        got = [z3.simplify(z3.substitute(terms[k], *sub)).as_long() for k in MARGIN_NAMES]
+        assert got == [int(x) for x in want], f
+
+
+def test_the_certified_mode_is_not_stated_and_the_conservative_needs_8_fraction_bits():
+    with pytest.raises(ValueError, match="paper and conservative modes"):
         prove_composition(FP16, mode="certified")
+    with pytest.raises(ValueError, match="man_bits >= 8"):
+        prove_composition(SMALL, mode="conservative")
