@@ -89,7 +89,12 @@ stream rule) and asserts:
   run; ``last`` exactly when no answer is left (the ``valid`` bits, probed: every ray left
   above the one sent, with a hit beat), or one ``empty`` beat with ``last`` for a run
   without answers; and the stream rule on ``o``. Checked to a stated depth (``bmc``): the
-  products and the answer RAM are state no invariant of the harness names.
+  products and the answer RAM are state no invariant of the harness names. In certified
+  mode (``reducer-certified``) the environment also numbers its beats in ``u`` (carried,
+  never compared) with ``hit`` = ``outcome == 1``: the pairs passed on in stage ``r``
+  (``emit``, probed) = those out + the output and skid registers' (none lost or doubled),
+  and each leaves in stream order, a beat of the run being reduced with its ray and a
+  non-zero outcome, never ``last`` and never after an answer of its run.
 
 The stages and what each checks are :data:`STAGES`; :func:`check_stage` runs one
 (k-induction, ``mode prove``; a stage whose induction does not close at the depth given is
@@ -210,6 +215,11 @@ STAGES = {s.name: s for s in (
     Stage("reducer-send", "rtl.unit.reducer.Reducer, e3m2, 2 x 2 rays, 4-bit run numbers: "
           "the send stage's order and framing, behind the whole pipeline", 20, "bmc",
           cover=20, probes=(("valid_probe", "dut.valid"),)),
+    Stage("reducer-certified", "rtl.unit.reducer.Reducer, certified, e3m2, 2 x 2 rays, "
+          "4-bit run numbers: passed-on pairs through the output and skid registers, before "
+          "their run's answers", 16, "bmc", cover=16,
+          probes=(("valid_probe", "dut.valid"), ("emit_probe", "dut.emit"),
+                  ("en_probe", "dut.en"), ("sk_probe", "dut.sk_v"))),
 )}
 
 
@@ -253,6 +263,8 @@ def stage_verilog(name: str) -> tuple[str, dict]:
         return _feeder_verilog()
     if name == "reducer-send":
         return _reducer_verilog()
+    if name == "reducer-certified":
+        return _reducer_verilog("certified")
     from ..rtl.unit.lanes import JobDistributor, ResultMerger
 
     cfg = _config(3)
@@ -360,20 +372,23 @@ def _feeder_verilog() -> tuple[str, dict]:
     return text, info
 
 
-def _reducer_verilog() -> tuple[str, dict]:
+def _reducer_verilog(mode: str = "paper") -> tuple[str, dict]:
     from amaranth.back import verilog
 
     from ..rtl.unit.reducer import Reducer
 
     # the send stage's order and framing do not depend on the format: the narrowest keeps
     # the products (which decide only which rays have answers) cheap
-    cfg = replace(_config(1, rows=2, fmt=FETCH_FORMAT), reduce=True)
+    cfg = replace(_config(1, rows=2, fmt=FETCH_FORMAT), reduce=True, mode=mode)
     comp = Reducer(cfg, seq_bits=SEQ)
     i_layout, o_layout = comp.i.payload.shape(), comp.o.payload.shape()
+    certified = mode == "certified"
     info = {"rays": cfg.n_rays, "rb": cfg.ray_id_bits, "iw": i_layout.size,
-            "ow": o_layout.size,
-            "i": {n: i_layout[n].offset for n in ("ray_id", "hit", "last", "empty")},
-            "o": {n: o_layout[n].offset for n in ("ray_id", "last", "empty")}}
+            "ow": o_layout.size, "uw": cfg.fmt.width,
+            "i": {n: i_layout[n].offset for n in ("ray_id", "hit", "last", "empty")
+                  + (("u", "outcome") if certified else ())},
+            "o": {n: o_layout[n].offset for n in ("ray_id", "last", "empty")
+                  + (("u", "outcome") if certified else ())}}
     return verilog.convert(comp, name="stage", emit_src=False), info
 
 
@@ -1126,10 +1141,9 @@ endmodule
 """
 
 
-def _reducer_check(info: dict) -> str:
-    n, rb, iw, ow, at, ot = (info["rays"], info["rb"], info["iw"], info["ow"], info["i"],
-                             info["o"])
-    regs, checks = _stream_env(iw, ow)
+def _reducer_harness_head(info: dict) -> str:
+    """The reducer harnesses' ports, the reducer (``dut``) and its probed ``valid`` bits."""
+    n, iw, ow = info["rays"], info["iw"], info["ow"]
     return f"""module stream_check(input clk, input rst, input i_valid,
                     input [{iw - 1}:0] i_payload, input o_ready, input wr_en,
                     input [31:0] wr_addr, input [31:0] wr_data, input rb_valid,
@@ -1145,7 +1159,14 @@ def _reducer_check(info: dict) -> str:
             .run_bank__valid(rb_valid), .run_bank__payload(rb_payload),
             .run_bank__ready(rb_ready), .blocked(blocked), .seq(seq));
   wire [{n - 1}:0] valid_probe;              // the rays with an answer (connect -set)
-  wire i_take = i_valid && i_ready, o_take = o_valid && o_ready;
+"""
+
+
+def _reducer_check(info: dict) -> str:
+    n, rb, iw, ow, at, ot = (info["rays"], info["rb"], info["iw"], info["ow"], info["i"],
+                             info["o"])
+    regs, checks = _stream_env(iw, ow)
+    return f"""{_reducer_harness_head(info)}  wire i_take = i_valid && i_ready, o_take = o_valid && o_ready;
   wire i_last = i_payload[{at["last"]}];
   wire i_hit = i_payload[{at["hit"]}] && !i_payload[{at["empty"]}];   // a hit beat
   wire [{rb - 1}:0] i_ray = i_payload[{at["ray_id"] + rb - 1}:{at["ray_id"]}];
@@ -1205,6 +1226,116 @@ endmodule
 """
 
 
+def _reducer_certified_check(info: dict) -> str:
+    """The certified reducer's output order: every beat taken on ``i`` carries its number
+    in ``u`` (assumed; ``u`` is carried, never compared), so a passed-on pair (``outcome``
+    2) names the beat it is; its ``hit`` bit is ``outcome == 1`` (assumed, as the
+    ray-triangle unit makes it), every other field free. Asserted: the pairs the stage
+    passes on in ``r`` (its ``emit``, probed) = those out + the one in the output register
+    + the one in the skid register (none lost or doubled); passed-on pairs leave in stream
+    order, each once, each one of the beats of the run being reduced (taken, and not after
+    that run's ``last``), with that beat's ray and an uncertain or certain-hit outcome, and
+    none after an answer of their run; answers (``outcome`` 1) as in ``reducer-send``;
+    ``empty`` is outcome 0, after no answer; the stream rule on ``o``."""
+    n, rb, iw, ow, uw, at, ot = (info["rays"], info["rb"], info["iw"], info["ow"],
+                                 info["uw"], info["i"], info["o"])
+    regs, checks = _stream_env(iw, ow)
+    nb = 1 << uw                                    # beat numbers (mod 2**uw; < 20 here)
+    return f"""{_reducer_harness_head(info)}  wire emit_probe, en_probe, sk_probe;       // a pair passed on in r; r moves; skid full
+  wire i_take = i_valid && i_ready, o_take = o_valid && o_ready;
+  wire i_last = i_payload[{at["last"]}];
+  wire i_hit = i_payload[{at["hit"]}] && !i_payload[{at["empty"]}];
+  wire [1:0] i_outcome = i_payload[{at["outcome"] + 1}:{at["outcome"]}];
+  wire [{rb - 1}:0] i_ray = i_payload[{at["ray_id"] + rb - 1}:{at["ray_id"]}];
+  wire [{uw - 1}:0] i_u = i_payload[{at["u"] + uw - 1}:{at["u"]}];
+  wire o_last = o_payload[{ot["last"]}], o_empty = o_payload[{ot["empty"]}];
+  wire [1:0] o_outcome = o_payload[{ot["outcome"] + 1}:{ot["outcome"]}];
+  wire o_unc = o_outcome == 2'd2;
+  wire [{rb - 1}:0] o_ray = o_payload[{ot["ray_id"] + rb - 1}:{ot["ray_id"]}];
+  wire [{uw - 1}:0] o_u = o_payload[{ot["u"] + uw - 1}:{ot["u"]}];
+  wire [{n - 1}:0] upto = ({n + 1}'d2 << o_ray) - 1;   // rays 0 .. o_ray
+  reg [3:0] n_in = 0, n_out = 0;             // runs whose last beat came in / left
+  wire [3:0] in_flight = n_in - n_out;
+  reg [{8 * n - 1}:0] hits = 0;              // per run slot, the rays with a hit beat
+  wire [{n - 1}:0] out_hits = hits >> (n_out[2:0] * {n});
+  wire [2:0] next_slot = n_in[2:0] + 3'd1;
+  reg sent = 0;                              // an answer of run n_out has left ...
+  reg [{rb - 1}:0] prev = 0;                 // ... this ray's the latest
+  reg [{uw - 1}:0] n_beats = 0;              // beats taken: the next one's number
+  reg [{uw - 1}:0] n_pass = 0, n_unc = 0;    // pairs passed on in r; passed-on pairs out
+  reg [{uw - 1}:0] u_next = 0;               // passed-on pairs leave from this number up
+  reg [{8 * uw - 1}:0] first = 0;            // per run slot, the number of its first beat
+  wire [{uw - 1}:0] run_first = first >> (n_out[2:0] * {uw});
+  wire [{uw - 1}:0] run_end = first >> ((n_out[2:0] + 3'd1) * {uw});  // past its last
+  reg [{nb * rb - 1}:0] ray_of = 0;          // per beat number, its ray
+  reg [{nb * 2 - 1}:0] outcome_of = 0;       // ... and its outcome
+  wire [{rb - 1}:0] o_beat_ray = ray_of >> (o_u * {rb});
+  wire [1:0] o_beat_outcome = outcome_of >> (o_u * 2);
+  reg rb_held = 0, rb_held_payload = 0;
+{regs}  always @(posedge clk) begin
+    init <= 0;
+    if (rst) begin
+      n_in <= 0; n_out <= 0; hits <= 0; sent <= 0; n_beats <= 0; u_next <= 0; first <= 0;
+      n_pass <= 0; n_unc <= 0;
+    end else begin
+      if (emit_probe && en_probe) n_pass <= n_pass + 1;
+      if (o_take && o_unc) n_unc <= n_unc + 1;
+      if (i_take) begin
+        n_beats <= n_beats + 1;
+        ray_of[i_u * {rb} +: {rb}] <= i_ray;
+        outcome_of[i_u * 2 +: 2] <= i_outcome;
+      end
+      if (i_take && i_hit) hits[n_in[2:0] * {n} + i_ray] <= 1;
+      if (i_take && i_last) begin
+        n_in <= n_in + 1;
+        hits[next_slot * {n} +: {n}] <= 0;
+        first[next_slot * {uw} +: {uw}] <= n_beats + 1;
+      end
+      if (o_take && o_unc) u_next <= o_u + 1;
+      if (o_take && !o_unc) begin
+        sent <= !o_last;
+        if (o_last) n_out <= n_out + 1;
+        prev <= o_ray;
+      end
+    end
+    rb_held <= !rst && rb_valid && !rb_ready;
+    rb_held_payload <= rb_payload;
+{checks}      if (rb_held) assume(rb_valid && rb_payload == rb_held_payload);   // the stream rule
+      if (i_valid) assume(i_u == n_beats);   // the environment numbers its beats in u
+      // the ray-triangle unit's certified hit bit is its outcome 1
+      if (i_valid) assume(i_payload[{at["hit"]}] == (i_outcome == 2'd1));
+      assert(in_flight <= 7);
+      if (i_take) assert(in_flight <= 6);
+      // none lost or doubled: passed on = out + in the output register + in the skid
+      assert(n_pass == n_unc + (o_valid && o_unc) + sk_probe);
+      if (o_valid) begin
+        assert(o_empty == (o_outcome == 2'd0));
+        if (o_unc) begin                     // a passed-on pair, maybe before its run's last
+          assert(!o_last && !sent);          // before its run's answers, never its last
+          assert(o_u >= u_next && o_u < n_beats);      // in stream order, once each
+          // a beat of run n_out (the one being reduced), up to its last if that came in
+          assert(o_u >= run_first && (in_flight == 0 || o_u < run_end));
+          assert(o_ray == o_beat_ray);       // that beat's ray
+          assert(o_beat_outcome != 2'd0);    // uncertain, or a certain hit
+        end else assert(in_flight != 0);     // an answer only for a run whose last came in
+        if (o_empty) assert(o_last && !sent && valid_probe == 0);
+        else if (!o_unc) begin
+          assert(!sent || o_ray > prev);     // lowest first: ascending, each ray once
+          assert(out_hits[o_ray]);           // a ray with a hit beat in its run
+          assert((valid_probe & upto) == 0 && (valid_probe & ~out_hits) == 0);
+          assert(o_last == (valid_probe == 0));
+        end
+      end
+      cover(o_take && o_unc && o_u != 0);    // a passed-on pair after another beat
+      cover(o_valid && o_unc && off);        // one held under !o.ready (the skid fills)
+      cover(o_take && !o_unc && !o_empty && u_next != 0);   // an answer after passed-on pairs
+      cover(o_take && o_empty && u_next != 0);   // a run with passed-on pairs, no answer
+    end
+  end
+endmodule
+"""
+
+
 def _check_text(name: str, info: dict) -> str:
     if name in ("bram-fifo", "sync-fifo-buffered", "credit-fifo", "credit-fifo-banked"):
         return _fifo_check(info["width"], info["depth"], info.get("credits", False))
@@ -1220,6 +1351,8 @@ def _check_text(name: str, info: dict) -> str:
         return _feeder_check(info)
     if name == "reducer-send":
         return _reducer_check(info)
+    if name == "reducer-certified":
+        return _reducer_certified_check(info)
     return _merger_check(info)
 
 
