@@ -15,9 +15,9 @@ model of it) at every format and rounding it takes (significands of at most 17 b
 and the ray-triangle unit by composition (paper and conservative mode, FP16 and FP24: its
 wiring around its operations as uninterpreted functions;
 :mod:`raplas_hdl.formal.composition`).
-One solver call at a time, each bounded by
-``--timeout`` (a composition proof by at least an hour). Each record notes the 1-minute load average before and after it (the
-machine is shared).
+One solver call at a time, each bounded by ``--timeout`` (a composition proof by at least
+an hour). Each record notes the 1-minute load average before and after it (the machine is
+shared).
 
 Then the intersection unit's stream stages with SymbiYosys
 (:mod:`raplas_hdl.formal.streams`). Writes ``docs/results/proofs.json`` (merged by unit,

@@ -1166,7 +1166,8 @@ def _reducer_check(info: dict) -> str:
     n, rb, iw, ow, at, ot = (info["rays"], info["rb"], info["iw"], info["ow"], info["i"],
                              info["o"])
     regs, checks = _stream_env(iw, ow)
-    return f"""{_reducer_harness_head(info)}  wire i_take = i_valid && i_ready, o_take = o_valid && o_ready;
+    return _reducer_harness_head(info) + f"""\
+  wire i_take = i_valid && i_ready, o_take = o_valid && o_ready;
   wire i_last = i_payload[{at["last"]}];
   wire i_hit = i_payload[{at["hit"]}] && !i_payload[{at["empty"]}];   // a hit beat
   wire [{rb - 1}:0] i_ray = i_payload[{at["ray_id"] + rb - 1}:{at["ray_id"]}];
@@ -1241,7 +1242,8 @@ def _reducer_certified_check(info: dict) -> str:
                                  info["uw"], info["i"], info["o"])
     regs, checks = _stream_env(iw, ow)
     nb = 1 << uw                                    # beat numbers (mod 2**uw; < 20 here)
-    return f"""{_reducer_harness_head(info)}  wire emit_probe, en_probe, sk_probe;       // a pair passed on in r; r moves; skid full
+    return _reducer_harness_head(info) + f"""\
+  wire emit_probe, en_probe, sk_probe;       // a pair passed on in r; r moves; skid full
   wire i_take = i_valid && i_ready, o_take = o_valid && o_ready;
   wire i_last = i_payload[{at["last"]}];
   wire i_hit = i_payload[{at["hit"]}] && !i_payload[{at["empty"]}];

@@ -4,8 +4,8 @@ nextpnr promotes only clocks to the ECP5's global network by itself; any other n
 design puts through a ``DCCA`` is routed on a global too, down to each user's pin, instead
 of through the general routing. The board design puts its reset there: a synchronised
 reset reaches some 9,000 flip-flops' ``LSR`` pins (the default 8 x 8 certified build), a
-net that otherwise takes general routing wires all over the device (it is not what keeps
-that build's routing from converging: ``docs/board-top.md``).
+net that otherwise takes general routing wires all over the device (whether that build's
+routing converges did not turn on it: ``docs/board-top.md``).
 
 :class:`ECP5GlobalBuffer` is the instance: ``i`` in, ``o`` out, always enabled. Like
 :class:`~raplas_hdl.rtl.ecp5_pll.ECP5PLL` it is a primitive (Yosys' ``synth_ecp5`` keeps
