@@ -13,8 +13,10 @@ The nine combinational steps, in order:
 
 ``classify``
     Classify both operands (``sub`` flips the sign of ``b``), compare their magnitudes
-    (exponent, then significand), form both exponent differences side by side, and work out
-    the special results (NaN operand, inf - inf, infinity) and the sign of an exact zero sum.
+    (exponent, then significand), form both exponent differences side by side, each clamped
+    to the alignment's width (so the comparison drives one multiplexer before the shifter),
+    and work out the special results (NaN operand, inf - inf, infinity) and the sign of an
+    exact zero sum.
 ``order``
     Order the operands by the comparison so that ``x`` is the larger, and pick the exponent
     difference ``d`` = ``exp(x) - exp(y)``. Hands on: ``x``'s sign, exponent and
@@ -22,7 +24,7 @@ The nine combinational steps, in order:
     subtraction, the specials.
 ``align``
     Shift ``y``'s significand (with two zero bits appended, in a double-width window that
-    loses no bit) right by ``d``'s multiple of four (``d`` clamped to the width).
+    loses no bit) right by ``d``'s multiple of four (``d`` was clamped to the width).
 ``shift``
     The rest of the shift (``d mod 4``); the bits below the significand's window are ORed
     into a sticky bit. ``chop`` instead drops everything below ``y``'s own last bit, as the
@@ -224,18 +226,24 @@ class FPAdd(wiring.Component):
 
     # -- combinational steps -----------------------------------------------------------
     def _step_classify(self, m, v):
-        return classify(self._fmt, m, v)
+        # both exponent differences clamped to the alignment's width here, beside the
+        # magnitude comparison, so that ``order`` picks the shift amount with one multiplexer
+        # and ``align``'s shifter waits on nothing after it (swap -> difference multiplexer
+        # -> clamp -> shifter was the slowest path of a placed adder)
+        width = self._fmt.man_bits + 3
+        v = classify(self._fmt, m, v)
+        return {**v, **{name: Mux(v[name] > width, width, v[name])
+                        for name in ("diff_ab", "diff_ba")}}
 
     def _step_order(self, m, v):
         return order(m, v)
 
     def _step_align(self, m, v):
-        # the shift by the difference's multiple of 4 (clamped to the width, which shifts
-        # everything out); every bit stays in the double-width window, so ``shift`` below
-        # loses nothing that its sticky bit should see
+        # the shift by the difference's multiple of 4 (the difference clamped to the width
+        # by ``classify``, which shifts everything out); every bit stays in the double-width
+        # window, so ``shift`` below loses nothing that its sticky bit should see
         width = self._fmt.man_bits + 3
-        amount = Value.cast(v["diff"])
-        clamped = wire(m, Mux(amount > width, width, amount), "clamped")
+        clamped = wire(m, v["diff"], "clamped")
         wide = Cat(Const(0, width), Const(0, 2), v["sig_y"]) >> Cat(Const(0, 2), clamped[2:])
         return {**keep(v, "sign_x", "zero_sign", "eff_sub", "exp_x", "sig_x", *SPECIALS),
                 "wide": wide[:2 * width], "fine": clamped[:2]}

@@ -10,7 +10,11 @@ adders (``bram_fifo``). Checked here:
   ``w_rdy``, with random writes and reads, full and empty stretches;
 * which units use it, the errors for a bad option, the generic target's Verilog without it;
 * Yosys maps it (the FIFO shape in the whole unit: 133 bits, 47 words) to ``RAMB16`` and no
-  LUT RAM.
+  LUT RAM;
+* the forms whose write is not gated by the level (the unit's writer holds credits:
+  :class:`~raplas_hdl.rtl.ram.CreditSyncFIFO`, ``BlockRAMFIFO(credits=True)``) equal the gated
+  ones (Amaranth's ``SyncFIFO``, ``BlockRAMFIFO``) on every port in every cycle, behind a
+  writer that never writes into a full FIFO; and a write into a full one is not refused.
 
 (The unit with it against the golden model, with input gaps and output back-pressure:
 ``tests/rtl/test_dsp48_adder_units.py``.)
@@ -20,10 +24,12 @@ import random
 
 import pytest
 from amaranth.back import verilog
+from amaranth.hdl import Module
+from amaranth.lib.fifo import SyncFIFO
 from amaranth.sim import Simulator
 
 from raplas_hdl.fp import FP24
-from raplas_hdl.rtl.ram import BlockRAMFIFO
+from raplas_hdl.rtl.ram import BlockRAMFIFO, CreditSyncFIFO
 from raplas_hdl.rtl.ray_triangle import RayTriangleUnit
 
 V4 = "virtex4"
@@ -133,3 +139,80 @@ def test_yosys_maps_it_to_block_ram(tmp_path):
     r = synthesize(text, "bf", cache_dir=tmp_path)
     assert r.bram == 4 and r.lutram == 0           # 133 bits in four 512 x 36 RAMB16
     assert "RAMB16" in r.cells_by_type
+
+
+_PORTS = ("w_rdy", "r_rdy", "r_data", "level")
+
+
+def _pair(kind, depth):
+    """The credit form and its gated reference, ``kind`` "sync" or "bram"."""
+    if kind == "sync":
+        return CreditSyncFIFO(width=10, depth=depth), SyncFIFO(width=10, depth=depth)
+    return (BlockRAMFIFO(width=10, depth=depth, credits=True),
+            BlockRAMFIFO(width=10, depth=depth))
+
+
+@pytest.mark.parametrize("kind", ["sync", "bram"])
+@pytest.mark.parametrize("depth, w_density, r_density", [
+    (2, 0.8, 0.4), (5, 0.9, 0.3), (7, 0.5, 0.8), (47, 1.0, 0.9)])
+def test_credit_fifos_equal_the_gated_ones_behind_a_credit_writer(kind, depth, w_density,
+                                                                  r_density):
+    dut, ref = _pair(kind, depth)
+    m = Module()
+    m.submodules.dut, m.submodules.ref = dut, ref
+    rng = random.Random(depth * 7919 + int(w_density * 100) + len(kind))
+    seen = {"full": 0, "read": 0}
+
+    async def testbench(ctx):
+        for cyc in range(800):
+            for name in _PORTS:
+                got, want = ctx.get(getattr(dut, name)), ctx.get(getattr(ref, name))
+                if name == "r_data" and not ctx.get(ref.r_rdy):
+                    continue                    # no head word: the data is not a result
+                assert got == want, f"cycle {cyc}: {name} {got} != {want}"
+            # the writer holds a credit for a free word: it writes only while one is free
+            w = ctx.get(ref.w_rdy) and rng.random() < w_density
+            r = rng.random() < r_density
+            seen["full"] += not ctx.get(ref.w_rdy)
+            seen["read"] += r and ctx.get(ref.r_rdy)
+            data = rng.getrandbits(10)
+            for f in (dut, ref):
+                ctx.set(f.w_en, w)
+                ctx.set(f.w_data, data)
+                ctx.set(f.r_en, r)
+            await ctx.tick()
+
+    sim = Simulator(m)
+    sim.add_clock(1e-6)
+    sim.add_testbench(testbench)
+    sim.run()
+    assert seen["read"] > 100 and (seen["full"] > 0 or r_density > w_density)
+
+
+@pytest.mark.parametrize("kind", ["sync", "bram"])
+def test_a_credit_fifo_does_not_refuse_a_write_when_full(kind):
+    """The write enable is ``w_en`` alone: a write into a full FIFO is taken (and overwrites
+    a word), where the gated FIFO refuses it. The unit's credits keep it from happening."""
+    dut, ref = _pair(kind, 3)
+    m = Module()
+    m.submodules.dut, m.submodules.ref = dut, ref
+    levels = []
+
+    async def testbench(ctx):
+        for n in range(6):
+            for f in (dut, ref):
+                ctx.set(f.w_en, 1)
+                ctx.set(f.w_data, n)
+            await ctx.tick()
+            levels.append((ctx.get(dut.level), ctx.get(ref.level)))
+
+    sim = Simulator(m)
+    sim.add_clock(1e-6)
+    sim.add_testbench(testbench)
+    sim.run()
+    assert levels[-1][1] == 3 and levels[-1][0] != 3
+
+
+def test_credit_sync_fifo_bad_shape():
+    with pytest.raises(ValueError, match="credit FIFO"):
+        CreditSyncFIFO(width=4, depth=0)
