@@ -13,9 +13,9 @@ The nine combinational steps, in order:
 
 ``classify``
     Classify both operands (``sub`` flips the sign of ``b``), compare their magnitudes
-    (exponent, then significand), form both exponent differences side by side, each clamped
-    to the alignment's width (so the comparison drives one multiplexer before the shifter),
-    and work out the special results (NaN operand, inf - inf, infinity) and the sign of an
+    (exponent, then significand), form both exponent differences side by side (each clamped
+    to the alignment's width when a register follows, so that the comparison drives one
+    multiplexer before the shifter), and work out the special results (NaN operand, inf - inf, infinity) and the sign of an
     exact zero sum.
 ``order``
     Order the operands by the comparison so that ``x`` is the larger, and pick the exponent
@@ -24,7 +24,7 @@ The nine combinational steps, in order:
     subtraction, the specials.
 ``align``
     Shift ``y``'s significand (with two zero bits appended, in a double-width window that
-    loses no bit) right by ``d``'s multiple of four (``d`` was clamped to the width).
+    loses no bit) right by ``d``'s multiple of four (``d`` clamped to the width).
 ``shift``
     The rest of the shift (``d mod 4``); the bits below the significand's window are ORed
     into a sticky bit. ``chop`` instead drops everything below ``y``'s own last bit, as the
@@ -225,25 +225,40 @@ class FPAdd(wiring.Component):
         return group_steps(self._steps, self._registered)
 
     # -- combinational steps -----------------------------------------------------------
-    def _step_classify(self, m, v):
-        # both exponent differences clamped to the alignment's width here, beside the
-        # magnitude comparison, so that ``order`` picks the shift amount with one multiplexer
-        # and ``align``'s shifter waits on nothing after it (swap -> difference multiplexer
-        # -> clamp -> shifter was the slowest path of a placed adder)
+    def _clamp(self, diff):
+        """An exponent difference clamped to the alignment's width (a larger shift shifts
+        everything out)."""
         width = self._fmt.man_bits + 3
+        return Mux(diff > width, width, diff)
+
+    @property
+    def _clamp_early(self) -> bool:
+        """Clamp both differences in ``classify`` (a register follows it), else the one
+        ``order`` picks, in ``align``."""
+        return ADD_STEPS.index("classify") in self._registered
+
+    def _step_classify(self, m, v):
+        # with a register behind this step, both exponent differences are clamped here,
+        # beside the magnitude comparison, so that ``order`` picks the shift amount with one
+        # multiplexer and ``align``'s shifter waits on nothing after it (swap -> difference
+        # multiplexer -> clamp -> shifter was the slowest path of a placed adder). Where
+        # ``order`` shares this step's stage (``chop``'s 5 stages) the clamp stays in
+        # ``align``: here it lengthened the stage (FP24 chop, 129.7 -> 119.8 MHz, speed 6)
         v = classify(self._fmt, m, v)
-        return {**v, **{name: Mux(v[name] > width, width, v[name])
-                        for name in ("diff_ab", "diff_ba")}}
+        if not self._clamp_early:
+            return v
+        return {**v, **{name: self._clamp(v[name]) for name in ("diff_ab", "diff_ba")}}
 
     def _step_order(self, m, v):
         return order(m, v)
 
     def _step_align(self, m, v):
-        # the shift by the difference's multiple of 4 (the difference clamped to the width
-        # by ``classify``, which shifts everything out); every bit stays in the double-width
-        # window, so ``shift`` below loses nothing that its sticky bit should see
+        # the shift by the difference's multiple of 4 (the difference clamped to the width,
+        # which shifts everything out); every bit stays in the double-width window, so
+        # ``shift`` below loses nothing that its sticky bit should see
         width = self._fmt.man_bits + 3
-        clamped = wire(m, v["diff"], "clamped")
+        clamped = wire(m, v["diff"] if self._clamp_early else self._clamp(v["diff"]),
+                       "clamped")
         wide = Cat(Const(0, width), Const(0, 2), v["sig_y"]) >> Cat(Const(0, 2), clamped[2:])
         return {**keep(v, "sign_x", "zero_sign", "eff_sub", "exp_x", "sig_x", *SPECIALS),
                 "wide": wide[:2 * width], "fine": clamped[:2]}
