@@ -24,6 +24,13 @@ stream rule) and asserts:
   reset, one spent per write, one back a cycle after each read) and no other assumption on
   its writes; the harness asserts that every write then finds a free entry (``w_rdy``), the
   premise of taking it unchecked, besides all of the above;
+- for the ray-triangle unit's output (``output-credits``: its credit count,
+  :func:`~raplas_hdl.rtl.credit_count.credit_count`, in front of a pipeline that never
+  stalls, and :class:`~raplas_hdl.rtl.ram.CreditSyncFIFO`, which takes every write, behind
+  it), with ``valid`` and ``ready`` free: the FIFO is never written full; ``ready`` is
+  exactly "fewer than the FIFO's depth accepted and not yet taken" (so the count's
+  registered take and comparisons lose no cycle); accepted = taken + in the pipeline + in
+  the FIFO; the pairs leave in order, each once, under the stream rule;
 - for the job distributor, that beat ``n`` leaves on lane ``n mod K``; for the result
   merger, that it takes lane ``k``'s beats only between job-last beats ``k - 1`` and ``k``
   (mod K);
@@ -101,7 +108,8 @@ The stages and what each checks are :data:`STAGES`; :func:`check_stage` runs one
 ``unknown``, never passed; the FIFOs, the sphere feeder and the reducer are checked to a
 stated depth instead, since an induction over a FIFO's memory words (the reducer's: its
 RAMs and pipeline registers) needs an invariant the harness cannot state). Cover statements
-show the checks are not vacuous: each stage must reach a full FIFO / a lane change / an
+show the checks are not vacuous: each stage must reach a full FIFO (the output on credits:
+also a pair accepted on a credit given back after all were in use) / a lane change / an
 ``empty`` beat, a ``last`` beat and a beat held under ``!ready`` / a skipped ray, a marker
 job, a job held under ``!ready``, every ray of a sphere (with the early-out, also a blocked
 ray dropped, and a job of a ray blocked in another run's report) / a job's two pairs, a
@@ -147,6 +155,7 @@ check.v
 SEQ = 4         # bits of the sequence numbers of the lanes' checks
 FIFO_SEQ = 3    # the FIFO's words: sequence numbers mod 8, more than the 4 words it holds
 FETCH_FORMAT = FPFormat(3, 2)   # the record fetch's words: 6-bit fields
+CREDIT_PIPE = 3     # the output-credits check's pipeline; its FIFO is 2 deeper, as the unit's
 
 
 @dataclass(frozen=True)
@@ -189,6 +198,10 @@ STAGES = {s.name: s for s in (
           "with credits: the unit's pair and sphere FIFOs", 12, "bmc"),
     Stage("credit-fifo-banked", "rtl.unit.credit_fifo.CreditFIFO(width=3, depth=4, banks=3) "
           "behind a writer with credits: the pair FIFO in banks, one bit each", 12, "bmc"),
+    Stage("output-credits", f"rtl.credit_count.credit_count in front of a {CREDIT_PIPE}-cycle "
+          f"pipeline that never stalls and rtl.ram.CreditSyncFIFO(width=3, "
+          f"depth={CREDIT_PIPE + 2}) behind it: the ray-triangle unit's output on credits",
+          12, "bmc", cover=14),
     Stage("job-distributor", "rtl.unit.lanes.JobDistributor, 3 lanes", 8,
           probes=(("turn_probe", "dut.turn"),)),
     Stage("result-merger", "rtl.unit.lanes.ResultMerger, 3 lanes", 8,
@@ -253,6 +266,8 @@ def stage_verilog(name: str) -> tuple[str, dict]:
                        banks=FIFO_SEQ if name == "credit-fifo-banked" else 1)
         return (verilog.convert(f, name="stage", emit_src=False),
                 {"width": FIFO_SEQ, "depth": 4, "credits": True})
+    if name == "output-credits":
+        return _credits_verilog()
     if name == "result-framing":
         return _framing_verilog()
     if name in ("pair-selector", "pair-selector-reduce"):
@@ -276,6 +291,99 @@ def stage_verilog(name: str) -> tuple[str, dict]:
     info = {"lanes": 3, "width": width, "top": cfg.ray_id_bits + 1,
             "ray_lsb": _ray_lsb(comp) if name == "result-merger" else 0}
     return verilog.convert(comp, name="stage", emit_src=False), info
+
+
+def _credits_verilog() -> tuple[str, dict]:
+    """The ray-triangle unit's output as it builds it: :func:`~raplas_hdl.rtl.credit_count.
+    credit_count` in front, a pipeline of :data:`CREDIT_PIPE` registers that never stalls
+    (the valid bits reset, the data not), the FIFO behind written on the last valid bit."""
+    from amaranth.back import verilog
+    from amaranth.hdl import Cat, Elaboratable, Module, Signal
+
+    from ..rtl.credit_count import credit_count
+    from ..rtl.ram import CreditSyncFIFO
+
+    depth = CREDIT_PIPE + 2
+
+    class Output(Elaboratable):
+        def __init__(self):
+            for name in ("i_valid", "i_ready", "o_valid", "o_ready", "w_en", "w_rdy"):
+                setattr(self, name, Signal(name=name))
+            self.i_data = Signal(FIFO_SEQ, name="i_data")
+            self.o_data = Signal(FIFO_SEQ, name="o_data")
+            self.level = Signal(range(depth + 1), name="level")
+            self.line = Signal(CREDIT_PIPE, name="line")
+
+        def elaborate(self, platform):
+            m = Module()
+            fifo = m.submodules.fifo = CreditSyncFIFO(width=FIFO_SEQ, depth=depth)
+            accept = credit_count(m, valid=self.i_valid, ready=self.i_ready,
+                                  take=fifo.r_rdy & self.o_ready, depth=depth)
+            valid, data = accept, self.i_data
+            bits = []
+            for k in range(CREDIT_PIPE):
+                v, d = Signal(name=f"v{k}"), Signal(FIFO_SEQ, name=f"d{k}", reset_less=True)
+                m.d.sync += [v.eq(valid), d.eq(data)]
+                valid, data = v, d
+                bits.append(v)
+            m.d.comb += [fifo.w_en.eq(valid), fifo.w_data.eq(data), self.w_en.eq(valid),
+                         self.w_rdy.eq(fifo.w_rdy), self.level.eq(fifo.level),
+                         self.line.eq(Cat(*bits)), self.o_valid.eq(fifo.r_rdy),
+                         fifo.r_en.eq(self.o_ready), self.o_data.eq(fifo.r_data)]
+            return m
+
+    top = Output()
+    ports = [top.i_valid, top.i_ready, top.i_data, top.o_valid, top.o_ready, top.o_data,
+             top.w_en, top.w_rdy, top.level, top.line]
+    return (verilog.convert(top, name="stage", ports=ports, emit_src=False),
+            {"width": FIFO_SEQ, "depth": depth, "pipe": CREDIT_PIPE})
+
+
+def _credits_check(info: dict) -> str:
+    w, depth, pipe = info["width"], info["depth"], info["pipe"]
+    lw = depth.bit_length()
+    in_flight = " + ".join(f"line[{k}]" for k in range(pipe))
+    return f"""module stream_check(input clk, input rst, input i_valid, input o_ready);
+  reg init = 1;
+  reg [{w - 1}:0] n_in = 0, n_out = 0;
+  wire [{w - 1}:0] i_data = n_in;
+  wire i_ready, o_valid, w_en, w_rdy;
+  wire [{w - 1}:0] o_data;
+  wire [{lw - 1}:0] level;
+  wire [{pipe - 1}:0] line;
+  stage dut(.clk(clk), .rst(rst), .i_valid(i_valid), .i_ready(i_ready), .i_data(i_data),
+            .o_valid(o_valid), .o_ready(o_ready), .o_data(o_data), .w_en(w_en),
+            .w_rdy(w_rdy), .level(level), .line(line));
+  reg offered = 0, full = 0;
+  reg [{w - 1}:0] offered_data = 0;
+  wire [{w - 1}:0] used = n_in - n_out;       // accepted and not yet taken
+  always @(posedge clk) begin
+    init <= 0;
+    if (rst) begin n_in <= 0; n_out <= 0; end
+    else begin
+      if (i_valid && i_ready) n_in <= n_in + 1;
+      if (o_valid && o_ready) n_out <= n_out + 1;
+    end
+    offered <= !rst && o_valid && !o_ready;
+    offered_data <= o_data;
+    full <= !rst && !i_ready;
+  end
+  always @* begin
+    if (init) assume(rst);
+    if (!init && !rst) begin
+      if (w_en) assert(w_rdy);                   // the credits made room: never written full
+      assert(i_ready == (used < {depth}));       // ready exactly while a credit is free
+      assert(used == level + {in_flight});  // in = out + in flight + held
+      assert(used <= {depth});
+      if (o_valid) assert(o_data == n_out);      // in order, none lost or doubled
+      if (offered) assert(o_valid && o_data == offered_data);   // the stream rule
+      cover(full && i_ready);                    // out of credits, then one given back
+      cover(level == {depth});
+      cover(n_out == {depth + 2});
+    end
+  end
+endmodule
+"""
 
 
 def _framing_verilog() -> tuple[str, dict]:
@@ -1341,6 +1449,8 @@ endmodule
 def _check_text(name: str, info: dict) -> str:
     if name in ("bram-fifo", "sync-fifo-buffered", "credit-fifo", "credit-fifo-banked"):
         return _fifo_check(info["width"], info["depth"], info.get("credits", False))
+    if name == "output-credits":
+        return _credits_check(info)
     if name == "job-distributor":
         return _distributor_check(info)
     if name == "result-framing":

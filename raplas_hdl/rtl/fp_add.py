@@ -15,8 +15,8 @@ The nine combinational steps, in order:
     Classify both operands (``sub`` flips the sign of ``b``), compare their magnitudes
     (exponent, then significand), form both exponent differences side by side (each clamped
     to the alignment's width when a register follows, so that the comparison drives one
-    multiplexer before the shifter), and work out the special results (NaN operand, inf - inf, infinity) and the sign of an
-    exact zero sum.
+    multiplexer before the shifter), and work out the special results (NaN operand,
+    inf - inf, infinity) and the sign of an exact zero sum.
 ``order``
     Order the operands by the comparison so that ``x`` is the larger, and pick the exponent
     difference ``d`` = ``exp(x) - exp(y)``. Hands on: ``x``'s sign, exponent and

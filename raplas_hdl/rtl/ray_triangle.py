@@ -56,8 +56,8 @@ the two. The valid bit (reset) always stays in flip-flops. ``srl=0`` gives the
 flip-flop-only Verilog of the generic target.
 
 **Output FIFO in block RAM.** The output FIFO of ``D + 4`` words of about 140 bits is, as
-Amaranth's ``SyncFIFO`` (cycle for cycle), distributed RAM with an asynchronous read: about 450 ``RAM16X1D``
-(900 LUT sites) on Virtex-4. With ``bram_fifo`` (by default with ``adder="virtex4"``) it is a
+Amaranth's ``SyncFIFO`` (cycle for cycle), distributed RAM with an asynchronous read: about
+450 ``RAM16X1D`` (900 LUT sites) on Virtex-4. With ``bram_fifo`` (by default with ``adder="virtex4"``) it is a
 :class:`~.ram.BlockRAMFIFO` instead: a synchronous-read memory marked for block RAM (four
 ``RAMB16`` at FP24) whose read register holds the head word. A result then reaches ``o``
 one clock later, so ``latency`` is ``D + 4`` and the FIFO ``D + 5`` words deep (the credit
@@ -78,6 +78,7 @@ from ..model.certified import certified_constants, check_certified_format
 from ..model.ordering import tight_bits
 from ..model.records import EVENT_COUNT_BITS, PAIR, RT_RESULT, RT_RESULT_CERTIFIED
 from .certified_bound import RTL_VARIANTS, BoundOps
+from .credit_count import credit_count
 from .fp_add import FPAdd, check_adder, default_add_stages, fp_add_latency
 from .fp_compare import is_nan, le as fp_le, lt as fp_lt, neg as fp_neg
 from .fp_mul import FPMul, check_multiplier, default_mul_stages, fp_mul_latency
@@ -540,40 +541,13 @@ class RayTriangleUnit(wiring.Component):
         fifo = m.submodules.fifo = (
             BlockRAMFIFO(width=width, depth=self.fifo_depth, credits=True) if self._bram_fifo
             else CreditSyncFIFO(width=width, depth=self.fifo_depth))
-        # credits in use, kept as ``held = in use + took``: ``took`` is the last cycle's
-        # take from ``o``, registered, so that ``o.ready`` (from whatever the unit feeds,
-        # maybe far across the chip) reaches only a flip-flop, never the counter's carry
-        # chain; the two comparisons ``i.ready`` picks from are registers too, formed from
-        # the count's next value, so that ``i.ready`` (which enables the pair FIFO's read,
-        # every bank of it) is one LUT from flip-flops: certified, the comparison's carry
-        # chain there took 2 to 3 ns of a 12.4 ns path (ECP5 speed 6). ``i.ready`` is the
-        # same function of the true count as it would be unregistered, so every handshake
-        # happens on the same cycle
-        depth = self.fifo_depth
-        held = Signal(range(depth + 2))
-        took = Signal()
-        accept = Signal()
-        held_next = Signal(range(depth + 2))
-        held_le = Signal(init=1)                        # held <= depth (held starts at 0)
-        held_lt = Signal(init=1)                        # held < depth
+        # a credit for every accepted pair until it is taken from ``o`` (:mod:`.credit_count`)
+        accept = credit_count(m, valid=self.i.valid, ready=self.i.ready,
+                              take=fifo.r_rdy & self.o.ready, depth=self.fifo_depth)
         m.d.comb += [
-            self.i.ready.eq(Mux(took, held_le, held_lt)),
-            accept.eq(self.i.valid & self.i.ready),
-            held_next.eq(held + accept - took),
             self.o.valid.eq(fifo.r_rdy),
             fifo.r_en.eq(self.o.ready),
             self.o.payload.eq(fifo.r_data),
-        ]
-        # the next comparisons are formed from ``held`` alone for each of the count's three
-        # steps (+1, 0, -1; held <= depth + 1 always), so that ``took`` and ``accept`` pass
-        # a multiplexer and no carry chain: chop, took -> held_le was a 11.0 ns path
-        count_up, count_down = accept & ~took, took & ~accept
-        m.d.sync += [
-            took.eq(fifo.r_rdy & self.o.ready), held.eq(held_next),
-            held_le.eq(Mux(count_up, held < depth,
-                           Mux(count_down, held <= depth + 1, held <= depth))),
-            held_lt.eq(Mux(count_up, held < depth - 1,
-                           Mux(count_down, held <= depth, held < depth))),
         ]
         # event counts: per event, the number of the pair's operations that raised it,
         # summed along the pipeline as the operations finish (each running sum only as
