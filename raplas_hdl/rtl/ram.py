@@ -140,6 +140,15 @@ class SyncRAM:
             m.d.comb += rp.data.eq(rdata[k * self.width:(k + 1) * self.width])
 
 
+def _fifo_ports(fifo) -> None:
+    """Give ``fifo`` the ports of :class:`amaranth.lib.fifo.SyncFIFO` for its ``width`` and
+    ``depth``: ``w_data``, ``w_en``, ``w_rdy``, ``r_data``, ``r_en``, ``r_rdy``, ``level``."""
+    shapes = {"w_data": fifo.width, "w_en": 1, "w_rdy": 1, "r_data": fifo.width, "r_en": 1,
+              "r_rdy": 1, "level": range(fifo.depth + 1)}
+    for name, shape in shapes.items():
+        setattr(fifo, name, Signal(shape, name=name))
+
+
 #: Attributes that make Yosys (``memory_libmap``) and vendor tools map a memory to block RAM.
 BLOCK_RAM_ATTRS = {"ram_style": "block"}
 
@@ -177,13 +186,7 @@ class BlockRAMFIFO(Elaboratable):
                              f"not {width} x {depth}")
         self.width, self.depth = int(width), int(depth)
         self.credits = bool(credits)
-        self.w_data = Signal(self.width)
-        self.w_en = Signal()
-        self.w_rdy = Signal()
-        self.r_data = Signal(self.width)
-        self.r_en = Signal()
-        self.r_rdy = Signal()
-        self.level = Signal(range(self.depth + 1))
+        _fifo_ports(self)
 
     def elaborate(self, platform):
         m = Module()
@@ -249,13 +252,7 @@ class CreditSyncFIFO(Elaboratable):
             raise ValueError(f"a credit FIFO needs width >= 1 and depth >= 1, "
                              f"not {width} x {depth}")
         self.width, self.depth = int(width), int(depth)
-        self.w_data = Signal(self.width)
-        self.w_en = Signal()
-        self.w_rdy = Signal()
-        self.r_data = Signal(self.width)
-        self.r_en = Signal()
-        self.r_rdy = Signal()
-        self.level = Signal(range(self.depth + 1))
+        _fifo_ports(self)
 
     def elaborate(self, platform):
         m = Module()
