@@ -22,7 +22,7 @@ from amaranth.hdl import Cat, ClockSignal, Elaboratable, Instance, Module, Mux, 
 from amaranth.lib.memory import Memory
 
 __all__ = ["SyncRAM", "RAM_IMPLS", "RAM_MODULE", "ram_verilog", "BlockRAMFIFO",
-           "CreditSyncFIFO", "BLOCK_RAM_ATTRS"]
+           "CreditSyncFIFO", "BLOCK_RAM_ATTRS", "incr_modulo"]
 
 #: Implementations of :class:`SyncRAM`.
 RAM_IMPLS = ("memory", "verilog")
@@ -138,6 +138,14 @@ class SyncRAM:
             i_ren=Cat(*[rp.en for rp in self._rps]), o_rdata=rdata)
         for k, rp in enumerate(self._rps):
             m.d.comb += rp.data.eq(rdata[k * self.width:(k + 1) * self.width])
+
+
+def incr_modulo(value, modulo: int):
+    """``value + 1`` modulo ``modulo`` (a plain increment when that is a power of two): a FIFO
+    pointer's step."""
+    if modulo == 1 << len(value):
+        return value + 1
+    return Mux(value == modulo - 1, 0, value + 1)
 
 
 def _fifo_ports(fifo) -> None:
@@ -267,15 +275,9 @@ class CreditSyncFIFO(Elaboratable):
         consume = Signal(range(self.depth))
         m.d.comb += [wp.addr.eq(produce), wp.data.eq(self.w_data), wp.en.eq(self.w_en),
                      rp.addr.eq(consume), self.r_data.eq(rp.data)]
-
-        def incr(p):
-            if self.depth == 1 << len(p):
-                return p + 1
-            return Mux(p == self.depth - 1, 0, p + 1)
-
         with m.If(self.w_en):
-            m.d.sync += produce.eq(incr(produce))
+            m.d.sync += produce.eq(incr_modulo(produce, self.depth))
         with m.If(do_read):
-            m.d.sync += consume.eq(incr(consume))
+            m.d.sync += consume.eq(incr_modulo(consume, self.depth))
         m.d.sync += self.level.eq(self.level + self.w_en - do_read)
         return m

@@ -24,19 +24,14 @@ Banked, each read enable reaches one slice.
 
 from __future__ import annotations
 
-from amaranth.hdl import Module, Mux, Signal
+from amaranth.hdl import Module, Signal
 from amaranth.lib import stream, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
+from ..ram import incr_modulo
+
 __all__ = ["CreditFIFO"]
-
-
-def _incr(value, modulo: int):
-    """``value + 1`` modulo ``modulo`` (a plain increment when that is a power of two)."""
-    if modulo == 1 << len(value):
-        return value + 1
-    return Mux(value == modulo - 1, 0, value + 1)
 
 
 class CreditFIFO(wiring.Component):
@@ -100,9 +95,9 @@ class CreditFIFO(wiring.Component):
                      self.w_stream.ready.eq(inner_level != inner_depth),
                      self.level.eq(inner_level + head)]
         with m.If(do_write):
-            m.d.sync += produce.eq(_incr(produce, inner_depth))
+            m.d.sync += produce.eq(incr_modulo(produce, inner_depth))
         with m.If(do_inner_read):
-            m.d.sync += consume.eq(_incr(consume, inner_depth))
+            m.d.sync += consume.eq(incr_modulo(consume, inner_depth))
         with m.If(do_write & ~do_inner_read):
             m.d.sync += inner_level.eq(inner_level + 1)
         with m.If(do_inner_read & ~do_write):
