@@ -24,7 +24,8 @@ from amaranth.hdl import Cat, Const, Mux, Value
 from ..fp.format import FLAG_INVALID, FLAG_OVERFLOW, FLAG_UNDERFLOW, FPFormat, check_format
 
 __all__ = ["Unpacked", "check_format", "unpack", "leading_zeros",
-           "shift_right_sticky", "round_significand", "pack"]
+           "shift_right_sticky", "round_significand", "round_significand_ranged",
+           "exponent_range", "pack"]
 
 
 class Unpacked(NamedTuple):
@@ -118,6 +119,15 @@ def shift_right_sticky(value, amount, limit: int | None = None) -> tuple[Value, 
     return wide[width:], wide[:width] != 0
 
 
+def _round_up(fmt: FPFormat, sig, guard, sticky) -> tuple[Value, Value]:
+    """``rne``'s round-up of ``sig``: the rounded ``M+1`` bits and the carry out of them."""
+    m = fmt.man_bits
+    up = guard & (sticky | sig[0])
+    total = sig + up  # m + 2 bits
+    carry = total[m + 1]
+    return Mux(carry, Const(1 << m, m + 1), total[:m + 1]), carry
+
+
 def round_significand(fmt: FPFormat, sig, exp, guard, sticky) -> tuple[Value, Value]:
     """Round a normalised significand to ``M+1`` bits by the format's rounding.
 
@@ -132,23 +142,50 @@ def round_significand(fmt: FPFormat, sig, exp, guard, sticky) -> tuple[Value, Va
         wider than ``exp`` for ``rne``).
     """
     sig, exp = Value.cast(sig), Value.cast(exp)
-    m = fmt.man_bits
     if fmt.rounding != "rne":
         return sig, exp
-    up = guard & (sticky | sig[0])
-    total = sig + up  # m + 2 bits
-    carry = total[m + 1]
-    return Mux(carry, Const(1 << m, m + 1), total[:m + 1]), exp + carry
+    sig, carry = _round_up(fmt, sig, guard, sticky)
+    return sig, exp + carry
 
 
-def pack(fmt: FPFormat, *, sign, exp, sig, zero, inf, nan, invalid) -> tuple[Value, Value]:
+def round_significand_ranged(fmt: FPFormat, sig, exp, guard,
+                             sticky) -> tuple[Value, Value, Value, Value]:
+    """:func:`round_significand`, with :func:`pack`'s range tests of the rounded exponent.
+
+    The tests are made on ``exp`` and on ``exp + 1`` beside the round-up's carry chain, and
+    the carry only picks one (``exp + carry >= K`` is ``exp >= K - carry``), so a pipeline
+    register between this and :func:`pack` (given ``overflow`` and ``underflow``) leaves
+    ``pack`` without a comparison: its stage is the result multiplexer alone.
+
+    Returns
+    -------
+    (sig, exp, overflow, underflow)
+    """
+    sig, exp = Value.cast(sig), Value.cast(exp)
+    if fmt.rounding != "rne":
+        return (sig, exp) + exponent_range(fmt, exp)
+    sig, carry = _round_up(fmt, sig, guard, sticky)
+    overflow = Mux(carry, exp >= fmt.exp_max_field - 1, exp >= fmt.exp_max_field)
+    underflow = Mux(carry, exp <= -1, exp <= 0)
+    return sig, exp + carry, overflow, underflow
+
+
+def exponent_range(fmt: FPFormat, exp) -> tuple[Value, Value]:
+    """``(overflow, underflow)`` of a rounded exponent: ``exp >= 2**E - 1``, ``exp <= 0``."""
+    exp = Value.cast(exp)
+    return exp >= fmt.exp_max_field, exp <= 0
+
+
+def pack(fmt: FPFormat, *, sign, exp, sig, zero, inf, nan, invalid, overflow=None,
+         underflow=None) -> tuple[Value, Value]:
     """Assemble the result bit pattern and the event flags.
 
     Priority: ``nan`` (canonical NaN; ``invalid`` raises the invalid flag), then ``inf``
     (infinity of ``sign``), then ``zero`` (exact zero of ``sign``, no flag), then the
     rounded finite result: overflow (``exp >= 2**E - 1``) gives the signed max finite value
     for ``rtz`` and ``chop`` and the signed infinity for ``rne``; underflow (``exp <= 0``)
-    gives the signed zero; each raises its flag.
+    gives the signed zero; each raises its flag. ``overflow`` and ``underflow``, when
+    given, are those two tests made earlier (:func:`round_significand_ranged`).
 
     Returns
     -------
@@ -157,8 +194,8 @@ def pack(fmt: FPFormat, *, sign, exp, sig, zero, inf, nan, invalid) -> tuple[Val
     """
     m, e, w = fmt.man_bits, fmt.exp_bits, fmt.width
     exp = Value.cast(exp)
-    overflow = exp >= fmt.exp_max_field
-    underflow = exp <= 0
+    if overflow is None:
+        overflow, underflow = exponent_range(fmt, exp)
     normal = Cat(Value.cast(sig)[:m], exp[:e], sign)
     signed_zero = Cat(Const(0, w - 1), sign)
     big = Cat(Const(fmt.inf if fmt.rounding == "rne" else fmt.max_finite, w - 1), sign)
