@@ -154,7 +154,7 @@ def round_significand_ranged(fmt: FPFormat, sig, exp, guard,
 
     The tests are made on ``exp`` and on ``exp + 1`` beside the round-up's carry chain, and
     the carry only picks one (``exp + carry >= K`` is ``exp >= K - carry``), so a pipeline
-    register between this and :func:`pack` (given ``overflow`` and ``underflow``) leaves
+    register between this and :func:`pack` (given ``exp_range=(overflow, underflow)``) leaves
     ``pack`` without a comparison: its stage is the result multiplexer alone.
 
     Returns
@@ -176,16 +176,16 @@ def exponent_range(fmt: FPFormat, exp) -> tuple[Value, Value]:
     return exp >= fmt.exp_max_field, exp <= 0
 
 
-def pack(fmt: FPFormat, *, sign, exp, sig, zero, inf, nan, invalid, overflow=None,
-         underflow=None) -> tuple[Value, Value]:
+def pack(fmt: FPFormat, *, sign, exp, sig, zero, inf, nan, invalid,
+         exp_range=None) -> tuple[Value, Value]:
     """Assemble the result bit pattern and the event flags.
 
     Priority: ``nan`` (canonical NaN; ``invalid`` raises the invalid flag), then ``inf``
     (infinity of ``sign``), then ``zero`` (exact zero of ``sign``, no flag), then the
     rounded finite result: overflow (``exp >= 2**E - 1``) gives the signed max finite value
     for ``rtz`` and ``chop`` and the signed infinity for ``rne``; underflow (``exp <= 0``)
-    gives the signed zero; each raises its flag. ``overflow`` and ``underflow``, when
-    given, are those two tests made earlier (:func:`round_significand_ranged`).
+    gives the signed zero; each raises its flag. ``exp_range``, when given, is
+    ``(overflow, underflow)``: those two tests made earlier (:func:`round_significand_ranged`).
 
     Returns
     -------
@@ -194,8 +194,7 @@ def pack(fmt: FPFormat, *, sign, exp, sig, zero, inf, nan, invalid, overflow=Non
     """
     m, e, w = fmt.man_bits, fmt.exp_bits, fmt.width
     exp = Value.cast(exp)
-    if overflow is None:
-        overflow, underflow = exponent_range(fmt, exp)
+    overflow, underflow = exponent_range(fmt, exp) if exp_range is None else exp_range
     normal = Cat(Value.cast(sig)[:m], exp[:e], sign)
     signed_zero = Cat(Const(0, w - 1), sign)
     big = Cat(Const(fmt.inf if fmt.rounding == "rne" else fmt.max_finite, w - 1), sign)

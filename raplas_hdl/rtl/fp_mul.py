@@ -303,10 +303,10 @@ class FPMul(wiring.Component):
                 "underflow": underflow}
 
     def _step_pack(self, m, v):
-        ranged = {k: v[k] for k in ("overflow", "underflow") if k in v}
+        exp_range = (v["overflow"], v["underflow"]) if "overflow" in v else None
         bits, flags = pack(self._fmt, sign=v["sign"], exp=v["exp"], sig=v["sig"],
                            zero=v["zero"], inf=v["inf"], nan=v["nan"], invalid=v["invalid"],
-                           **ranged)
+                           exp_range=exp_range)
         return {"bits": bits, "flags": flags}
 
     def elaborate(self, platform):

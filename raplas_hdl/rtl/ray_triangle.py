@@ -58,11 +58,11 @@ flip-flop-only Verilog of the generic target.
 **Output FIFO in block RAM.** The output FIFO of ``D + 4`` words of about 140 bits is, as
 Amaranth's ``SyncFIFO`` (cycle for cycle), distributed RAM with an asynchronous read: about
 450 ``RAM16X1D`` (900 LUT sites) on Virtex-4. With ``bram_fifo`` (by default with
-``adder="virtex4"``) it is a :class:`~.ram.BlockRAMFIFO` instead: a synchronous-read memory marked for block RAM (four
-``RAMB16`` at FP24) whose read register holds the head word. A result then reaches ``o``
-one clock later, so ``latency`` is ``D + 4`` and the FIFO ``D + 5`` words deep (the credit
-scheme is unchanged: it still can never overflow, and one pair a clock still never runs out
-of credits). The generic target's Verilog is unchanged.
+``adder="virtex4"``) it is a :class:`~.ram.BlockRAMFIFO` instead: a synchronous-read
+memory marked for block RAM (four ``RAMB16`` at FP24) whose read register holds the head
+word. A result then reaches ``o`` one clock later, so ``latency`` is ``D + 4`` and the
+FIFO ``D + 5`` words deep (the credit scheme is unchanged: it still can never overflow, and
+one pair a clock still never runs out of credits). The generic target's Verilog is unchanged.
 """
 
 from __future__ import annotations
