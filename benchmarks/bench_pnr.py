@@ -619,7 +619,35 @@ def render(runs: list) -> str:
             "of the RTL before the adder and FIFO changes placed at 96.6 MHz (69 % of the "
             "LUT4). The paper ray-triangle unit at speed 8: rtz 147.6 -> 154.0 MHz "
             "(149.5-154.2), rne 148.8 -> 145.6 (140.2-147.6), chop 148.6 -> 144.0 "
-            "(141.6-147.7), each above the whole unit's 140 MHz target."]
+            "(141.6-147.7), each above the whole unit's 140 MHz target.", "",
+            "**Control sets, tried and not kept** (seed runs by hand, two at once). Each of "
+            "the certified whole unit's three paths above ends on a flip-flop's LSR (reset) "
+            "input: Yosys made a bound register's data-dependent zeroing a synchronous reset "
+            "of four flip-flops, and the route into that LSR took 1.1-1.4 ns. With "
+            "`synth_ecp5` split at `map_ffs` and `dfflegalize -minsrst 8` between (a reset "
+            "that fewer than 8 flip-flops share becomes LUT logic; LSR nets 757 -> 286, "
+            "LUT4 26,953 -> 27,906), seed 3 placed at 91.9 MHz (94.0 without): no bound "
+            "operation among its paths any more, its critical one the ray-triangle unit's "
+            "credit comparison through the pair FIFO's `valid` into a 32-bit event counter's "
+            "carry chain (10.9 ns, 7.7 of it routing). Two whole units with that synthesis "
+            "(LSR nets 1,096 -> 558, 72 % of the TRELLIS_COMB) were still in nextpnr's first "
+            "legalisation after 24 minutes, two of the default synthesis at nextpnr's own "
+            "placer timing weight (40 above) after 23, and two whole units with `--reduce` "
+            "(73 % of the TRELLIS_COMB) after 14; each was stopped there (the failed run "
+            "above took 55 minutes to fail in that step). No netlist of the tables changed.",
+            "",
+            "**The bounds' zeroing, a lever for the next re-measurement** (by hand, not yet "
+            "kept). The reset groups on those paths are the bound operators' "
+            "`Mux(carry, 0, mr[:k])`: a significand that rounds up past `2**(k+1)` has its "
+            "low bits zero already, so the multiplexer changes no bit, and the bound "
+            "operators without it are still proved to round up as the model does "
+            "(`prove_bound_operator`, e4m3, FP16, FP24: under a second each). The certified "
+            "whole unit without it (26,965 LUT4, LSR nets 757 -> 726) placed at 95.0 and "
+            "97.0 MHz on seeds 1 and 3 (88.1 and 94.0 with it; seed 2 not run), its paths "
+            "the record fetch's job into the job FIFO's `r_rdy` (seed 1: 10.5 ns, 7.9 of it "
+            "routing) and a bound sum's second half (seed 3: 10.3 ns, 7.2 routing). "
+            "It changes the certified ray-triangle unit's netlist in every rounding, so it "
+            "lands with their re-measurement (about 2.5 hours of place and route)."]
     for speed, target in ((6, 100.0), (8, 140.0)):
         iu = find("intersection-unit", speed=speed)
         if iu:

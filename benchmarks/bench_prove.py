@@ -12,8 +12,8 @@ default stages), and every unit's synthesised netlists (``netlist-ecp5``, ``netl
 ``synth_ecp5`` with the DSP register packing, ``synth_xilinx -family xc4v``) against its RTL
 at every format and rounding, and the ``virtex4`` target of both units (DSP48 through Yosys's
 model of it) at every format and rounding it takes (significands of at most 17 bits),
-and the ray-triangle unit by composition (paper and conservative mode, FP16 and FP24: its
-wiring around its operations as uninterpreted functions;
+and the ray-triangle unit by composition (paper, conservative and certified mode, FP16 and
+FP24: its wiring around its operations as uninterpreted functions;
 :mod:`raplas_hdl.formal.composition`).
 One solver call at a time, each bounded by ``--timeout`` (a composition proof by at least
 an hour). Each record notes the 1-minute load average before and after it (the machine is
@@ -88,7 +88,7 @@ def plan(formats):
         if name in ("FP16", "FP24"):
             # the ray-triangle unit's wiring around its operations
             jobs += [("ray-triangle", name, "rtz", 0, None, "generic", mode)
-                     for mode in ("paper", "conservative")]
+                     for mode in ("paper", "conservative", "certified")]
         if PRESETS[name].man_bits <= 16:
             for unit in ("fp-mul", "fp-add"):
                 jobs += [(unit, name, rnd, _default(unit, name, rnd), None, "virtex4")

@@ -75,10 +75,10 @@ def add_parser(subparsers):
                         "with Yosys's simulation model of it (default generic)")
     p.add_argument("--mode", type=g.choice("paper", "conservative", "certified",
                                            what="mode"),
-                   default="paper", metavar="{paper,conservative}",
+                   default="paper", metavar="{paper,conservative,certified}",
                    help="ray-triangle only: the unit's mode (default paper; conservative "
-                        "needs a format with at least 8 fraction bits; certified is not "
-                        "stated yet)")
+                        "needs a format with at least 8 fraction bits; certified, its bounds "
+                        "and outcome included, at most 9 exponent bits)")
     p.add_argument("--json", default=None, metavar="FILE.json",
                    help="also write the result record as JSON")
     return p
@@ -101,8 +101,11 @@ def check(args) -> None:
     if args.mode != "paper" and args.unit != "ray-triangle":
         raise g.UsageError(f"{args.unit} has no --mode (only ray-triangle)")
     if args.mode == "certified":
-        raise g.UsageError("ray-triangle --mode certified: its bound datapath is not stated "
-                           "by the composition proof yet (paper or conservative)")
+        from ..model.certified import MAX_EXP_BITS
+
+        if args.fmt.exp_bits > MAX_EXP_BITS:
+            raise g.UsageError(f"--mode certified needs at most {MAX_EXP_BITS} exponent bits, "
+                               f"not {args.fmt.exp_bits} ({args.fmt})")
     if args.mode == "conservative" and args.fmt.man_bits < 8:
         raise g.UsageError(f"--mode conservative needs at least 8 fraction bits, not "
                            f"{args.fmt.man_bits} ({args.fmt})")

@@ -324,9 +324,10 @@ def _prove_composition(fmt, mode, timeout, cwd, t0) -> ProofResult:
         target="generic", result=res["result"], solver=res["solver"],
         seconds=round(time.monotonic() - t0, 3),
         method=(f"{composition_method(mode)}: {res['ops']} operations as uninterpreted "
-                f"functions, {res['cycles']} cycles unrolled"),
-        steps=[{"proves": f"composition: output register == contract formula ({mode} mode)",
-                "result": res["result"], "seconds": res["solver_seconds"]}],
+                "functions"
+                + (f", {res['bound_ops']} bound operations cut" if res.get("bound_ops") else "")
+                + f", {res['cycles']} cycles unrolled"),
+        steps=res["steps"],
         counterexample=cex, reason=res.get("reason", ""))
 
 
