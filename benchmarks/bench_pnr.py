@@ -636,18 +636,21 @@ def render(runs: list) -> str:
             "(73 % of the TRELLIS_COMB) after 14; each was stopped there (the failed run "
             "above took 55 minutes to fail in that step). No netlist of the tables changed.",
             "",
-            "**The bounds' zeroing, a lever for the next re-measurement** (by hand, not yet "
-            "kept). The reset groups on those paths are the bound operators' "
-            "`Mux(carry, 0, mr[:k])`: a significand that rounds up past `2**(k+1)` has its "
-            "low bits zero already, so the multiplexer changes no bit, and the bound "
-            "operators without it are still proved to round up as the model does "
-            "(`prove_bound_operator`, e4m3, FP16, FP24: under a second each). The certified "
-            "whole unit without it (26,965 LUT4, LSR nets 757 -> 726) placed at 95.0 and "
-            "97.0 MHz on seeds 1 and 3 (88.1 and 94.0 with it; seed 2 not run), its paths "
-            "the record fetch's job into the job FIFO's `r_rdy` (seed 1: 10.5 ns, 7.9 of it "
-            "routing) and a bound sum's second half (seed 3: 10.3 ns, 7.2 routing). "
-            "It changes the certified ray-triangle unit's netlist in every rounding, so it "
-            "lands with their re-measurement (about 2.5 hours of place and route)."]
+            "**The bounds' zeroing** (by hand, not kept). The four-flip-flop reset groups "
+            "on those paths are a bound sum's aligned significand `lo` (`k + 1` bits), "
+            "zeroed when the shift passes `k + 1`, a condition read from the exponent "
+            "difference's carry chain. Smaller groups come from the operators' "
+            "`Mux(carry, 0, mr[:k])`, which changes no bit (a significand that rounds up to "
+            "`2**(k+1)` has its low bits zero already): without it the bound operators are "
+            "still proved to round up as the model does (`prove_bound_operator`, e4m3, "
+            "FP16, FP24: under a second each), and the certified whole unit (26,965 LUT4; "
+            "three-flip-flop reset groups of the bounds 80 -> 49, the four-flip-flop ones "
+            "62 as before) placed at 95.0 and 97.0 MHz on seeds 1 and 3 (88.1 and 94.0 "
+            "with it; seed 2 not run), inside the seeds' spread, its paths the record "
+            "fetch's job into the job FIFO's `r_rdy` (seed 1: 10.5 ns, 7.9 of it routing) "
+            "and a bound sum's second half (seed 3: 10.3 ns, 7.2). It would change the "
+            "certified ray-triangle unit's netlist in every rounding, for no clear gain, "
+            "so the RTL keeps the multiplexer."]
     for speed, target in ((6, 100.0), (8, 140.0)):
         iu = find("intersection-unit", speed=speed)
         if iu:
