@@ -177,12 +177,16 @@ def _emit(fmt: FPFormat, mode: str, unit_class) -> tuple[str, ComposedUnit]:
 def _smt2(text: str, workdir) -> str:
     """Yosys's transition system of the emitted ``text`` (:mod:`.netlist`'s script, with the
     stand-ins' results cut into inputs)."""
+    return _yosys_smt2(text, workdir, f"read_rtlil top.il; prep -top {TOP}; flatten; "
+                       "expose -input w:*.res w:*.res_flags w:bop*_res; memory_map; "
+                       "dffunmap; opt_clean; write_smt2 -stbv -wires top.smt2")
+
+
+def _yosys_smt2(text: str, workdir, script: str) -> str:
+    """``script`` run by Yosys on the RTLIL ``text`` (as ``top.il`` in ``workdir``): the
+    SMT-LIB model it writes to ``top.smt2``."""
     workdir.mkdir(parents=True, exist_ok=True)
     (workdir / "top.il").write_text(text)
-    script = (f"read_rtlil top.il; prep -top {TOP}; flatten; "
-              "expose -input w:*.res w:*.res_flags w:bop*_res; memory_map; dffunmap; "
-              "opt_clean; "
-              "write_smt2 -stbv -wires top.smt2")
     res = subprocess.run([*yosys_command(), "-q", "-p", script], cwd=workdir,
                          capture_output=True, text=True, check=False)
     if res.returncode != 0:
@@ -500,20 +504,15 @@ def prove_bound_operator(fmt: FPFormat, kind: str, *, timeout: float = 600,
     unit = BoundOperator(fmt, _bound_k(fmt), kind, ops_class)
     workdir = (Path(cwd or ".") / WORK_DIR
                / f"bound-{kind}-{fmt.name}-{ops_class.__name__}")
-    workdir.mkdir(parents=True, exist_ok=True)
-    (workdir / "top.il").write_text(rtlil.convert(unit, name="bound_op", emit_src=False))
-    res = subprocess.run([*yosys_command(), "-q", "-p", "read_rtlil top.il; prep -top bound_op; "
-                          "flatten; opt_clean; write_smt2 -wires top.smt2"], cwd=workdir,
-                         capture_output=True, text=True, check=False)
-    if res.returncode != 0:
-        raise RuntimeError(f"yosys failed: {(res.stderr or res.stdout).strip()[-400:]}")
+    smt2 = _yosys_smt2(rtlil.convert(unit, name="bound_op", emit_src=False), workdir,
+                       "read_rtlil top.il; prep -top bound_op; flatten; opt_clean; "
+                       "write_smt2 -wires top.smt2")
     w = unit._ops.width
     lines = ["(declare-const |s| |bound_op_s|)"]
     for name in ("a", "b", "o"):
         lines += [f"(declare-const v_{name} (_ BitVec {w}))",
                   f"(assert (= v_{name} (|bound_op_n {name}| |s|)))"]
-    facts = z3.parse_smt2_string((workdir / "top.smt2").read_text() + "\n"
-                                 + "\n".join(lines) + "\n")
+    facts = z3.parse_smt2_string(smt2 + "\n" + "\n".join(lines) + "\n")
     a, b, o = (z3.BitVec(f"v_{x}", w) for x in "abo")
     run = solve(z3.And(*facts, bound_operator_goal(fmt, kind, o, a, b)), timeout,
                 watch={"a": a, "b": b, "o": o})
