@@ -15,11 +15,15 @@ Every function returns a combinational value; the caller places the registers. T
 operators and chop's rounding term come in two halves, so that a caller can put a register
 between them (each half a few short carry chains, to meet the FP units' clock):
 
-- ``add = add_sum(align(a, b))``: exponent differences, both orders' shifts side by side,
-  and the larger exponent plus 0, 1 and 2 | the significand sum plus 0, 1 and 2 side by
-  side, the rounded sum and the exponent chosen;
-- ``mul = mul_round(mul_product(a, b))``: the partial-product sum and the exponent sum
-  plus 0, 1 and 2 | rounding up, the exponent chosen;
+- ``add = add_sum(align(a, b))``: exponent differences and both orders' shifts side by
+  side, the larger exponent | the significand sum plus 0, 1 and 2 and the exponent plus
+  0, 1 and 2 side by side, the rounded sum and the exponent chosen;
+- ``mul = mul_round(mul_product(a, b))``: the partial-product sum and the exponent sum |
+  rounding up and the exponent sum plus 0, 1 and 2, the exponent chosen.
+
+The first halves read each operand's exponent into as few carry chains as they can (the
+differences, or the sum): an operand's register then has few loads to be placed near, which
+is what the certified whole unit's clock wanted (``docs/pnr.md``).
 - ``rnd_add = rnd_add_finish(rnd_add_top(rnd_add_operands(a, b), s))``: what the term
   needs of the operands, taken as they enter the adder | what it needs of the sum |
   the term (:attr:`BoundOps.rnd_add_stages`: the last two want a register between them
@@ -185,46 +189,46 @@ class BoundOps:
     @property
     def align_layout(self):
         """What :meth:`align` hands to :meth:`add_sum`: the larger operand's ``f`` and
-        ``e`` (with ``e + 1`` and ``e + 2``: the sum's exponent is one of them), the
-        smaller's shifted significand ``lo`` and ``sticky``, and, when an operand is zero
-        (``zero``), the other (``pass_``), which is the sum."""
+        ``e``, the smaller's shifted significand ``lo`` and ``sticky``, and, when an operand
+        is zero (``zero``), the other (``pass_``), which is the sum."""
         k = self.k
-        e = signed(self.ew)
-        return data.StructLayout({"f": k, "e": e, "e1": e, "e2": e, "lo": k + 1,
+        return data.StructLayout({"f": k, "e": signed(self.ew), "lo": k + 1,
                                   "sticky": 1, "zero": 1, "pass_": self.layout})
 
     def align(self, m, a, b):
         """First half of a bound sum ``a + b``, rounded up to ``k + 1`` significant bits:
         order the operands by exponent and shift the smaller
         one's significand (its bits beyond ``k + 1`` ORed into ``sticky``). Both orders are
-        shifted side by side and the exponent compare chooses after the shift; a shift
-        beyond ``k + 1`` is found from the difference's bits, without a carry chain."""
+        shifted side by side and the exponent compare chooses after the shift.
+
+        The shifter takes the difference's low ``nb`` bits only, which arrive first: a
+        shift of ``k + 1`` up to ``2**nb - 1 <= 2k + 1`` already leaves ``lo`` zero and
+        the leading one in ``sticky``. A difference of ``2**nb`` or more, known last (the
+        chains' high bits), zeroes ``lo`` and sets ``sticky`` after the shifter, not
+        before it."""
         k = self.k
         ew = self.ew
-        top = k + 1                                # the largest shift that keeps a bit
-        nb = top.bit_length()
+        nb = (k + 1).bit_length()                  # 2**(nb-1) <= k + 1: see above
         self._n += 1
         n = self._n
 
-        def shifted(f, d, name):
-            """``f``'s significand shifted right by ``d`` (when ``d >= 0``): ``(lo,
-            sticky)``."""
-            over = Signal(name=f"bov{name}{n}")
-            m.d.comb += over.eq((d[nb:] != 0)
-                                | Cat(*[d[:nb] == v for v in range(top + 1, 1 << nb)]).any())
-            ext = Cat(Const(0, k + 1), f, Const(1, 1)) >> Mux(over, top, d[:nb])
+        def shifted(f, d):
+            """``f``'s significand shifted right by ``d``'s low bits: ``(lo, sticky)``."""
+            ext = Cat(Const(0, k + 1), f, Const(1, 1)) >> d[:nb]
             return ext[k + 1:], ext[:k + 1] != 0
 
         dab = Signal(signed(ew + 1), name=f"bdab{n}")
         dba = Signal(signed(ew + 1), name=f"bdba{n}")
         m.d.comb += [dab.eq(a.e - b.e), dba.eq(b.e - a.e)]
         swap = dab[-1]                             # b.e > a.e: b is the larger
-        lo_a, st_a = shifted(b.f, dab, "a")        # a the larger
-        lo_b, st_b = shifted(a.f, dba, "b")
+        lo_a, st_a = shifted(b.f, dab)             # a the larger
+        lo_b, st_b = shifted(a.f, dba)
+        over = Signal(name=f"bov{n}")              # the larger's difference >= 2**nb
+        m.d.comb += over.eq(Mux(swap, dba[nb:] != 0, dab[nb:] != 0))
         r = Signal(self.align_layout, name=f"bal{n}")
         m.d.comb += [r.f.eq(Mux(swap, b.f, a.f)), r.e.eq(Mux(swap, b.e, a.e)),
-                     r.e1.eq(Mux(swap, b.e + 1, a.e + 1)), r.e2.eq(Mux(swap, b.e + 2, a.e + 2)),
-                     r.lo.eq(Mux(swap, lo_b, lo_a)), r.sticky.eq(Mux(swap, st_b, st_a)),
+                     r.lo.eq(Mux(over, 0, Mux(swap, lo_b, lo_a))),
+                     r.sticky.eq(over | Mux(swap, st_b, st_a)),
                      r.zero.eq(a.z | b.z), r.pass_.eq(Mux(a.z, b, a))]
         return r
 
@@ -243,7 +247,7 @@ class BoundOps:
         m.d.comb += mr.eq(Mux(big, Mux(s0[0], s1[1:], Mux(x.sticky, s2[1:], s0[1:])),
                               Mux(x.sticky, s1, s0)))
         carry = mr[k + 1]
-        both = self._new(m, "add", 0, self._bump(x, big, carry), Mux(carry, 0, mr[:k]))
+        both = self._new(m, "add", 0, self._bump(m, x, big, carry), Mux(carry, 0, mr[:k]))
         r = Signal(self.layout, name=f"bsum{self._n}")
         m.d.comb += r.eq(Mux(x.zero, x.pass_, both))
         return r
@@ -264,10 +268,9 @@ class BoundOps:
 
     @property
     def product_layout(self):
-        """What :meth:`mul_product` hands to :meth:`mul_round` (the exponent sum ``e`` with
-        ``e + 1`` and ``e + 2``, as :meth:`align_layout`)."""
-        e = signed(self.ew)
-        return data.StructLayout({"p": 2 * self.k + 2, "e": e, "e1": e, "e2": e, "z": 1})
+        """What :meth:`mul_product` hands to :meth:`mul_round`: the significand product
+        ``p``, the exponent sum ``e``, the zero bit ``z``."""
+        return data.StructLayout({"p": 2 * self.k + 2, "e": signed(self.ew), "z": 1})
 
     def mul_product(self, m, a, b):
         """First half of a bound product ``a * b``, rounded up to ``k + 1`` significant bits:
@@ -278,8 +281,7 @@ class BoundOps:
         pp = [Mux(b.f[i], ma << i, 0) for i in range(k)] + [ma << k]
         self._n += 1
         r = Signal(self.product_layout, name=f"bpr{self._n}")
-        m.d.comb += [r.p.eq(sum(pp[1:], pp[0])), r.e.eq(a.e + b.e), r.e1.eq(a.e + b.e + 1),
-                     r.e2.eq(a.e + b.e + 2), r.z.eq(a.z | b.z)]
+        m.d.comb += [r.p.eq(sum(pp[1:], pp[0])), r.e.eq(a.e + b.e), r.z.eq(a.z | b.z)]
         return r
 
     def mul_round(self, m, x):
@@ -292,13 +294,15 @@ class BoundOps:
         mr = Signal(k + 2, name=f"bmr{self._n}")
         m.d.comb += mr.eq(mant + rup)
         carry = mr[k + 1]
-        return self._new(m, "mul", x.z, self._bump(x, big, carry), Mux(carry, 0, mr[:k]))
+        return self._new(m, "mul", x.z, self._bump(m, x, big, carry), Mux(carry, 0, mr[:k]))
 
-    @staticmethod
-    def _bump(x, big, carry):
-        """``x.e + big + carry`` from the first half's ``e``, ``e1``, ``e2``: a choice, not
-        an add, after the significand's carry chains."""
-        return Mux(big & carry, x.e2, Mux(big | carry, x.e1, x.e))
+    def _bump(self, m, x, big, carry):
+        """``x.e + big + carry``: ``x.e`` plus 0, 1 and 2 in chains of their own beside the
+        significand's, then a choice after them, not an add."""
+        e1 = Signal(signed(self.ew), name=f"be1_{self._n}")
+        e2 = Signal(signed(self.ew), name=f"be2_{self._n}")
+        m.d.comb += [e1.eq(x.e + 1), e2.eq(x.e + 2)]
+        return Mux(big & carry, e2, Mux(big | carry, e1, x.e))
 
     # -- the outcome's comparisons -------------------------------------------------------
     def tight(self, x, g, q: int):

@@ -220,7 +220,7 @@ class _MulRoundsDown(BoundOps):
         k = self.k
         big = x.p[2 * k + 1]
         mant = Mux(big, x.p[k + 1:], x.p[k:2 * k + 1])
-        return self._new(m, "mul", x.z, self._bump(x, big, 0), mant[:k])
+        return self._new(m, "mul", x.z, self._bump(m, x, big, 0), mant[:k])
 
 
 def test_a_bound_product_rounded_down_gives_a_counterexample(work):
