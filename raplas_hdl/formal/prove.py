@@ -90,6 +90,11 @@ TARGETS = ("generic", "virtex4")
 #: The units of one register stage (no ``stages`` option).
 ONE_STAGE = ("fp-le", "fp-lt", "fp-neg")
 
+#: Counterexamples of a netlist's product cut checked with the real product before the
+#: answer is "unknown" (each one that is no counterexample is excluded and the cut asked
+#: again).
+CUT_RETRIES = 8
+
 
 @dataclass
 class ProofResult:
@@ -352,21 +357,34 @@ def _prove_netlist(unit, fmt, stages, method, timeout, cwd, mutate, t0) -> Proof
     run = solve(goal, timeout, watch)
     steps = [{"proves": described, "result": run.result, "seconds": round(run.seconds, 3)}]
     result, reason, cex = run.result, run.reason, run.values or None
-    if run.result == "counterexample" and unit == "fp-mul":
+    for _ in range(CUT_RETRIES if unit == "fp-mul" else 0):
+        if run.result != "counterexample":
+            break
         # the cut product may be no product: the same inputs with the real one
-        pins = [v == run.values[f"in.{k}"] for k, v in rtl.inputs.items()]
-        again = solve(z3.And(equivalence_miter(rtl, gate), *pins), timeout, watch)
+        pins = z3.And(*[v == run.values[f"in.{k}"] for k, v in rtl.inputs.items()])
+        again = solve(z3.And(equivalence_miter(rtl, gate), pins), timeout, watch)
         steps.append({"proves": "the same inputs with the real product", "result":
                       again.result, "seconds": round(again.seconds, 3)})
-        if again.result != "counterexample":
-            result, cex = "unknown", None
-            reason = "the cut's counterexample needs a product that is not one"
-            per = [count_products(z3.And(*side.assumptions)) for side in (rtl, gate)]
-            if per[1] > per[0]:
-                reason += (f" (the netlist forms each product from {per[1] // per[0]} "
-                           "DSP partial products, which the cut does not join into one)")
-        else:
-            cex = again.values
+        if again.result == "counterexample":
+            result, reason, cex = again.result, again.reason, again.values
+            break
+        result, cex = "unknown", None
+        reason = "the cut's counterexample needs a product that is not one"
+        per = [count_products(z3.And(*side.assumptions)) for side in (rtl, gate)]
+        if per[1] > per[0]:
+            reason += (f" (the netlist forms each product from {per[1] // per[0]} "
+                       "DSP partial products, which the cut does not join into one)")
+            break
+        if again.result != "proved":
+            break
+        # those inputs agree with the real product: ask the cut again without them (the
+        # solver may pick any of the cut's counterexamples, a real one among them or not)
+        goal = z3.And(goal, z3.Not(pins))
+        run = solve(goal, timeout, watch)
+        steps.append({"proves": f"{described}, those inputs excluded", "result": run.result,
+                      "seconds": round(run.seconds, 3)})
+        if run.result != "counterexample":
+            result, reason = run.result, run.reason
     return ProofResult(unit=unit, format=format_label(fmt), rounding=fmt.rounding,
                        stages=stages, target="generic", result=result, solver=SOLVER,
                        seconds=round(time.monotonic() - t0, 3), method=described, steps=steps,

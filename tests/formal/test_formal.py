@@ -458,6 +458,35 @@ def test_netlist_of_a_mutated_verilog_gives_a_real_counterexample(unit, flow, wo
     assert "netlist" in text and "golden" in text
 
 
+def test_a_cut_counterexample_that_the_real_product_refutes_is_excluded(work, monkeypatch):
+    """The solver may answer the product cut with a counterexample that needs a product that
+    is not one (which one it picks is its own choice): those inputs are checked with the
+    real product, excluded, and the cut asked again, so the real counterexample is found."""
+    import importlib
+
+    from raplas_hdl.formal.solve import SolverRun
+
+    prove_module = importlib.import_module("raplas_hdl.formal.prove")   # not the function
+
+    real_solve = prove_module.solve
+    calls = []
+
+    def first_answer_spurious(goal, timeout, watch=None, **kw):
+        calls.append(goal)
+        if len(calls) == 1:                     # a = b = 0 (0 * 0 never overflows)
+            return SolverRun("counterexample", 0.0,
+                             {k: 0 for k in watch if k.startswith("in.")})
+        return real_solve(goal, timeout, watch, **kw)
+
+    monkeypatch.setattr(prove_module, "solve", first_answer_spurious)
+    res = check_proof("fp-mul", FP24, work, method="netlist-ecp5", mutate=_saturate_wrong)
+    assert res.result == "counterexample", (res.result, res.reason, res.steps)
+    assert [s["result"] for s in res.steps] == ["counterexample", "proved", "counterexample",
+                                                "counterexample"]
+    assert "those inputs excluded" in res.steps[2]["proves"]
+    assert (res.counterexample["in.a"], res.counterexample["in.b"]) != (0, 0)
+
+
 # -- the virtex4 target (DSP48 through Yosys's model of it) --------------------------------
 @pytest.mark.parametrize("unit, fmt", [("fp-mul", FP24.with_rounding("rne")),
                                        ("fp-add", FP16)], ids=["fp-mul-FP24-rne", "fp-add-FP16"])
