@@ -19,15 +19,15 @@ between them (each half a few short carry chains, to meet the FP units' clock):
   side, the larger exponent | the significand sum plus 0, 1 and 2 and the exponent plus
   0, 1 and 2 side by side, the rounded sum and the exponent chosen;
 - ``mul = mul_round(mul_product(a, b))``: the partial-product sum and the exponent sum |
-  rounding up and the exponent sum plus 0, 1 and 2, the exponent chosen.
-
-The first halves read each operand's exponent into as few carry chains as they can (the
-differences, or the sum): an operand's register then has few loads to be placed near, which
-is what the certified whole unit's clock wanted (``docs/pnr.md``).
+  rounding up and the exponent sum plus 0, 1 and 2, the exponent chosen;
 - ``rnd_add = rnd_add_finish(rnd_add_top(rnd_add_operands(a, b), s))``: what the term
   needs of the operands, taken as they enter the adder | what it needs of the sum |
   the term (:attr:`BoundOps.rnd_add_stages`: the last two want a register between them
   in chop, which takes the largest of three exponents and adds two powers of two).
+
+The first halves read each operand's exponent into as few carry chains as they can (the
+differences, or the sum): an operand's register then has few loads to be placed near, which
+is what the certified whole unit's clock wanted (``docs/pnr.md``).
 """
 
 from __future__ import annotations
