@@ -687,7 +687,32 @@ def render(runs: list) -> str:
             "101.8 in rne on seed 1; not kept. The next lever is the fetch's pop from "
             "registers alone (`last` registered from the job as it is taken and from "
             "`k + 2 == ntris` as a pair issues, `credit != 0` from the credit's next value), "
-            "cycle for cycle the same, which changes every whole unit's netlist."]
+            "cycle for cycle the same, which changes every whole unit's netlist.", "",
+            "**The fetch's pop from registers, and each tester's own radius register** "
+            "(kept). The record fetch starts a pair and takes its next job from registers "
+            "alone: `last` (the next pair is its job's last) is registered as a job is taken "
+            "(`marker | ntris == 1`) and as a pair starts (`marker | k + 2 == ntris`), "
+            "`has_credit` from the credit count's next value; the same pairs on the same "
+            "cycles (the stage's SymbiYosys check closes by k-induction with both tied to "
+            "what they stand for; a `last` a pair late and a credit test that misses the "
+            "cycle's pair each give a counterexample). Each plane-sphere tester's radius "
+            "line now ends in a register of its own, which takes the plane's bits on a "
+            "cycle without a sphere (the flag is not read then), so that Yosys can no "
+            "longer merge the testers' last stages into one register fanned out to every "
+            "comparator (8 registers of 25 bits for one: the 4x4 array +190 FF, +190 "
+            "LUT4). The certified whole unit: 90.5 -> 91.5 MHz (88.2 / 91.5 / 96.2; LUT4 "
+            "25,356 -> 25,523, FF 35,001 -> 35,193); the three seeds' paths are now routes "
+            "of one or two cells: the ray-triangle unit's output FIFO level into `took` "
+            "(seed 1, 11.3 ns, 10.3 of it routing), the feeder's state through the command "
+            "handshake into its position (seed 2, 10.9 ns, 9.7 routing) and a Triangle "
+            "Memory block RAM's output (5.8 ns clock-to-out) into the pair FIFO's input "
+            "register (seed 3, 10.4 ns, 4.3 routing): placement over a device half full, "
+            "not logic depth. The default whole unit: speed 6 111.8 -> 109.9 MHz (116.1 / "
+            "109.1 / 109.9; its median seed's path the selector's iterator into the "
+            "feeder's `retired`, 9.1 ns), speed 8 145.4 -> {S8}; `--reduce` 103.7 -> {RED}; the array "
+            "rtz 141.4 -> 144.9, rne 127.9 -> 132.4, chop 115.2 -> 115.4; the tester alone "
+            "rtz 151.1 -> 146.7, rne 143.6 -> 138.1, chop 123.4 -> 122.4 (its paths inside "
+            "the adders, not the radius). {BETA}"]
     for speed, target in ((6, 100.0), (8, 140.0)):
         iu = find("intersection-unit", speed=speed)
         if iu:

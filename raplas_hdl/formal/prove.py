@@ -357,6 +357,7 @@ def _prove_netlist(unit, fmt, stages, method, timeout, cwd, mutate, t0) -> Proof
     run = solve(goal, timeout, watch)
     steps = [{"proves": described, "result": run.result, "seconds": round(run.seconds, 3)}]
     result, reason, cex = run.result, run.reason, run.values or None
+    per = None              # products per side: counted once, on the first spurious pick
     for _ in range(CUT_RETRIES if unit == "fp-mul" else 0):
         if run.result != "counterexample":
             break
@@ -370,7 +371,8 @@ def _prove_netlist(unit, fmt, stages, method, timeout, cwd, mutate, t0) -> Proof
             break
         result, cex = "unknown", None
         reason = "the cut's counterexample needs a product that is not one"
-        per = [count_products(z3.And(*side.assumptions)) for side in (rtl, gate)]
+        if per is None:
+            per = [count_products(z3.And(*side.assumptions)) for side in (rtl, gate)]
         if per[1] > per[0]:
             reason += (f" (the netlist forms each product from {per[1] // per[0]} "
                        "DSP partial products, which the cut does not join into one)")

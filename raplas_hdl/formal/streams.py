@@ -219,7 +219,8 @@ STAGES = {s.name: s for s in (
     Stage("record-fetch", "rtl.unit.fetch.RecordFetch(depth=4, job_last=True), e3m2, 2 rays, "
           "2 spheres of 2 triangles: stage 6 as a lane builds it, on credits", 8, cover=14,
           probes=tuple((f"{r}_probe", f"dut.{r}")
-                       for r in ("busy", "job", "k", "credit", "g1", "g2", "g3"))),
+                       for r in ("busy", "job", "k", "credit", "g1", "g2", "g3", "last",
+                                 "has_credit"))),
     Stage("sphere-feeder", "rtl.unit.feeder.SphereFeeder, e3m2, 2 spheres, 2 planes: stages 1 "
           "and 2, plane loads and spheres on credits into its sphere FIFO", 18, "bmc", cover=18,
           probes=(*((f"{r}_probe", f"dut.{r}") for r in ("credit", "freed", "f1", "fs", "f2",
@@ -1068,7 +1069,7 @@ def _fetch_check(info: dict) -> str:
             .tri__addr(tri_addr), .tri__en(tri_en), .tri__data(tri_data));
   // the fetch's registers (connect -set): the job it expands, its next pair, its credits,
   // and the pipeline (bit 0 of g1 .. g3: valid; g4's is o.valid)
-  wire busy_probe;
+  wire busy_probe, last_probe, has_credit_probe;
   wire [{iw - 1}:0] job_probe;
 {probes}  // jobs taken (job n kept at n mod 8); jobs whose pairs all left; pairs of job n_done out
   reg [{nb - 1}:0] n_in = 0, n_done = 0;
@@ -1115,6 +1116,9 @@ def _fetch_check(info: dict) -> str:
       // the credits: every entry is free for the fetch, claimed by a pair in flight, full,
       // or on its way back
       assert(credit_probe + in_flight + lvl + fr == {d} && lvl <= {d});
+      // the registered tests: a credit is held; the job's next pair is its last
+      assert(has_credit_probe == (credit_probe != 0));
+      if (busy_probe) assert(last_probe == (cur_marker || ip_k == cur_ntris - 1));
       // the job the fetch holds is the last taken, at its next pair; the pairs in flight are
       // those from the next out to it
       assert(queued <= 5);

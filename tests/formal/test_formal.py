@@ -577,12 +577,17 @@ def test_stream_stage_checked(stage, work):
     # the record fetch starts with 5 credits for a FIFO of 4: a write into a full FIFO
     ("record-fetch", ("3'h4", "3'h5")),
     # ... it takes the next job after any pair, not only the last: a job's pairs lost
-    ("record-fetch", ("assign \\$10  = issue & last;", "assign \\$10  = issue;")),
+    ("record-fetch", ("assign \\$4  = issue & last;", "assign \\$4  = issue;")),
+    # ... its registered ``last`` comes a pair late: a pair beyond the job's triangles
+    ("record-fetch", ("assign \\$11  = k + 2'h2;", "assign \\$11  = k + 1'h1;")),
+    # ... its registered credit test reads the credit before the cycle's pair: one pair
+    # more than the FIFO has room for
+    ("record-fetch", ("assign \\$9  = | \\$2 [2:0];", "assign \\$9  = | credit;")),
     # ... it reads the Ray Memory's bank 0 whatever the job's bank
-    ("record-fetch", ("assign \\$14  = g2[2] ? \\$13  : { 2'h0, g2[1] };",
-                      "assign \\$14  = { 2'h0, g2[1] };")),
+    ("record-fetch", ("assign \\$8  = g2[2] ? \\$7  : { 2'h0, g2[1] };",
+                      "assign \\$8  = { 2'h0, g2[1] };")),
     # ... it sets the job-last bit on a marker's pair only: the lanes' merger never moves on
-    ("record-fetch", ("\\$20 [4] = last;", "\\$20 [4] = job[5];")),
+    ("record-fetch", ("\\$25 [4] = last;", "\\$25 [4] = job[5];")),
     # the sphere feeder ignores the run lists: an indirect run's spheres are its positions
     ("sphere-feeder", ("assign f1_sid = f1[1] ? rlist__data : f1[2];",
                        "assign f1_sid = f1[2];")),
