@@ -265,8 +265,8 @@ class PlaneSphereTester(wiring.Component):
         # r' rides along to the comparator; the line's last stage is the tester's own: it
         # takes the plane's bits on a cycle without a sphere (its flag is then not read), so
         # that synthesis cannot merge it with the other testers' (their lines are the same
-        # signal, and one merged register fanned out to every tester's comparator was the
-        # certified whole unit's path, 11.2 ns at ECP5 speed 6, 9.2 of it routing)
+        # signal, and one merged register fanned out to every tester's comparator was one of
+        # the certified whole unit's paths, 11.2 ns at ECP5 speed 6, 9.2 of it routing)
         lat_r = lat_m + 2 * lat_a
         r_line = delay(m, radius_terms(m, self.r, fmt), lat_r - 1, en=en, name="r_dly")
         v_line = delay(m, self.i_valid, lat_r - 1, en=en, name="rv_dly")

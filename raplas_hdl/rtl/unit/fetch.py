@@ -18,8 +18,8 @@ The expander starts a pair and takes the next job from registers alone: whether 
 held and whether the next pair is its job's last are registered from their next values (the
 credit count after the cycle's pair and return; ``k + 2 == ntris`` as a pair starts, the new
 job's ``ntris == 1`` as it is taken), not compared from the count and ``k`` in front of the
-job FIFO's read: the job -> ``k == ntris - 1`` -> pop -> job FIFO level path was the
-certified whole unit's, 10.8 ns at ECP5 speed 6. Cycle for cycle the same pairs.
+job FIFO's read: the job -> ``k == ntris - 1`` -> pop -> job FIFO level path was one of
+the certified whole unit's (seed 3), 10.8 ns at ECP5 speed 6. Cycle for cycle the same pairs.
 """
 
 from __future__ import annotations
