@@ -716,9 +716,12 @@ def render(runs: list) -> str:
             "151.1 -> 146.7, rne 143.6 -> 138.1, chop 123.4 -> 122.4 (its paths inside the "
             "adders, not the radius). Latency unchanged everywhere. Two flow options tried "
             "on the certified whole unit, seed 1, not kept: nextpnr's `--placer static` "
-            "(before this change's RTL: 79.8 MHz, against 89.7 with the heap placer) and "
-            "`--placer-heap-beta 0.7` (a lower placement density: 88.2 MHz, the same path "
-            "and figure as at the default 0.9)."]
+            "(before this change's RTL: 79.8 MHz, against 89.7 with the heap placer), "
+            "`--placer-heap-beta 0.7` (a lower placement density) and `--freq 115` (a "
+            "tighter target): both 88.2 MHz, the same path and figure as the record. 8.5 ns "
+            "of that path is one net, a LUT's output formed from the result FIFO's level and "
+            "the ray-triangle unit's FIFO level, into `rtu.took`: that handshake between "
+            "the ray-triangle unit and the result FIFO is the next lever."]
     for speed, target in ((6, 100.0), (8, 140.0)):
         iu = find("intersection-unit", speed=speed)
         if iu:
