@@ -344,7 +344,8 @@ def _prove_netlist(unit, fmt, stages, method, timeout, cwd, mutate, t0) -> Proof
     rtl = unroll(netlist(unit, fmt, stages, cwd=cwd))
     src = netlist(unit, fmt, stages, cwd=cwd, mutate=mutate, tag="src") if mutate else rtl.net
     gate = unroll(synthesized(src, flow, timeout=timeout))
-    goal = equivalence_miter(rtl, gate)
+    miter = equivalence_miter(rtl, gate)
+    goal = miter
     described = f"netlist-{flow}: the {flow} netlist == the RTL"
     if unit == "fp-mul":
         goal, count = cut_products(goal, product_function(fmt.man_bits + 1), guarded=True)
@@ -363,7 +364,7 @@ def _prove_netlist(unit, fmt, stages, method, timeout, cwd, mutate, t0) -> Proof
             break
         # the cut product may be no product: the same inputs with the real one
         pins = z3.And(*[v == run.values[f"in.{k}"] for k, v in rtl.inputs.items()])
-        again = solve(z3.And(equivalence_miter(rtl, gate), pins), timeout, watch)
+        again = solve(z3.And(miter, pins), timeout, watch)
         steps.append({"proves": "the same inputs with the real product", "result":
                       again.result, "seconds": round(again.seconds, 3)})
         if again.result == "counterexample":
