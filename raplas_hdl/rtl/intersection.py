@@ -345,7 +345,9 @@ class IntersectionUnit(wiring.Component):
                    "tlist": fetches, "plane": [feeder], "ray": fetches,
                    "enable": [selector], "rlist": [feeder]}
         for key, (width, depth, lane) in memory_geometry(cfg).items():
-            mem = SyncRAM(width, depth, impl=self._ram, name=MEMORIES[key])
+            # never a read and a write of one address in a clock: the host writes the scene
+            # memories between runs and the other memories' bank no run reads
+            mem = SyncRAM(width, depth, impl=self._ram, name=MEMORIES[key], collision_free=True)
             bind_write(m, mem.write_port(granularity=lane), getattr(writes, key))
             for reader in readers[key]:
                 bind_read(m, mem.read_port(), getattr(reader, key))
