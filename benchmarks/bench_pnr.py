@@ -721,7 +721,42 @@ def render(runs: list) -> str:
             "tighter target): both 88.2 MHz, the same path and figure as the record. 8.5 ns "
             "of that path is one net, a LUT's output formed from the result FIFO's level and "
             "the ray-triangle unit's FIFO level, into `rtu.took`: that handshake between "
-            "the ray-triangle unit and the result FIFO is the next lever."]
+            "the ray-triangle unit and the result FIFO is the next lever.", "",
+            "**The memories built collision-free** (kept). Yosys mapped each of the unit's "
+            "block RAMs with logic that returns the old word when a read meets a write of "
+            "its address (the ECP5's two ports collide undefined): the written word and the "
+            "address match registered per lane, and a multiplexer on every bit between the "
+            "block RAM's output and its reader's register (the certified whole unit's seed-3 "
+            "path: a Triangle Memory output, 5.8 ns clock-to-out, through that multiplexer, "
+            "10.4 ns). The host never writes what a run reads (the drain rule of "
+            "`docs/intersection-unit.md`), so the unit's eight memories now carry Yosys's "
+            "`no_rw_check` (`SyncRAM(collision_free=True)`): each block RAM's output is the "
+            "read data, simulation unchanged. A 72-bit, 1024-word RAM with 24-bit lanes: "
+            "5 DP16KD and 1 LUT4, against 5 DP16KD, 99 LUT4 and 160 FF (checked in "
+            "`tests/rtl/test_ram.py`). The certified whole unit: LUT4 25,523 -> 25,129, FF "
+            "35,193 -> 35,097, 91.5 -> 90.2 MHz (87.2 / 90.2 / 95.3: within the seeds' "
+            "spread); the default whole unit: LUT4 19,640 -> 19,184, FF 24,111 -> 24,015, "
+            "speed 6 109.9 -> 112.6 MHz (112.6 / 114.8 / 112.1), speed 8 149.1 -> 146.6 "
+            "(147.5 / 141.7 / 146.6); `--reduce` 102.9 -> 104.4 (101.7 / 104.4 / 105.9; "
+            "LUT4 21,033 -> 20,509, FF 25,483 -> 25,387). The default "
+            "unit's seed 1 at speed 6 now ends on a block RAM's output straight into the pair "
+            "FIFO's input register (5.8 + 3.1 ns). Two of the certified whole unit's three "
+            "seeds (2 and 3) end on the ray-triangle unit's `took` (11.1 and 10.5 ns, 8.2-8.4 "
+            "of it the one route from the take's LUT among the result FIFO), seed 1 on a bound "
+            "operation inside the ray-triangle unit (11.5 ns, 10.1 routing).", "",
+            "**The take registered factor by factor** (tried, not kept). `took` registered "
+            "as two flip-flops, the FIFO's `r_rdy` (made a register of its own, formed from "
+            "the level's next value) and the reader's `ready`, with their AND taken into "
+            "`ready`'s LUT (four inputs), cycle for cycle the same (the output-credits stage "
+            "check closed, and a mutant of the new register failed). The certified whole "
+            "unit's seed 1 placed at 83.8 MHz (against 87.2 without): the placer kept the "
+            "new `took_1` beside the result FIFO, so the crossing moved into `ready`'s own "
+            "path, `took_1` -> `ready` -> the pair FIFO bank's level (11.9 ns, 4.5 of it the "
+            "route out of `took_1`), which has three LUTs behind the route where `took` had "
+            "none. A crossing of the ray-triangle unit that ends on a flip-flop with nothing "
+            "behind it needs the credit back a cycle later: one more word in its FIFO, and "
+            "one more pair accepted while the output is held (not cycle for cycle the same "
+            "under back-pressure); that is the next lever."]
     for speed, target in ((6, 100.0), (8, 140.0)):
         iu = find("intersection-unit", speed=speed)
         if iu:
