@@ -18,8 +18,8 @@ clock return the old word) and two implementations:
 A RAM built ``collision_free`` is one whose user never reads an address in the clock it
 writes it (the unit's memories: the host writes the scene memories only between runs, and
 only the bank no run reads). Its memory carries Yosys's ``no_rw_check`` attribute (both
-implementations), so synthesis maps it to block RAM as it is, without the logic that makes
-a block RAM, whose ports collide undefined, return the old word: on an ECP5 that logic is
+implementations), so synthesis maps it to its RAM cells as they are, without the logic that
+makes a block RAM, whose ports collide undefined, return the old word: on an ECP5 that logic is
 a register of the written word and of the address match per lane and a multiplexer on
 every bit of the read data, between the block RAM's output (5.8 ns clock-to-out at speed
 6) and its reader's register, and was the certified whole unit's seed-3 path (10.4 ns).
@@ -44,7 +44,7 @@ RAM_MODULE = "raplas_sdp_ram"
 RAM_MODULE_NO_RW_CHECK = "raplas_sdp_ram_no_rw_check"
 
 #: Yosys's attribute on a memory whose reads never meet a write of the same address: it maps
-#: to block RAM without read-during-write logic (``collision_free``).
+#: to RAM cells without read-during-write logic (``collision_free``).
 NO_RW_CHECK_ATTRS = {"no_rw_check": 1}
 
 _RAM_TEMPLATE = """
